@@ -1,0 +1,422 @@
+"""The types plugins implement and exchange: the whole API a plugin author needs, with fusion.hookspecs.
+
+Conventions (DESIGN.md): SI units; NED navigation frame, FRD body frame; quaternions Hamilton,
+scalar first ``[w x y z]``, body-to-navigation (C_b^n); angles in radians; time in seconds (float64).
+
+Shapes: a state is ``(..., n)``; process and measurement functions are vectorised over the leading
+axes, so a sigma-point filter calls them once per step with all ``2n+1`` points.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any, ClassVar, Literal, Mapping, Sequence
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict
+
+__all__ = [
+    "Block", "StateLayout", "Belief", "Message", "Observation", "UpdateResult", "Event",
+    "Estimate", "Params", "BuildContext", "Component", "ProcessModel", "MeasurementModel",
+    "Filter", "Gate", "Decoder", "Solver", "Source", "Sink", "Simulator", "FusionError",
+    "ConfigError", "InputError", "MalformedMessage", "KINDS",
+]
+
+KINDS = ("process", "measurement", "filter", "gate", "decoder", "solver", "source", "sink", "simulator")
+
+BlockKind = Literal["vector", "quaternion", "angle"]
+
+
+# --------------------------------------------------------------------------- errors
+class FusionError(Exception):
+    """Base of the errors a user can act on (the CLI prints them in one line, exit code 2)."""
+
+
+class ConfigError(FusionError):
+    """A config or scenario is wrong: the message names file, field path (and YAML line) and what is valid."""
+
+
+class InputError(FusionError):
+    """An input (recording, serial port) cannot be used at all: missing, binary, wrong encoding, dead port."""
+
+
+class MalformedMessage(ValueError):
+    """One message is malformed (bad number, wrong field count, bad checksum): counted and skipped."""
+
+
+# --------------------------------------------------------------------------- state layout
+_AXES = {"vector": "xyz", "quaternion": "wxyz"}
+
+
+@dataclass(frozen=True)
+class Block:
+    """A named block of the state: ``p:3`` (vector), ``q:4`` (quaternion), ``psi:1`` (angle)."""
+
+    name: str
+    size: int
+    kind: BlockKind = "vector"
+
+    def element_names(self) -> tuple[str, ...]:
+        """Names of the elements: ``px py pz`` (vector <= 3), ``qw qx qy qz`` (quaternion), else ``b0 b1 ..``."""
+        if self.kind == "quaternion":
+            return tuple(self.name + a for a in "wxyz")
+        if self.kind == "vector" and self.size <= 3:
+            return tuple(self.name + a for a in "xyz"[: self.size])
+        if self.size == 1:
+            return (self.name,)
+        return tuple(f"{self.name}{i}" for i in range(self.size))
+
+
+class StateLayout:
+    """Ordered named blocks; everything outside a model addresses the state by block name.
+
+    >>> lay = StateLayout.parse("p:3 v:3 q:4:quaternion")
+    >>> lay.n, lay["v"], lay.names[:4]
+    (10, slice(3, 6, None), ('px', 'py', 'pz', 'vx'))
+    """
+
+    def __init__(self, blocks: Sequence[Block]):
+        self.blocks: tuple[Block, ...] = tuple(blocks)
+        names = [b.name for b in self.blocks]
+        if len(set(names)) != len(names):
+            raise ValueError(f"duplicate block names in state layout: {names}")
+        self._slices: dict[str, slice] = {}
+        i = 0
+        for b in self.blocks:
+            self._slices[b.name] = slice(i, i + b.size)
+            i += b.size
+        self.n: int = i
+        self.names: tuple[str, ...] = tuple(e for b in self.blocks for e in b.element_names())
+
+    @classmethod
+    def parse(cls, spec: str) -> "StateLayout":
+        """Parse ``"name:size[:kind] ..."``, e.g. ``"p:3 v:3 q:4:quaternion ba:3 bw:3"``."""
+        blocks = []
+        for tok in spec.split():
+            parts = tok.split(":")
+            kind = parts[2] if len(parts) > 2 else ("quaternion" if parts[0] == "q" and parts[1] == "4" else "vector")
+            blocks.append(Block(parts[0], int(parts[1]), kind))  # type: ignore[arg-type]
+        return cls(blocks)
+
+    def __getitem__(self, name: str) -> slice:
+        try:
+            return self._slices[name]
+        except KeyError:
+            raise KeyError(f"state has no block {name!r}; blocks are {list(self._slices)}") from None
+
+    def __contains__(self, name: str) -> bool:
+        return name in self._slices
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, StateLayout) and self.blocks == other.blocks
+
+    def __hash__(self) -> int:
+        return hash(self.blocks)
+
+    def __repr__(self) -> str:
+        return "StateLayout(" + " ".join(f"{b.name}:{b.size}:{b.kind}" for b in self.blocks) + ")"
+
+    def block(self, name: str) -> Block:
+        for b in self.blocks:
+            if b.name == name:
+                return b
+        raise KeyError(f"state has no block {name!r}; blocks are {list(self._slices)}")
+
+    def element_index(self, element: str) -> int:
+        """Index of a named element (``"vy"``)."""
+        try:
+            return self.names.index(element)
+        except ValueError:
+            raise KeyError(f"state has no element {element!r}; elements are {list(self.names)}") from None
+
+    def vector(self, values: Mapping[str, Any], default: float = 0.0) -> np.ndarray:
+        """Assemble a full state vector from ``{block: values}`` (scalar broadcast to the block)."""
+        x = np.full(self.n, default, dtype=float)
+        for name, val in values.items():
+            sl = self[name]
+            arr = np.broadcast_to(np.asarray(val, dtype=float), (sl.stop - sl.start,))
+            x[sl] = arr
+        return x
+
+
+# --------------------------------------------------------------------------- data
+@dataclass(frozen=True)
+class Belief:
+    """Gaussian belief at time ``t``: mean ``x`` (n,) and either covariance ``P`` (n, n) or its
+    lower Cholesky factor ``S`` (P = S S^T, used by the square-root UKF). Immutable: filters return new ones."""
+
+    t: float
+    x: np.ndarray
+    P: np.ndarray | None = None
+    S: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.P is None and self.S is None:
+            raise ValueError("a Belief needs P or S")
+
+    @property
+    def cov(self) -> np.ndarray:
+        """The covariance P (computed from S when the belief is square-root)."""
+        if self.P is not None:
+            return self.P
+        return self.S @ self.S.T  # type: ignore[union-attr]
+
+    @property
+    def sd(self) -> np.ndarray:
+        """Standard deviations sqrt(diag P)."""
+        if self.S is not None and self.P is None:
+            return np.sqrt(np.einsum("ij,ij->i", self.S, self.S))
+        return np.sqrt(np.clip(np.diagonal(self.P), 0.0, None))  # type: ignore[arg-type]
+
+    def with_(self, **changes: Any) -> "Belief":
+        return replace(self, **changes)
+
+
+@dataclass(frozen=True, slots=True)
+class Message:
+    """One timestamped sensor message.
+
+    ``values`` holds the fields after ``t,sensor``: floats, or strings for labels (a beacon name) and raw
+    payloads (an NMEA sentence). ``line`` is the 1-based line number in the source, for error messages.
+    """
+
+    t: float
+    sensor: str
+    values: tuple[Any, ...]
+    line: int | None = None
+
+    def floats(self) -> np.ndarray:
+        """The values as a float64 array (raises MalformedMessage when one is not a number)."""
+        try:
+            return np.array(self.values, dtype=float)
+        except (TypeError, ValueError):
+            raise MalformedMessage(f"expected numbers, got {self.values!r}") from None
+
+
+@dataclass(frozen=True)
+class Observation:
+    """A measurement ready for a filter update: ``z`` (m,), the model to predict it (possibly bound to the
+    message, e.g. a range model bound to beacon B2) and, optionally, its own covariance ``R`` (m, m)
+    (a solver's fix carries one); ``None`` means the sensor's configured R."""
+
+    t: float
+    z: np.ndarray
+    model: "MeasurementModel"
+    R: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class UpdateResult:
+    """What a filter update returns. ``belief`` is the input belief when ``accepted`` is False."""
+
+    belief: Belief
+    innovation: np.ndarray
+    S: np.ndarray
+    nis: float
+    accepted: bool
+
+
+@dataclass(frozen=True)
+class Event:
+    """Something worth reporting: ``kind`` in e.g. ``malformed``, ``late``, ``rejected``, ``gap``,
+    ``not_positive_definite``, ``no_fix``, ``warning``. ``sensor`` may be None."""
+
+    t: float
+    kind: str
+    sensor: str | None
+    detail: str = ""
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A belief emitted by the scheduler. ``reason`` is ``update`` (after a measurement from ``sensor``)
+    or ``output`` (a fixed-rate output by prediction). ``update`` holds the filter's UpdateResult, if any."""
+
+    t: float
+    belief: Belief
+    reason: str
+    sensor: str | None = None
+    update: UpdateResult | None = None
+
+
+# --------------------------------------------------------------------------- components
+class Params(BaseModel):
+    """Base of every plugin's Params model: unknown keys are errors."""
+
+    model_config = ConfigDict(extra="forbid", arbitrary_types_allowed=True)
+
+
+@dataclass
+class BuildContext:
+    """What a component may need when it is built from a config.
+
+    ``layout``: the process model's state layout (None while the process itself is built);
+    ``beacons``: name -> position (m, NED or local frame of the config); ``sensor``: the sensor being
+    wired (None for process/filter); ``base_dir``: folder of the config file, for relative paths;
+    ``extra``: anything else a plugin wants to share (e.g. the system's gravity)."""
+
+    layout: StateLayout | None = None
+    beacons: Mapping[str, np.ndarray] = field(default_factory=dict)
+    sensor: str | None = None
+    base_dir: str = "."
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class Component:
+    """Base of every plugin component. Subclasses set ``name``, ``kind``, a pydantic ``Params`` model and a
+    docstring (shown by ``fusion plugins --verbose``). Built as ``cls(params, context)``."""
+
+    name: ClassVar[str] = ""
+    kind: ClassVar[str] = ""
+    Params: ClassVar[type[Params]] = Params
+
+    def __init__(self, params: Params | None = None, context: BuildContext | None = None):
+        self.params = params if params is not None else self.Params()
+        self.context = context if context is not None else BuildContext()
+
+    def __repr__(self) -> str:
+        return f"<{self.kind} {self.name}>"
+
+
+class ProcessModel(Component):
+    """x_k = f(x_{k-1}, u, dt) + w, w ~ N(0, Q).
+
+    ``layout`` is the state layout; ``input_dim`` the length of the control input u (0: no input);
+    ``linear`` is True when f is affine in x (F independent of x), so a filter may predict as the linear KF.
+    """
+
+    kind: ClassVar[str] = "process"
+    layout: StateLayout
+    input_dim: int = 0
+    linear: bool = False
+
+    def f(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        """Propagate states ``x`` (..., n) over ``dt`` seconds with input ``u`` (input_dim,) or None."""
+        raise NotImplementedError
+
+    def jacobian(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray | None:
+        """dF/dx (n, n) at ``x`` (n,); None when the model has no analytic Jacobian."""
+        return None
+
+    def Q(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        """Discrete process-noise covariance (n, n) over ``dt``."""
+        raise NotImplementedError
+
+    def normalize(self, x: np.ndarray) -> np.ndarray:
+        """Bring states (..., n) back to their manifold (unit quaternions); identity by default."""
+        return x
+
+    def input_from(self, message: Message) -> np.ndarray:
+        """The control input u carried by an input-sensor message (default: its values as floats)."""
+        u = message.floats()
+        if u.shape != (self.input_dim,):
+            raise MalformedMessage(f"process {self.name!r} expects {self.input_dim} input values, got {u.size}")
+        return u
+
+
+class MeasurementModel(Component):
+    """z = h(x) + v, v ~ N(0, R). ``dim`` is m. ``observe`` turns a decoded message into an Observation
+    (binding per-message context such as the beacon of a range); ``h`` is vectorised over leading axes."""
+
+    kind: ClassVar[str] = "measurement"
+    dim: int = 0
+
+    def h(self, x: np.ndarray) -> np.ndarray:
+        """Predicted measurement (..., m) for states x (..., n)."""
+        raise NotImplementedError
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray | None:
+        """dh/dx (m, n) at x (n,); None when there is no analytic Jacobian."""
+        return None
+
+    def residual(self, z: np.ndarray, z_hat: np.ndarray) -> np.ndarray:
+        """z - z_hat, broadcast over leading axes (override to wrap angles)."""
+        return z - z_hat
+
+    def observe(self, message: Message) -> Observation | None:
+        """Observation for a decoded message (default: all values are z, this model predicts it)."""
+        z = message.floats()
+        if z.shape != (self.dim,):
+            raise MalformedMessage(f"measurement {self.name!r} expects {self.dim} values, got {z.size}")
+        return Observation(message.t, z, self)
+
+
+class Gate(Component):
+    """Validation gate on the normalised innovation squared (NIS = y^T S^-1 y)."""
+
+    kind: ClassVar[str] = "gate"
+
+    def accept(self, nis: float, dim: int) -> bool:
+        raise NotImplementedError
+
+
+class Filter(Component):
+    """Shared interface of kf, ekf, iekf, ukf, srukf. Both methods return new objects, never mutate."""
+
+    kind: ClassVar[str] = "filter"
+
+    def initial_belief(self, t: float, x: np.ndarray, P: np.ndarray) -> Belief:
+        """Belief in this filter's representation (P, or S for square-root filters)."""
+        return Belief(t, np.asarray(x, float), P=np.asarray(P, float))
+
+    def predict(self, belief: Belief, process: ProcessModel, u: np.ndarray | None, dt: float) -> Belief:
+        raise NotImplementedError
+
+    def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
+               gate: Gate | None = None) -> UpdateResult:
+        raise NotImplementedError
+
+
+class Decoder(Component):
+    """Per-sensor decoding of a framed message (e.g. an NMEA sentence into NED position).
+    Returns the decoded Message, or None when the message carries nothing to fuse; raises
+    MalformedMessage for a bad one."""
+
+    kind: ClassVar[str] = "decoder"
+
+    def decode(self, message: Message) -> Message | None:
+        return message
+
+
+class Solver(Component):
+    """Single-shot fixes (trilateration, TRIAD, ...). As a sensor preprocessor, ``feed`` gathers raw
+    messages and returns the messages it produces (e.g. one position fix per cycle of ranges); events
+    (e.g. ``no_fix`` with a reason) go to ``self.events``."""
+
+    kind: ClassVar[str] = "solver"
+
+    def feed(self, message: Message) -> list[Message]:
+        raise NotImplementedError
+
+    def flush(self) -> list[Message]:
+        """Messages still gathered at the end of the input."""
+        return []
+
+
+class Source(Component):
+    """Yields raw text lines of the log format (a recording, stdin, a serial port)."""
+
+    kind: ClassVar[str] = "source"
+
+    def lines(self):  # -> Iterator[str]
+        raise NotImplementedError
+
+
+class Sink(Component):
+    """Consumes estimates and events (files, plots)."""
+
+    kind: ClassVar[str] = "sink"
+
+    def on_estimate(self, estimate: Estimate) -> None: ...
+
+    def on_event(self, event: Event) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class Simulator(Component):
+    """Simulates one sensor from a truth trajectory (used by ``fusion simulate``)."""
+
+    kind: ClassVar[str] = "simulator"

@@ -1,0 +1,7 @@
+"""Built-in measurement: each module holds one component; this module registers them."""
+from fusion import hookimpl
+
+
+@hookimpl
+def fusion_register_components(registry):
+    pass
