@@ -1,0 +1,65 @@
+"""The ``fusion`` command: one subcommand a module in fusion.commands (each has ``register(subparsers)``).
+
+Exit codes: 0 success; 2 bad usage, bad config or bad input (one line naming file, line/field and what
+is wrong; no traceback unless ``--debug``); 1 internal error.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from fusion import __version__
+from fusion.api import FusionError
+
+COMMANDS = ("run", "validate", "plugins", "simulate", "tui")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="fusion",
+        description="Plugin-based sensor fusion: compose an estimator from a YAML config and run it over a "
+                    "recording or a live serial stream.",
+    )
+    parser.add_argument("--version", action="version", version=f"fusion {__version__}")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks for errors")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMANDS:
+        try:
+            mod = importlib.import_module(f"fusion.commands.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"fusion.commands.{name}":
+                continue
+            raise
+        mod.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except FusionError as exc:
+        if args.debug:
+            raise
+        print(f"fusion {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+    except Exception as exc:  # internal error: a bug, not the user's fault
+        if args.debug:
+            raise
+        print(f"fusion {args.command}: internal error: {type(exc).__name__}: {exc} (rerun with --debug for a traceback)",
+              file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

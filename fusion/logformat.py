@@ -1,0 +1,167 @@
+"""The log format (recordings and the serial wire are the same format), DESIGN.md "Log format".
+
+One message a line, UTF-8: ``t,sensor,v1,v2,...`` with an optional ``*HH`` checksum (XOR of the bytes
+before ``*``, as NMEA). ``#`` lines are comments and metadata; ``# fields SENSOR NAME NAME ...`` names a
+sensor's columns; ``# key: value`` lines are header metadata (``# scenario: uwb_route1``). A raw NMEA
+sentence may follow the prefix: ``t,gps,$GPGGA,...*HH`` (the checksum is then the sentence's own and is
+checked by the ``nmea`` decoder).
+
+Fields parse as float when they look numeric; tokens that start with a letter or ``$`` are labels (a
+beacon name) kept as strings. ``nan``/``inf`` and anything else that is neither is malformed.
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Iterable, Iterator, Sequence
+
+from fusion.api import MalformedMessage, Message
+
+_LABEL = re.compile(r"^[A-Za-z_][A-Za-z0-9_.:\-/]*$")
+_NONFINITE = {"nan", "+nan", "-nan", "inf", "+inf", "-inf", "infinity", "+infinity", "-infinity"}
+_CHECKSUM = re.compile(r"\*([0-9A-Fa-f]{2})$")
+_SENSOR = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
+
+
+def checksum(body: str) -> str:
+    """Two hex digits: XOR of the bytes of ``body`` (the text before ``*``)."""
+    c = 0
+    for b in body.encode("utf-8"):
+        c ^= b
+    return f"{c:02X}"
+
+
+def _field(tok: str) -> float | str:
+    tok = tok.strip()
+    low = tok.lower()
+    if low in _NONFINITE:
+        raise MalformedMessage(f"non-finite value {tok!r}")
+    try:
+        v = float(tok)
+    except ValueError:
+        if _LABEL.match(tok):
+            return tok
+        raise MalformedMessage(f"bad number {tok!r}") from None
+    if not math.isfinite(v):
+        raise MalformedMessage(f"non-finite value {tok!r}")
+    return v
+
+
+@dataclass
+class Header:
+    """Metadata collected from ``#`` lines: ``fields`` per sensor and ``key: value`` pairs."""
+
+    fields: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    meta: dict[str, str] = field(default_factory=dict)
+
+
+def parse_comment(text: str, header: Header) -> None:
+    """Record the metadata of one ``#`` line (anything else is a plain comment)."""
+    body = text[1:].strip()
+    if body.startswith("fields "):
+        parts = body.split()
+        if len(parts) >= 2:
+            header.fields[parts[1]] = tuple(parts[2:])
+        return
+    m = re.match(r"^([A-Za-z_][A-Za-z0-9_\-]*)\s*:\s*(.*)$", body)
+    if m:
+        header.meta[m.group(1)] = m.group(2)
+
+
+def parse_line(text: str, lineno: int | None = None) -> Message:
+    """Parse one message line (not a comment, not blank). Raises MalformedMessage with the reason."""
+    line = text.strip()
+    parts = line.split(",", 2)
+    if len(parts) < 3:
+        raise MalformedMessage("expected 't,sensor,value,...'")
+    t_txt, sensor, rest = parts
+    try:
+        t = float(t_txt)
+    except ValueError:
+        raise MalformedMessage(f"bad time {t_txt.strip()!r}") from None
+    if not math.isfinite(t):
+        raise MalformedMessage(f"non-finite time {t_txt.strip()!r}")
+    sensor = sensor.strip()
+    if not _SENSOR.match(sensor):
+        raise MalformedMessage(f"bad sensor name {sensor!r}")
+    rest = rest.strip()
+    if rest.startswith("$"):
+        return Message(t, sensor, (rest,), lineno)
+    m = _CHECKSUM.search(rest)
+    if m:
+        body = line[: line.rindex("*")]
+        if checksum(body) != m.group(1).upper():
+            raise MalformedMessage(f"bad checksum *{m.group(1)} (computed *{checksum(body)})")
+        rest = rest[: m.start()]
+    if not rest:
+        raise MalformedMessage("no values")
+    return Message(t, sensor, tuple(_field(tok) for tok in rest.split(",")), lineno)
+
+
+def format_value(v: float | str) -> str:
+    """Shortest text that round-trips (repr of a float), labels as they are."""
+    if isinstance(v, str):
+        return v
+    return repr(float(v))
+
+
+def format_line(t: float, sensor: str, values: Sequence[float | str], with_checksum: bool = False,
+                precision: int | None = None) -> str:
+    """One log line (no newline). ``precision`` rounds floats to that many decimals (None: exact repr)."""
+    if precision is None:
+        vals = ",".join(format_value(v) for v in values)
+        ts = repr(float(t))
+    else:
+        vals = ",".join(v if isinstance(v, str) else f"{v:.{precision}f}" for v in values)
+        ts = f"{t:.6f}"
+    body = f"{ts},{sensor},{vals}"
+    return f"{body}*{checksum(body)}" if with_checksum else body
+
+
+@dataclass
+class ParsedStream:
+    """Counters of a parsed stream: malformed lines per sensor (``None`` key when the sensor is unknown)."""
+
+    header: Header = field(default_factory=Header)
+    malformed: dict[str | None, int] = field(default_factory=dict)
+    last_error: dict[str | None, str] = field(default_factory=dict)
+
+
+def _guess_sensor(text: str) -> str | None:
+    parts = text.split(",", 2)
+    if len(parts) >= 2 and _SENSOR.match(parts[1].strip()):
+        return parts[1].strip()
+    return None
+
+
+def iter_messages(lines: Iterable[str], state: ParsedStream | None = None,
+                  known_sensors: set[str] | None = None) -> Iterator[Message | MalformedMessage]:
+    """Messages from text lines; a malformed line yields a MalformedMessage (with ``.sensor``,
+    ``.lineno``) after counting it in ``state``. Comments update ``state.header``. Field counts are
+    checked against ``# fields`` when the sensor has them. Never raises on any text."""
+    st = state if state is not None else ParsedStream()
+    for lineno, raw in enumerate(lines, 1):
+        text = raw.strip().lstrip("\ufeff")
+        if not text:
+            continue
+        if text.startswith("#"):
+            parse_comment(text, st.header)
+            continue
+        try:
+            msg = parse_line(text, lineno)
+            if known_sensors is not None and msg.sensor not in known_sensors and msg.sensor != "truth":
+                raise MalformedMessage(f"unknown sensor {msg.sensor!r}")
+            names = st.header.fields.get(msg.sensor)
+            if names is not None and not (len(msg.values) == 1 and isinstance(msg.values[0], str)
+                                          and msg.values[0].startswith("$")) and len(msg.values) != len(names):
+                raise MalformedMessage(f"{len(msg.values)} values, but '# fields {msg.sensor}' names {len(names)}")
+        except MalformedMessage as exc:
+            sensor = _guess_sensor(text)
+            st.malformed[sensor] = st.malformed.get(sensor, 0) + 1
+            st.last_error[sensor] = f"line {lineno}: {exc}"
+            exc.sensor = sensor  # type: ignore[attr-defined]
+            exc.lineno = lineno  # type: ignore[attr-defined]
+            yield exc
+            continue
+        yield msg
