@@ -1,7 +1,9 @@
-"""Core sources, registered as plugins like any other."""
+"""Core sources (recording replay, serial port), registered as plugins like any other."""
 from fusion import hookimpl
 
 
 @hookimpl
 def fusion_register_components(registry):
-    pass
+    from fusion.sources.recording import RecordingSource
+
+    registry.add(RecordingSource)

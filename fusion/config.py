@@ -1,0 +1,286 @@
+"""The system YAML: pydantic schema, and wiring into plugin instances (``load_system``).
+
+A component is selected by registry name, either as a bare name (``filter: ukf``) or as a mapping with
+``type`` plus the plugin's own parameters (``filter: {type: ukf, alpha: 0.5}``), validated by the
+plugin's ``Params`` model. Example::
+
+    name: uwb_example
+    recording: ../recordings/example_2d.log      # relative to this file
+    beacons: {B1: [0, 0], B2: [20, 0], B3: [20, 20], B4: [0, 20]}
+    process: {type: pv, dims: 2, spectral_density: 0.5}
+    initial: {mean: {p: [1, 1], v: [0, 0]}, sd: {p: 2.0, v: 1.0}}
+    filter: ukf
+    sensors:
+      uwb: {model: range, noise: {sd: 0.1}, gate: {type: chi2, probability: 0.999}}
+    scheduler: {max_latency: 0.2, late_policy: drop}
+    output: {on_update: true, rate_hz: null}
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal, Union
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from fusion.api import (BuildContext, Component, ConfigError, Decoder, Filter, Gate, MeasurementModel,
+                        ProcessModel, Solver)
+from fusion.registry import Registry, default_registry
+from fusion.yamlsource import LocatedYAML, load_yaml, pydantic_errors
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+ComponentSpec = Union[str, dict[str, Any]]
+
+
+class NoiseSpec(_Strict):
+    """Measurement noise: ``sd`` (scalar or one per component, in the measurement's units) or a full ``R``."""
+
+    sd: float | list[float] | None = None
+    R: list[list[float]] | None = None
+
+
+class SensorSpec(_Strict):
+    role: Literal["input", "measurement"] = "measurement"
+    decoder: ComponentSpec = "line"
+    preprocessor: ComponentSpec | None = None
+    model: ComponentSpec | None = None
+    noise: NoiseSpec | float | list[float] | None = None
+    gate: ComponentSpec | None = None
+    time_offset: float = 0.0
+    enabled: bool = True
+
+
+class InitialSpec(_Strict):
+    """Initial belief by block name: ``mean`` values and ``sd`` (scalar or per element), or full ``P``.
+    ``from_sensor`` takes the position block from the first observation of that sensor."""
+
+    mean: dict[str, float | list[float]] = Field(default_factory=dict)
+    sd: dict[str, float | list[float]] = Field(default_factory=dict)
+    P: list[list[float]] | None = None
+    from_sensor: str | None = None
+
+
+class SchedulerSpec(_Strict):
+    max_latency: float = Field(0.0, ge=0.0, description="reorder buffer length, s")
+    late_policy: Literal["drop", "replay"] = "drop"
+    history: int = Field(500, ge=1, description="beliefs kept for replay")
+
+
+class OutputSpec(_Strict):
+    on_update: bool = True
+    rate_hz: float | None = Field(None, gt=0.0)
+
+
+class SystemSpec(_Strict):
+    name: str
+    description: str = ""
+    recording: str | None = None
+    beacons: dict[str, list[float]] = Field(default_factory=dict)
+    process: ComponentSpec
+    initial: InitialSpec = Field(default_factory=InitialSpec)
+    filter: ComponentSpec = "ekf"
+    sensors: dict[str, SensorSpec]
+    scheduler: SchedulerSpec = Field(default_factory=SchedulerSpec)
+    output: OutputSpec = Field(default_factory=OutputSpec)
+
+    @field_validator("beacons")
+    @classmethod
+    def _beacon_dims(cls, v: dict[str, list[float]]) -> dict[str, list[float]]:
+        for name, pos in v.items():
+            if len(pos) not in (2, 3):
+                raise ValueError(f"beacon {name!r} needs 2 or 3 coordinates, got {len(pos)}")
+        return v
+
+
+@dataclass
+class SensorRuntime:
+    """One configured sensor, wired: its components and counters."""
+
+    name: str
+    role: str
+    decoder: Decoder
+    preprocessor: Solver | None
+    model: MeasurementModel | None
+    R: np.ndarray | None
+    gate: Gate | None
+    time_offset: float
+    counters: dict[str, int] = field(default_factory=lambda: dict(received=0, used=0, rejected=0, malformed=0, late=0))
+
+
+@dataclass
+class System:
+    """A wired system: everything the scheduler needs."""
+
+    spec: SystemSpec
+    path: Path | None
+    process: ProcessModel
+    filter: Filter
+    sensors: dict[str, SensorRuntime]
+    x0: np.ndarray
+    P0: np.ndarray
+    beacons: dict[str, np.ndarray]
+    registry: Registry
+
+    @property
+    def layout(self):
+        return self.process.layout
+
+    @property
+    def recording(self) -> Path | None:
+        if self.spec.recording is None:
+            return None
+        base = self.path.parent if self.path else Path(".")
+        return (base / self.spec.recording).resolve()
+
+
+def _split(spec: ComponentSpec, doc: LocatedYAML | None, loc: list[Any]) -> tuple[str, dict[str, Any]]:
+    if isinstance(spec, str):
+        return spec, {}
+    params = dict(spec)
+    name = params.pop("type", None)
+    if not isinstance(name, str):
+        where = doc.where(loc) if doc else ".".join(map(str, loc))
+        raise ConfigError(f"{where}: a component needs 'type: NAME' (got keys {sorted(spec)})")
+    return name, params
+
+
+def build_component(registry: Registry, kind: str, spec: ComponentSpec, ctx: BuildContext,
+                    doc: LocatedYAML | None = None, loc: list[Any] | None = None) -> Component:
+    """Instantiate a component of ``kind`` from its spec, validating params with its Params model."""
+    loc = loc or []
+    name, params = _split(spec, doc, loc)
+    where = doc.where(loc) if doc else ".".join(map(str, loc))
+    cls = registry.get(kind, name, where)
+    try:
+        p = cls.Params(**params)
+    except ValidationError as exc:
+        if doc is not None:
+            raise pydantic_errors(doc, exc, loc) from None
+        raise ConfigError(f"{where}: {exc}") from None
+    try:
+        return cls(p, ctx)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: {exc}") from None
+    except ValueError as exc:
+        raise ConfigError(f"{where}: {kind} {name!r}: {exc}") from None
+
+
+def _noise_matrix(noise: NoiseSpec | float | list[float] | None, m: int, where: str) -> np.ndarray | None:
+    if noise is None:
+        return None
+    if isinstance(noise, (int, float, list)):
+        noise = NoiseSpec(sd=noise)
+    if noise.R is not None:
+        R = np.asarray(noise.R, float)
+        if R.shape != (m, m):
+            raise ConfigError(f"{where}.R: must be {m} x {m} for this measurement model, got {R.shape[0]} x {R.shape[1] if R.ndim > 1 else 1}")
+        if not np.allclose(R, R.T) or np.any(np.linalg.eigvalsh(0.5 * (R + R.T)) <= 0):
+            raise ConfigError(f"{where}.R: must be symmetric positive definite")
+        return R
+    if noise.sd is not None:
+        sd = np.atleast_1d(np.asarray(noise.sd, float))
+        if sd.size not in (1, m):
+            raise ConfigError(f"{where}.sd: needs 1 or {m} values for this measurement model, got {sd.size}")
+        if np.any(sd <= 0):
+            raise ConfigError(f"{where}.sd: standard deviations must be > 0")
+        return np.diag(np.broadcast_to(sd, (m,)) ** 2)
+    return None
+
+
+def _initial(spec: SystemSpec, process: ProcessModel, doc: LocatedYAML | None) -> tuple[np.ndarray, np.ndarray]:
+    lay = process.layout
+    def where(*loc: Any) -> str:
+        return doc.where(["initial", *loc]) if doc else "initial." + ".".join(map(str, loc))
+    x0 = np.zeros(lay.n)
+    for block in lay.blocks:
+        if block.kind == "quaternion":
+            x0[lay[block.name].start] = 1.0
+    for name, val in spec.initial.mean.items():
+        if name not in lay:
+            raise ConfigError(f"{where('mean', name)}: state has no block {name!r}; blocks are {[b.name for b in lay.blocks]}")
+        sl = lay[name]
+        v = np.atleast_1d(np.asarray(val, float))
+        if v.size not in (1, sl.stop - sl.start):
+            raise ConfigError(f"{where('mean', name)}: block {name!r} has {sl.stop - sl.start} elements, got {v.size} values")
+        x0[sl] = v
+    if spec.initial.P is not None:
+        P0 = np.asarray(spec.initial.P, float)
+        if P0.shape != (lay.n, lay.n):
+            raise ConfigError(f"{where('P')}: must be {lay.n} x {lay.n} for the state {lay!r}, got {P0.shape}")
+    else:
+        sd = np.ones(lay.n)
+        for name, val in spec.initial.sd.items():
+            if name not in lay:
+                raise ConfigError(f"{where('sd', name)}: state has no block {name!r}; blocks are {[b.name for b in lay.blocks]}")
+            sl = lay[name]
+            v = np.atleast_1d(np.asarray(val, float))
+            if v.size not in (1, sl.stop - sl.start):
+                raise ConfigError(f"{where('sd', name)}: block {name!r} has {sl.stop - sl.start} elements, got {v.size} values")
+            sd[sl] = v
+        missing = [b.name for b in lay.blocks if b.name not in spec.initial.sd]
+        if missing and spec.initial.sd:
+            raise ConfigError(f"{where('sd')}: no standard deviation for block(s) {missing}")
+        if np.any(sd <= 0):
+            raise ConfigError(f"{where('sd')}: standard deviations must be > 0")
+        P0 = np.diag(sd ** 2)
+    if not np.allclose(P0, P0.T) or np.any(np.linalg.eigvalsh(0.5 * (P0 + P0.T)) <= 0):
+        raise ConfigError(f"{where('P')}: initial covariance must be symmetric positive definite")
+    return x0, P0
+
+
+def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = None,
+         registry: Registry | None = None, filter_override: ComponentSpec | None = None) -> System:
+    """Build every component of a validated SystemSpec and check dimensions."""
+    reg = registry or default_registry()
+    base_dir = str(path.parent) if path else "."
+    beacons = {k: np.asarray(v, float) for k, v in spec.beacons.items()}
+    ctx = BuildContext(layout=None, beacons=beacons, base_dir=base_dir)
+    process = build_component(reg, "process", spec.process, ctx, doc, ["process"])
+    assert isinstance(process, ProcessModel)
+    layout = process.layout
+    fspec = filter_override if filter_override is not None else spec.filter
+    filt = build_component(reg, "filter", fspec, BuildContext(layout, beacons, None, base_dir), doc, ["filter"])
+    sensors: dict[str, SensorRuntime] = {}
+    for sname, s in spec.sensors.items():
+        if not s.enabled:
+            continue
+        sctx = BuildContext(layout, beacons, sname, base_dir)
+        loc = ["sensors", sname]
+        where = doc.where(loc) if doc else f"sensors.{sname}"
+        decoder = build_component(reg, "decoder", s.decoder, sctx, doc, [*loc, "decoder"])
+        pre = build_component(reg, "solver", s.preprocessor, sctx, doc, [*loc, "preprocessor"]) if s.preprocessor else None
+        model = gate = R = None
+        if s.role == "measurement":
+            if s.model is None:
+                raise ConfigError(f"{where}: a measurement sensor needs 'model: NAME'")
+            model = build_component(reg, "measurement", s.model, sctx, doc, [*loc, "model"])
+            R = _noise_matrix(s.noise, model.dim, doc.where([*loc, "noise"]) if doc else f"{where}.noise")
+            gate = build_component(reg, "gate", s.gate, sctx, doc, [*loc, "gate"]) if s.gate else None
+        elif process.input_dim == 0:
+            raise ConfigError(f"{where}.role: 'input' but process {process.name!r} takes no control input")
+        sensors[sname] = SensorRuntime(sname, s.role, decoder, pre, model, R, gate, s.time_offset)
+    inputs = [n for n, s in sensors.items() if s.role == "input"]
+    if len(inputs) > 1:
+        raise ConfigError(f"{path or 'config'}: sensors: at most one input sensor, got {inputs}")
+    if process.input_dim and not inputs:
+        raise ConfigError(f"{path or 'config'}: sensors: process {process.name!r} needs an input sensor (role: input)")
+    if spec.initial.from_sensor and spec.initial.from_sensor not in sensors:
+        raise ConfigError(f"{doc.where(['initial', 'from_sensor']) if doc else 'initial.from_sensor'}: no sensor {spec.initial.from_sensor!r}")
+    x0, P0 = _initial(spec, process, doc)
+    return System(spec, path, process, filt, sensors, x0, P0, beacons, reg)  # type: ignore[arg-type]
+
+
+def load_system(path: str | Path, registry: Registry | None = None,
+                filter_override: ComponentSpec | None = None) -> System:
+    """Load, validate and wire a system YAML. Raises ConfigError naming file, line and field."""
+    doc = load_yaml(path)
+    try:
+        spec = SystemSpec.model_validate(doc.data)
+    except ValidationError as exc:
+        raise pydantic_errors(doc, exc) from None
+    return wire(spec, doc, Path(path), registry, filter_override)

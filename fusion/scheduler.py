@@ -1,0 +1,322 @@
+"""Time alignment of asynchronous sensor messages; drives predict/update; emits estimates (DESIGN.md).
+
+Messages go through a reorder buffer of ``max_latency`` seconds (sensor time, after each sensor's
+``time_offset``) and are released in time order. Input samples (role ``input``, the IMU) are integrated
+into the prediction in order, the last sample held over the interval to the next time; measurements
+are fused by updates at their own times; outputs are emitted at each update and/or at a fixed rate.
+
+A message older than the released horizon is late: ``drop`` counts it, ``replay`` rewinds to the newest
+stored belief before it and re-runs the processed messages after it (bounded history).
+
+``Scheduler.run(messages)`` is a generator of ``Estimate`` and ``Event`` objects, so a live UI can
+consume it as it goes.
+"""
+from __future__ import annotations
+
+import heapq
+import itertools
+import math
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Iterable, Iterator
+
+import numpy as np
+
+from fusion.api import Belief, Estimate, Event, MalformedMessage, Message
+from fusion.config import SensorRuntime, System
+
+
+@dataclass
+class _Snapshot:
+    t: float
+    belief: Belief
+    u: np.ndarray | None
+    next_output: float
+    index: int  # position in the processed-message log after which this snapshot was taken
+
+
+class Scheduler:
+    """Runs a wired System over a stream of Messages."""
+
+    def __init__(self, system: System, t0: float | None = None):
+        self.system = system
+        self.process = system.process
+        self.filter = system.filter
+        self.sensors = system.sensors
+        spec = system.spec
+        self.max_latency = spec.scheduler.max_latency
+        self.late_policy = spec.scheduler.late_policy
+        self.output_dt = 1.0 / spec.output.rate_hz if spec.output.rate_hz else None
+        self.on_update = spec.output.on_update
+        self.belief: Belief | None = None
+        self._t0 = t0
+        self.u: np.ndarray | None = None
+        self._buffer: list[tuple[float, int, Message]] = []
+        self._seq = itertools.count()
+        self._newest = -math.inf
+        self._horizon = -math.inf
+        self._next_output = math.inf
+        self._history: deque[_Snapshot] = deque(maxlen=spec.scheduler.history)
+        self._log: deque[Message] = deque(maxlen=spec.scheduler.history * 8)
+        self._log_start = 0
+        self._replaying = False
+        self.steps = {"predict": 0, "update": 0}
+        self.time_s = {"predict": 0.0, "update": 0.0}
+        self.unused: dict[str, int] = {}
+        self.nis: dict[str, list[tuple[float, float, int]]] = {}
+        self.truth: list[Message] = []
+        self._batch = hasattr(self.filter, "predict_inputs")
+
+    # ------------------------------------------------------------------ public
+    def run(self, messages: Iterable[Message | MalformedMessage]) -> Iterator[Estimate | Event]:
+        """Consume messages (and malformed-line markers from fusion.logformat.iter_messages)."""
+        for item in messages:
+            yield from self.push(item)
+        yield from self.finish()
+
+    def push(self, item: Message | MalformedMessage) -> Iterator[Estimate | Event]:
+        """Accept one message; yields whatever it releases."""
+        if isinstance(item, MalformedMessage):
+            sensor = getattr(item, "sensor", None)
+            if sensor in self.sensors:
+                self.sensors[sensor].counters["malformed"] += 1
+            yield Event(math.nan, "malformed", sensor, f"line {getattr(item, 'lineno', '?')}: {item}")
+            return
+        msg = item
+        if msg.sensor == "truth":
+            self.truth.append(msg)
+            return
+        sensor = self.sensors.get(msg.sensor)
+        if sensor is None:
+            n = self.unused.get(msg.sensor, 0)
+            self.unused[msg.sensor] = n + 1
+            if n == 0:
+                yield Event(msg.t, "warning", msg.sensor, f"sensor {msg.sensor!r} is not in the config; its messages are ignored")
+            return
+        sensor.counters["received"] += 1
+        t = msg.t + sensor.time_offset
+        if sensor.time_offset:
+            msg = Message(t, msg.sensor, msg.values, msg.line)
+        if t < self._horizon:
+            if self.late_policy == "drop" or not self._history:
+                sensor.counters["late"] += 1
+                yield Event(t, "late", msg.sensor, f"{self._horizon - t:.3f} s behind the released horizon; dropped")
+                return
+            sensor.counters["late"] += 1
+            yield from self._replay(msg)
+            return
+        heapq.heappush(self._buffer, (t, next(self._seq), msg))
+        self._newest = max(self._newest, t)
+        yield from self._release(self._newest - self.max_latency)
+
+    def finish(self) -> Iterator[Estimate | Event]:
+        """Release everything still buffered (end of input)."""
+        yield from self._release(math.inf)
+        for sensor in self.sensors.values():
+            if sensor.preprocessor is not None:
+                for out in sensor.preprocessor.flush():
+                    yield from self._measure(sensor, out)
+                yield from self._drain_solver_events(sensor)
+
+    # ------------------------------------------------------------------ internals
+    def _release(self, until: float) -> Iterator[Estimate | Event]:
+        pending: list[Message] = []
+        while self._buffer and self._buffer[0][0] <= until:
+            _, _, msg = heapq.heappop(self._buffer)
+            self._horizon = max(self._horizon, msg.t)
+            if self.sensors[msg.sensor].role == "input" and self._batch and not self._replaying:
+                pending.append(msg)
+                continue
+            if pending:
+                yield from self._inputs(pending)
+                pending = []
+            yield from self._process(msg)
+        if pending:
+            yield from self._inputs(pending)
+
+    def _process(self, msg: Message) -> Iterator[Estimate | Event]:
+        if not self._replaying:
+            self._record(msg)
+        sensor = self.sensors[msg.sensor]
+        if sensor.role == "input":
+            yield from self._inputs([msg])
+            return
+        try:
+            decoded = sensor.decoder.decode(msg)
+        except MalformedMessage as exc:
+            sensor.counters["malformed"] += 1
+            yield Event(msg.t, "malformed", msg.sensor, f"line {msg.line}: {exc}")
+            return
+        if decoded is None:
+            return
+        outs = [decoded] if sensor.preprocessor is None else sensor.preprocessor.feed(decoded)
+        yield from self._drain_solver_events(sensor)
+        for out in outs:
+            yield from self._measure(sensor, out)
+        self._snapshot()
+
+    def _drain_solver_events(self, sensor: SensorRuntime) -> Iterator[Event]:
+        events = getattr(sensor.preprocessor, "events", None)
+        if events:
+            yield from list(events)
+            events.clear()
+
+    def _ensure_belief(self, t: float) -> None:
+        if self.belief is None:
+            t0 = self._t0 if self._t0 is not None else t
+            self.belief = self.filter.initial_belief(t0, self.system.x0, self.system.P0)
+            self._next_output = t0 + self.output_dt if self.output_dt else math.inf
+
+    def _predict_to(self, t: float) -> Iterator[Estimate]:
+        """Predict with the held input up to ``t``, emitting fixed-rate outputs on the way."""
+        assert self.belief is not None
+        while self._next_output <= t:
+            self._step(self._next_output)
+            if not self._replaying:
+                yield Estimate(self.belief.t, self.belief, "output")
+            self._next_output += self.output_dt  # type: ignore[operator]
+        self._step(t)
+
+    def _step(self, t: float) -> None:
+        dt = t - self.belief.t  # type: ignore[union-attr]
+        if dt <= 0.0:
+            return
+        if self.process.input_dim and self.u is None:
+            # No input sample yet: nothing to propagate with; hold the belief, move its time.
+            self.belief = self.belief.with_(t=t)  # type: ignore[union-attr]
+            return
+        t0 = time.perf_counter()
+        self.belief = self.filter.predict(self.belief, self.process, self.u, dt)
+        self.time_s["predict"] += time.perf_counter() - t0
+        self.steps["predict"] += 1
+
+    def _inputs(self, msgs: list[Message]) -> Iterator[Estimate | Event]:
+        """Integrate input samples in order (the held sample propagates up to each new sample time)."""
+        sensor = self.sensors[msgs[0].sensor]
+        good: list[tuple[float, np.ndarray]] = []
+        for msg in msgs:
+            try:
+                decoded = sensor.decoder.decode(msg)
+                if decoded is None:
+                    continue
+                u = self.process.input_from(decoded)
+            except MalformedMessage as exc:
+                sensor.counters["malformed"] += 1
+                yield Event(msg.t, "malformed", msg.sensor, f"line {msg.line}: {exc}")
+                continue
+            good.append((msg.t, u))
+        if not good:
+            return
+        self._ensure_belief(good[0][0])
+        if self._batch and len(good) > 1 and self.u is not None and self._next_output > good[-1][0]:
+            # Whole run of samples in one call (the filter integrates them in order, DESIGN: same math).
+            ts = np.array([self.belief.t] + [t for t, _ in good])  # type: ignore[union-attr]
+            us = np.vstack([self.u] + [u for _, u in good[:-1]])
+            dts = np.diff(ts)
+            keep = dts > 0
+            if keep.any():
+                t0 = time.perf_counter()
+                self.belief = self.filter.predict_inputs(self.belief, self.process, us[keep], dts[keep])
+                self.time_s["predict"] += time.perf_counter() - t0
+                self.steps["predict"] += int(keep.sum())
+            self.u = good[-1][1]
+            sensor.counters["used"] += len(good)
+        else:
+            for t, u in good:
+                yield from self._predict_to(t)
+                self.u = u
+                sensor.counters["used"] += 1
+        self._snapshot()
+
+    def _measure(self, sensor: SensorRuntime, msg: Message) -> Iterator[Estimate | Event]:
+        try:
+            obs = sensor.model.observe(msg)  # type: ignore[union-attr]
+        except MalformedMessage as exc:
+            sensor.counters["malformed"] += 1
+            yield Event(msg.t, "malformed", sensor.name, f"line {msg.line}: {exc}")
+            return
+        if obs is None:
+            return
+        if self.belief is None and self.system.spec.initial.from_sensor == sensor.name:
+            self._initialise_from(obs)
+            sensor.counters["used"] += 1
+            return
+        self._ensure_belief(obs.t)
+        yield from self._predict_to(obs.t)
+        R = obs.R if obs.R is not None else sensor.R
+        if R is None:
+            raise MalformedMessage(f"sensor {sensor.name!r} has no noise R in the config and its message carries none")
+        t0 = time.perf_counter()
+        result = self.filter.update(self.belief, obs.model, obs.z, R, sensor.gate)
+        self.time_s["update"] += time.perf_counter() - t0
+        self.steps["update"] += 1
+        if result.accepted:
+            sensor.counters["used"] += 1
+            self.belief = result.belief
+        else:
+            sensor.counters["rejected"] += 1
+            if not self._replaying:
+                yield Event(obs.t, "rejected", sensor.name, f"NIS {result.nis:.1f} outside the gate")
+        if not self._replaying:
+            self.nis.setdefault(sensor.name, []).append((obs.t, result.nis, len(obs.z)))
+            if self.on_update:
+                yield Estimate(obs.t, self.belief, "update", sensor.name, result)
+
+    def _initialise_from(self, obs) -> None:
+        """Initial belief whose position block is the first observation (a fix) of ``from_sensor``."""
+        x0 = self.system.x0.copy()
+        P0 = self.system.P0.copy()
+        sl = self.system.layout["p"]
+        m = len(obs.z)
+        x0[sl.start:sl.start + m] = obs.z
+        if obs.R is not None:
+            P0[sl.start:sl.start + m, sl.start:sl.start + m] = obs.R
+        self.belief = self.filter.initial_belief(obs.t, x0, P0)
+        self._next_output = obs.t + self.output_dt if self.output_dt else math.inf
+
+    # ------------------------------------------------------------------ replay
+    def _record(self, msg: Message) -> None:
+        if self.late_policy != "replay":
+            return
+        if len(self._log) == self._log.maxlen:
+            self._log_start += 1
+        self._log.append(msg)
+
+    def _snapshot(self) -> None:
+        if self.late_policy != "replay" or self._replaying or self.belief is None:
+            return
+        self._history.append(_Snapshot(self.belief.t, self.belief, self.u, self._next_output,
+                                       self._log_start + len(self._log)))
+
+    def _replay(self, late: Message) -> Iterator[Estimate | Event]:
+        snap = None
+        for s in reversed(self._history):
+            if s.t <= late.t and s.index >= self._log_start:
+                snap = s
+                break
+        sensor = self.sensors[late.sensor]
+        if snap is None:
+            yield Event(late.t, "late", late.sensor, "older than the replay history; dropped")
+            return
+        rerun = list(itertools.islice(self._log, snap.index - self._log_start, None))
+        rerun.append(late)
+        rerun.sort(key=lambda m: m.t)
+        self.belief, self.u, self._next_output = snap.belief, snap.u, snap.next_output
+        self._replaying = True
+        counters = {n: dict(s.counters) for n, s in self.sensors.items()}
+        try:
+            for msg in rerun:
+                for out in self._process(msg):
+                    pass
+        finally:
+            self._replaying = False
+        for n, s in self.sensors.items():  # re-run messages were already counted
+            s.counters.update(counters[n])
+        sensor.counters["used"] += 1
+        self._record(late)
+        self._history.clear()
+        self._snapshot()
+        yield Event(late.t, "replayed", late.sensor, f"re-ran {len(rerun)} messages")
+        if self.on_update and self.belief is not None:
+            yield Estimate(self.belief.t, self.belief, "update", late.sensor)

@@ -1,0 +1,68 @@
+"""Process ``pv``: n-D constant velocity (white-noise acceleration), paper 001 eqs. 3-4.
+
+State ``p:n v:n`` (m, m/s; any Cartesian frame, NED in 3-D). Per axis i with spectral density S_i
+(m^2/s^3, the PSD of the white acceleration):
+
+.. math::
+    F = \\begin{bmatrix} I & \\Delta t\\, I \\\\ 0 & I \\end{bmatrix},\\qquad
+    Q_i = S_i \\begin{bmatrix} \\Delta t^3/3 & \\Delta t^2/2 \\\\ \\Delta t^2/2 & \\Delta t \\end{bmatrix}
+"""
+from __future__ import annotations
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from fusion.api import Block, Params, ProcessModel, StateLayout
+
+
+class ConstantVelocity(ProcessModel):
+    """n-D constant-velocity model (paper 001 eq. 4); state p:n v:n in m and m/s.
+
+    Params: ``dims`` (1-3), ``spectral_density``: S per axis in m^2/s^3 (scalar or one per axis)."""
+
+    name = "pv"
+    linear = True
+
+    class Params(Params):
+        dims: int = Field(2, ge=1, le=3, description="number of axes (2: plane, 3: space)")
+        spectral_density: float | list[float] = Field(1.0, description="S_v per axis, m^2/s^3")
+
+        @model_validator(mode="after")
+        def _check(self):
+            s = np.atleast_1d(np.asarray(self.spectral_density, float))
+            if s.size not in (1, self.dims):
+                raise ValueError(f"spectral_density needs 1 or {self.dims} values, got {s.size}")
+            if np.any(s < 0):
+                raise ValueError("spectral_density must be >= 0")
+            return self
+
+    def __init__(self, params=None, context=None):
+        super().__init__(params, context)
+        d = self.params.dims
+        self.layout = StateLayout([Block("p", d), Block("v", d)])
+        self._S = np.broadcast_to(np.asarray(self.params.spectral_density, float), (d,)).copy()
+
+    def F(self, dt: float) -> np.ndarray:
+        """Transition matrix (2d, 2d) over dt seconds."""
+        d = self.params.dims
+        F = np.eye(2 * d)
+        F[:d, d:] = dt * np.eye(d)
+        return F
+
+    def f(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        d = self.params.dims
+        out = np.array(x, dtype=float, copy=True)
+        out[..., :d] += dt * out[..., d:]
+        return out
+
+    def jacobian(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        return self.F(dt)
+
+    def Q(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        d = self.params.dims
+        Q = np.zeros((2 * d, 2 * d))
+        idx = np.arange(d)
+        Q[idx, idx] = self._S * dt ** 3 / 3
+        Q[idx, idx + d] = Q[idx + d, idx] = self._S * dt ** 2 / 2
+        Q[idx + d, idx + d] = self._S * dt
+        return Q
