@@ -1,0 +1,57 @@
+"""``fusion plugins``: every plugin found, built-in and third-party, by kind."""
+from __future__ import annotations
+
+import argparse
+import inspect
+
+from rich.console import Console
+from rich.table import Table
+
+from fusion.api import KINDS
+from fusion.registry import default_registry
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("plugins", help="list plugins by kind",
+                       description="List every plugin component found (built-in and from installed packages "
+                                   "with entry points in group 'fusion'): kind, name and provider.")
+    p.add_argument("--verbose", "-v", action="store_true", help="add each plugin's docstring and parameters")
+    p.add_argument("--kind", choices=KINDS, help="only this kind")
+    p.set_defaults(func=run)
+
+
+def describe_params(cls) -> list[tuple[str, str, str, str]]:
+    """(name, type, default, description) of a component's Params model."""
+    rows = []
+    for name, f in cls.Params.model_fields.items():
+        ann = getattr(f.annotation, "__name__", None) or str(f.annotation).replace("typing.", "")
+        default = "required" if f.is_required() else repr(f.default if f.default_factory is None else f.default_factory())
+        rows.append((name, ann, default, f.description or ""))
+    return rows
+
+
+def run(args: argparse.Namespace) -> int:
+    reg = default_registry()
+    console = Console()
+    entries = reg.entries(args.kind)
+    if not args.verbose:
+        table = Table(title="fusion plugins")
+        for col in ("kind", "name", "provider", "summary"):
+            table.add_column(col)
+        for e in entries:
+            doc = inspect.getdoc(e.cls) or ""
+            table.add_row(e.kind, e.name, e.provider, doc.splitlines()[0] if doc else "")
+        console.print(table)
+        return 0
+    for e in entries:
+        console.rule(f"[bold]{e.kind}[/bold] {e.name}  [dim]{e.provider}[/dim]")
+        console.print(inspect.getdoc(e.cls) or "(no docstring)", markup=False)
+        rows = describe_params(e.cls)
+        if rows:
+            t = Table(show_header=True, box=None)
+            for col in ("parameter", "type", "default", "description"):
+                t.add_column(col)
+            for r in rows:
+                t.add_row(*r)
+            console.print(t)
+    return 0

@@ -1,0 +1,98 @@
+"""The log format: parsing, checksums, metadata, and a property test that the decoder never raises."""
+import math
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fusion.api import MalformedMessage, Message
+from fusion.logformat import ParsedStream, checksum, format_line, iter_messages, parse_line
+
+
+def test_parse_numbers_and_labels():
+    m = parse_line("1.5,uwb,B2,7.25", 3)
+    assert m == Message(1.5, "uwb", ("B2", 7.25), 3)
+
+
+def test_checksum_matches_nmea_definition():
+    # NMEA's published example sentence: body between '$' and '*' XORs to 0x47.
+    body = "GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,"
+    assert checksum(body) == "47"
+
+
+def test_line_with_good_and_bad_checksum():
+    line = format_line(2.0, "imu", [0.1, -9.81, 0.0], with_checksum=True)
+    assert parse_line(line).values == (0.1, -9.81, 0.0)
+    bad = line[:-2] + ("00" if line[-2:] != "00" else "01")
+    with pytest.raises(MalformedMessage, match="checksum"):
+        parse_line(bad)
+
+
+@pytest.mark.parametrize("text,reason", [
+    ("abc,imu,1", "bad time"),
+    ("1.0,imu,1.2.3", "bad number"),
+    ("1.0,imu,nan", "non-finite"),
+    ("1.0,imu,inf", "non-finite"),
+    ("nan,imu,1", "non-finite time"),
+    ("1.0,imu", "expected"),
+    ("1.0,i mu,3", "sensor"),
+])
+def test_malformed_lines_say_why(text, reason):
+    with pytest.raises(MalformedMessage, match=reason):
+        parse_line(text)
+
+
+def test_nmea_payload_kept_whole():
+    m = parse_line("3.0,gps,$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47")
+    assert m.values == ("$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47",)
+
+
+def test_stream_counts_malformed_and_reads_metadata():
+    lines = ["# fusion-log 1", "# scenario: demo", "# fields imu ax ay", "0.0,imu,1,2", "0.1,imu,1", "0.2,imu,x!,2",
+             "", "0.3,imu,3,4", "garbage"]
+    st_ = ParsedStream()
+    out = list(iter_messages(lines, st_))
+    msgs = [m for m in out if isinstance(m, Message)]
+    assert [m.t for m in msgs] == [0.0, 0.3]
+    assert st_.header.fields["imu"] == ("ax", "ay")
+    assert st_.header.meta["scenario"] == "demo"
+    assert st_.malformed == {"imu": 2, None: 1}
+    assert "line 6" in st_.last_error["imu"]
+
+
+def test_format_roundtrip_exact():
+    vals = [0.1, 1e-300, -123456.789, 2.0 ** -30]
+    m = parse_line(format_line(12.345678901, "s", vals))
+    assert m.values == tuple(vals) and m.t == 12.345678901
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.text(max_size=60), max_size=20))
+def test_decoder_never_raises_on_arbitrary_text(lines):
+    for item in iter_messages(lines):
+        assert isinstance(item, (Message, MalformedMessage))
+
+
+finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+labels = st.from_regex(r"[A-Za-z][A-Za-z0-9_]{0,6}", fullmatch=True).filter(
+    lambda s: s.lower() not in {"nan", "inf", "infinity"})
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(finite, st.sampled_from(["imu", "uwb", "gps_1"]),
+                          st.lists(st.one_of(finite, labels), min_size=1, max_size=6), st.booleans()),
+                max_size=15),
+       st.lists(st.text(max_size=40), max_size=10))
+def test_well_formed_lines_are_never_dropped(records, noise):
+    """Interleave well-formed lines with arbitrary junk: every well-formed line comes out intact."""
+    lines = []
+    for i, (t, s, vals, ck) in enumerate(records):
+        lines.append(format_line(t, s, vals, with_checksum=ck))
+        if i < len(noise):
+            junk = noise[i].replace("\n", " ").replace("\r", " ")
+            lines.append("# note " + junk)  # comments never swallow a message
+    got = [m for m in iter_messages(lines) if isinstance(m, Message)]
+    assert len(got) == len(records)
+    for m, (t, s, vals, _) in zip(got, records):
+        assert m.t == t and m.sensor == s
+        assert all((a == b) or (isinstance(a, float) and math.isclose(a, b)) for a, b in zip(m.values, vals))
