@@ -1,0 +1,39 @@
+"""A barometric altimeter as a fusion measurement plugin: z = -p_z + bias (height up, NED state)."""
+from __future__ import annotations
+
+import numpy as np
+
+from fusion import hookimpl
+from fusion.api import ConfigError, MeasurementModel, Params
+
+
+class Altimeter(MeasurementModel):
+    """Height above the reference (m, up) from the NED position block ``p`` (needs 3 axes).
+
+    Params: ``offset``: height of the reference above the navigation origin (m)."""
+
+    name = "altimeter"
+    dim = 1
+
+    class Params(Params):
+        offset: float = 0.0
+
+    def __init__(self, params=None, context=None):
+        super().__init__(params, context)
+        lay = self.context.layout
+        if lay is None or "p" not in lay or lay.block("p").size != 3:
+            raise ConfigError("altimeter needs a 3-D position block 'p'")
+        self._iz = lay["p"].start + 2
+
+    def h(self, x: np.ndarray) -> np.ndarray:
+        return self.params.offset - x[..., self._iz : self._iz + 1]
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        H = np.zeros((1, x.shape[-1]))
+        H[0, self._iz] = -1.0
+        return H
+
+
+@hookimpl
+def fusion_register_components(registry):
+    registry.add(Altimeter)
