@@ -1,0 +1,296 @@
+"""Process ``ins``: IMU-driven 16-state strapdown INS (paper 000, sec. V-A, eqs. 33-52)."""
+from __future__ import annotations
+
+from typing import ClassVar, Literal
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from fusion import quaternion as quat
+from fusion.api import BuildContext, MalformedMessage, Message, Params, ProcessModel, StateLayout
+
+STANDARD_GRAVITY = 9.80665          # m/s^2
+EARTH_RATE = 7.292115e-5            # rad/s (WGS84)
+
+# ADIS16364 data sheet (Analog Devices, Rev. B): angular random walk 2.0 deg/sqrt(h), velocity random walk
+# 0.12 m/s/sqrt(h), in-run bias stability 25 deg/h and 0.1 mg. The bias random-walk densities are those
+# stabilities spread over ~100 s (stability / sqrt(100 s)), a common engineering reading of the sheet.
+ADIS16364_GYRO_ND = 2.0 * np.pi / 180.0 / 60.0            # rad/s/sqrt(Hz)  (= 5.82e-4)
+ADIS16364_ACCEL_ND = 0.12 / 60.0                          # m/s^2/sqrt(Hz)  (= 2.0e-3)
+ADIS16364_GYRO_BIAS_RW = 25.0 * np.pi / 180.0 / 3600.0 / 10.0   # rad/s^2/sqrt(Hz) (= 1.2e-5)
+ADIS16364_ACCEL_BIAS_RW = 0.1e-3 * STANDARD_GRAVITY / 10.0      # m/s^3/sqrt(Hz)  (= 9.8e-5)
+
+Density = float | tuple[float, float, float]
+
+# [R(q).ravel(), |q|^2] = outer(q, q).ravel() @ _K10 (one product gives the matrix and its normaliser)
+_K10 = np.concatenate([quat._K, np.eye(16)[:, quat._DIAG16].sum(axis=1, keepdims=True)], axis=1)
+
+
+def somigliana_gravity(latitude_deg: float, height_m: float = 0.0) -> float:
+    """Normal gravity (m/s^2) on the WGS84 ellipsoid (Somigliana) with the free-air correction -3.086e-6 h."""
+    s2 = np.sin(np.radians(latitude_deg)) ** 2
+    g0 = 9.7803253359 * (1.0 + 0.00193185265241 * s2) / np.sqrt(1.0 - 0.00669437999013 * s2)
+    return float(g0 - 3.086e-6 * height_m)
+
+
+class InsParams(Params):
+    """YAML parameters of ``ins``. Noise densities are one value (all axes) or three (x y z, FRD).
+
+    Data-sheet conversions: ARW [deg/sqrt(h)] * pi/180 / 60 = rad/s/sqrt(Hz);
+    VRW [m/s/sqrt(h)] / 60 = m/s^2/sqrt(Hz). Defaults are ADIS16364-class figures.
+    """
+
+    gravity: float | None = Field(None, gt=0, description="local gravity g (m/s^2); default: from latitude, "
+                                  "else the system's gravity (context.extra['gravity']), else 9.80665")
+    latitude_deg: float | None = Field(None, ge=-90, le=90, description="latitude (deg) for g and Earth rate")
+    height_m: float = Field(0.0, description="ellipsoidal height (m) for g from latitude")
+    earth_rate: bool = Field(False, description="subtract the Earth rate C_n^b w_ie (eq. 38; needs latitude)")
+    eta: float = Field(0.0, ge=0, description="quaternion norm-correction gain eta (1/s) of eq. 50; eta*dt < 1")
+    integration: Literal["euler", "trapezoidal"] = Field(
+        "euler", description="euler: eqs. 40-41 as in the paper; trapezoidal: mean of C_k f and C_k+1 f, "
+        "p += v dt + a dt^2/2 (second order)")
+    accel_noise_density: Density = Field(ADIS16364_ACCEL_ND, description="white noise of f (m/s^2/sqrt(Hz))")
+    gyro_noise_density: Density = Field(ADIS16364_GYRO_ND, description="white noise of w (rad/s/sqrt(Hz))")
+    accel_bias_rw: Density = Field(ADIS16364_ACCEL_BIAS_RW, description="accel bias random walk (m/s^3/sqrt(Hz))")
+    gyro_bias_rw: Density = Field(ADIS16364_GYRO_BIAS_RW, description="gyro bias random walk (rad/s^2/sqrt(Hz))")
+    quat_norm_variance: float = Field(0.0, ge=0, description="variance added along q per step so Q is "
+                                      "positive definite (the norm direction is otherwise noise-free)")
+    max_specific_force: float | None = Field(None, gt=0, description="sensor range (m/s^2, any axis)")
+    max_rate: float | None = Field(None, gt=0, description="sensor range (rad/s, any axis)")
+
+    @model_validator(mode="after")
+    def _earth_rate_needs_latitude(self) -> "InsParams":
+        if self.earth_rate and self.latitude_deg is None:
+            raise ValueError("earth_rate: true needs latitude_deg")
+        return self
+
+
+def _var(density: Density) -> np.ndarray:
+    d = np.broadcast_to(np.asarray(density, dtype=float), (3,))
+    if np.any(d < 0):
+        raise ValueError(f"noise densities must be >= 0, got {density}")
+    return d * d
+
+
+class Ins(ProcessModel):
+    """Strapdown INS driven by the IMU (paper 000 eqs. 33-52), NED navigation frame, FRD body frame.
+
+    State (eq. 33), 16 elements: ``p`` position (m, NED), ``v`` velocity (m/s, NED), ``q`` attitude
+    (Hamilton, scalar first, body-to-navigation C_b^n), ``ba`` accelerometer bias (m/s^2, FRD),
+    ``bw`` gyro bias (rad/s, FRD). Input ``u = [ax ay az gx gy gz]``: the IMU's specific force (m/s^2)
+    and angular rate (rad/s), FRD body frame.
+
+    Propagation over dt (one IMU sample, held constant over the interval):
+
+    .. math::
+        a = \\tilde a - b_a,\\quad \\omega = \\tilde\\omega - b_\\omega - C_n^b \\omega_{ie}^n
+        \\quad (37, 38;\\ \\omega_{ie}^n = \\Omega_e[\\cos\\varphi, 0, -\\sin\\varphi] \\text{ if earth\\_rate})
+
+        p_{k+1} = p_k + v_k dt, \\quad v_{k+1} = v_k + (C_b^n(q_k) a + g_n) dt \\quad (40, 41; g_n = [0, 0, g])
+
+        q_{k+1} = [I(\\cos s + \\eta\\,dt\\,\\lambda) - \\tfrac12 \\Phi_\\Delta \\tfrac{\\sin s}{s}] q_k,
+        \\quad s = \\tfrac12|\\omega| dt,\\ \\lambda = 1 - |q_k|^2 \\quad (43-50)
+
+        b_{a,k+1} = b_{a,k},\\quad b_{\\omega,k+1} = b_{\\omega,k} \\quad (51, 52: random walks, zero-mean steps)
+
+    Eq. 50 is evaluated as ``q_k (x) [cos s + eta dt lambda, (sin s / s) w dt / 2]``, the same matrix
+    (``-Phi/2`` is right multiplication by ``[0, w dt/2]``, eq. 39 corrected). The Euler updates of p and
+    v are the paper's; ``integration: trapezoidal`` uses ``a_n = (C_k + C_{k+1}) a / 2 + g_n``,
+    ``v += a_n dt``, ``p += v dt + a_n dt^2 / 2`` instead. C_b^n is computed from q / |q| (eq. 35
+    divided by |q|^2) so non-unit sigma points still rotate rigidly. The Coriolis and transport-rate
+    terms of the velocity equation are neglected, as in eq. 34 (2 w_ie v < 2e-4 m/s^2 at mine speeds).
+
+    Norm correction (eq. 50): the step scales |q| by about ``1 + eta dt (1 - |q|^2)``, which converges
+    for ``eta dt < 1`` (paper's condition); when a step has ``eta dt >= 1`` (a long gap) the product is
+    clamped to 0.5 (dead-beat) and counted in ``counters["eta_clamped"]``.
+
+    Noise ``Q(x, u, dt)``, from continuous white-noise densities N (YAML): accelerometer N_a enters v
+    as in the integrated double integrator (Q_vv = C N_a^2 C^T dt, Q_pv = Q_vv dt/2, Q_pp = Q_vv dt^2/3);
+    gyro N_w enters q through ``dq/dw = Xi(q) dt/2`` (first order): Q_qq = (dt/4) Xi(q) N_w^2 Xi(q)^T
+    (rank 3: nothing along q itself, plus ``quat_norm_variance`` q q^T/|q|^2 if set); biases
+    Q_ba = N_ba^2 dt, Q_bw = N_bw^2 dt (eqs. 51-52 with W of variance N^2/dt). Cross terms between the
+    bias random walks and v, q are second order in dt and neglected.
+    """
+
+    name: ClassVar[str] = "ins"
+    Params: ClassVar[type[Params]] = InsParams
+    layout: StateLayout = StateLayout.parse("p:3 v:3 q:4:quaternion ba:3 bw:3")
+    input_dim: int = 6
+    linear: bool = False
+
+    def __init__(self, params: InsParams | None = None, context: BuildContext | None = None):
+        super().__init__(params, context)
+        p: InsParams = self.params  # type: ignore[assignment]
+        if p.gravity is not None:
+            g = p.gravity
+        elif p.latitude_deg is not None:
+            g = somigliana_gravity(p.latitude_deg, p.height_m)
+        else:
+            g = float(self.context.extra.get("gravity", STANDARD_GRAVITY))
+        self.g: float = g
+        self.g_n: np.ndarray = np.array([0.0, 0.0, g])
+        if p.earth_rate:
+            lat = np.radians(p.latitude_deg)  # type: ignore[arg-type]
+            self.w_ie: np.ndarray | None = EARTH_RATE * np.array([np.cos(lat), 0.0, -np.sin(lat)])
+        else:
+            self.w_ie = None
+        self._var_a, self._var_w = _var(p.accel_noise_density), _var(p.gyro_noise_density)
+        self._var_ba, self._var_bw = _var(p.accel_bias_rw), _var(p.gyro_bias_rw)
+        self._trap = p.integration == "trapezoidal"
+        self.counters: dict[str, int] = {"eta_clamped": 0}
+
+    # ------------------------------------------------------------------ propagation
+    def _eta_dt(self, dt: float) -> float:
+        e = self.params.eta * dt  # type: ignore[attr-defined]
+        if e >= 1.0:
+            self.counters["eta_clamped"] += 1
+            return 0.5
+        return e
+
+    def f(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        """Propagate states x (..., 16) over dt (s) with the IMU sample u (6,) or (..., 6); see the class doc.
+
+        Evaluated once on the whole sigma-point array: a few stacked products, no loop over points."""
+        if u is None:
+            raise ValueError("process 'ins' needs the IMU sample u = [ax ay az gx gy gz]")
+        x = np.asarray(x, dtype=float)
+        lead = x.shape[:-1]
+        aw = np.asarray(u, dtype=float) - x[..., 10:16]          # eqs. 37-38 (noise-free mean): [a, w]
+        a = aw[..., :3]
+        q = x[..., 6:10]
+        qq = (q[..., :, None] * q[..., None, :]).reshape(lead + (16,))
+        Rn = qq @ _K10                                           # [R(q) (9), |q|^2]
+        n2 = Rn[..., 9:]
+        C = (Rn[..., :9] / n2).reshape(lead + (3, 3))            # C_b^n, eq. 35
+        w = aw[..., 3:]
+        if self.w_ie is not None:
+            w = w - C.swapaxes(-1, -2) @ self.w_ie              # eq. 38: C_n^b w_ie^n
+        half = w * (0.5 * dt)                                    # [dphi dtheta dpsi] / 2, eqs. 43-45
+        s = np.sqrt((half * half).sum(axis=-1, keepdims=True))   # eq. 49
+        s_ = np.maximum(s, 1e-300)
+        c = np.cos(s)
+        eta_dt = self._eta_dt(dt)
+        if eta_dt:
+            c = c + eta_dt * (1.0 - n2)                          # eq. 50, lambda = 1 - |q|^2
+        dq = np.concatenate([c, (np.sin(s_) / s_) * half], axis=-1)
+        q_new = (q[..., :, None] * dq[..., None, :]).reshape(lead + (16,)) @ quat._T16   # q (x) dq
+        f_n = (C @ a[..., None])[..., 0]                         # C_b^n a
+        pv = x[..., 0:6]
+        if self._trap:
+            qq = (q_new[..., :, None] * q_new[..., None, :]).reshape(lead + (16,))
+            Rn = qq @ _K10
+            C_new = (Rn[..., :9] / Rn[..., 9:]).reshape(lead + (3, 3))
+            f_n = 0.5 * (f_n + (C_new @ a[..., None])[..., 0])
+            acc = f_n + self.g_n
+            pv_new = pv + np.concatenate([x[..., 3:6] + acc * (0.5 * dt), acc], axis=-1) * dt
+        else:
+            acc = f_n + self.g_n                                 # eq. 34, v_dot
+            pv_new = pv + np.concatenate([x[..., 3:6], acc], axis=-1) * dt   # eqs. 40-41
+        return np.concatenate([pv_new, q_new, x[..., 10:16]], axis=-1)   # eqs. 51-52: mean bias kept
+
+    def normalize(self, x: np.ndarray) -> np.ndarray:
+        """Renormalise the quaternion block of states x (..., 16) to unit norm."""
+        x = np.array(x, dtype=float, copy=True)
+        x[..., 6:10] = quat.normalize(x[..., 6:10])
+        return x
+
+    # ------------------------------------------------------------------ linearisation
+    def _dq_dw(self, w: np.ndarray, dt: float) -> np.ndarray:
+        """d[cos s, sinc(s) w dt/2] / dw (4, 3)."""
+        half = 0.5 * dt * w
+        s = float(np.linalg.norm(half))
+        sinc = np.sinc(s / np.pi)
+        # (s cos s - sin s) / s^3, with its series near 0
+        c3 = (s * np.cos(s) - np.sin(s)) / s**3 if s > 1e-4 else -1.0 / 3.0 + s * s / 30.0
+        d = np.empty((4, 3))
+        d[0] = -0.5 * sinc * half
+        d[1:] = 0.5 * sinc * np.eye(3) + 0.5 * c3 * np.outer(half, half)
+        return d * dt
+
+    def jacobian(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        """Analytic F = df/dx (16, 16) at x (16,) (for the EKF), consistent with f including eq. 50."""
+        if u is None:
+            raise ValueError("process 'ins' needs the IMU sample u = [ax ay az gx gy gz]")
+        x = np.asarray(x, dtype=float)
+        u = np.asarray(u, dtype=float)
+        q = x[6:10]
+        a = u[:3] - x[10:13]
+        w = u[3:] - x[13:16]
+        n2 = q @ q
+        C = quat.to_matrix(q)
+        dw_dq = np.zeros((3, 4))
+        if self.w_ie is not None:
+            w = w - C.T @ self.w_ie
+            # C^T w_ie = C(q*) w_ie, q* = diag(1,-1,-1,-1) q
+            dw_dq = -quat.rotate_jacobian(quat.conjugate(q), self.w_ie) * np.array([1.0, -1.0, -1.0, -1.0])
+        eta_dt = self.params.eta * dt  # type: ignore[attr-defined]
+        eta_dt = 0.5 if eta_dt >= 1.0 else eta_dt
+        half = 0.5 * dt * w
+        s = np.linalg.norm(half)
+        dq = np.concatenate([[np.cos(s) + eta_dt * (1.0 - n2)], np.sinc(s / np.pi) * half])
+        L = quat.left_matrix(q)
+        Ldw = L @ self._dq_dw(w, dt)                             # d q_new / d w (4, 3)
+        F = np.eye(16)
+        F[0:3, 3:6] = dt * np.eye(3)
+        F_qq = quat.right_matrix(dq) - 2.0 * eta_dt * np.outer(q, q) + Ldw @ dw_dq
+        F_qbw = -Ldw
+        F[6:10, 6:10] = F_qq
+        F[6:10, 13:16] = F_qbw
+        # d f_n / d(q, ba, bw), f_n the navigation-frame specific force used over the step
+        Jq = quat.rotate_jacobian(q, a)
+        if self._trap:
+            q_new = L @ dq
+            Jq_new = quat.rotate_jacobian(q_new, a)
+            dfn_dq = 0.5 * (Jq + Jq_new @ F_qq)
+            dfn_dba = -0.5 * (C + quat.to_matrix(q_new))
+            dfn_dbw = 0.5 * Jq_new @ F_qbw
+            kp = 0.5 * dt * dt
+        else:
+            dfn_dq, dfn_dba, dfn_dbw, kp = Jq, -C, np.zeros((3, 3)), 0.0
+        for rows, k in ((slice(3, 6), dt), (slice(0, 3), kp)):
+            if k:
+                F[rows, 6:10] += k * dfn_dq
+                F[rows, 10:13] += k * dfn_dba
+                F[rows, 13:16] += k * dfn_dbw
+        return F
+
+    # ------------------------------------------------------------------ noise
+    def Q(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        """Discrete process noise (16, 16) over dt (s) at x (16,); see the class doc for the discretisation."""
+        q = np.asarray(x, dtype=float)[6:10]
+        Qm = np.zeros((16, 16))
+        if np.ptp(self._var_a) == 0.0:
+            Sa = self._var_a[0] * np.eye(3)                       # isotropic: C N^2 C^T = N^2 I
+        else:
+            C = quat.to_matrix(q)
+            Sa = (C * self._var_a) @ C.T
+        Qm[3:6, 3:6] = Sa * dt
+        Qm[0:3, 3:6] = Qm[3:6, 0:3] = Sa * (dt * dt / 2.0)
+        Qm[0:3, 0:3] = Sa * (dt**3 / 3.0)
+        q0, q1, q2, q3 = q
+        Xi = np.array([[-q1, -q2, -q3], [q0, -q3, q2], [q3, q0, -q1], [-q2, q1, q0]])   # q (x) [0, v] = Xi v
+        Qqq = (Xi * self._var_w) @ Xi.T * (dt / 4.0)
+        Qm[6:10, 6:10] = 0.5 * (Qqq + Qqq.T)
+        if self.params.quat_norm_variance:  # type: ignore[attr-defined]
+            Qm[6:10, 6:10] += self.params.quat_norm_variance * np.outer(q, q) / (q @ q)  # type: ignore[attr-defined]
+        Qm[10:13, 10:13] = np.diag(self._var_ba * dt)
+        Qm[13:16, 13:16] = np.diag(self._var_bw * dt)
+        return Qm
+
+    # ------------------------------------------------------------------ input
+    def input_from(self, message: Message) -> np.ndarray:
+        """u (6,) from an IMU message ``ax ay az gx gy gz`` (m/s^2, rad/s, FRD). Raises MalformedMessage for a
+        wrong count, a non-finite value, or a value beyond ``max_specific_force`` / ``max_rate``: the
+        sample is then rejected and counted, never integrated."""
+        u = message.floats()
+        if u.shape != (6,):
+            raise MalformedMessage(f"process 'ins' expects 6 IMU values (ax ay az gx gy gz), got {u.size}")
+        if not np.all(np.isfinite(u)):
+            raise MalformedMessage(f"non-finite IMU value in {message.values!r}")
+        p: InsParams = self.params  # type: ignore[assignment]
+        if p.max_specific_force is not None and np.max(np.abs(u[:3])) > p.max_specific_force:
+            raise MalformedMessage(f"specific force {u[:3].tolist()} beyond the sensor range "
+                                   f"+-{p.max_specific_force} m/s^2")
+        if p.max_rate is not None and np.max(np.abs(u[3:])) > p.max_rate:
+            raise MalformedMessage(f"angular rate {u[3:].tolist()} beyond the sensor range +-{p.max_rate} rad/s")
+        return u

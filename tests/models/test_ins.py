@@ -1,0 +1,253 @@
+"""Process ``ins`` (paper 000 eqs. 33-52): propagation, vectorisation, noise, input validation."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from fusion import quaternion as quat
+from fusion.api import BuildContext, MalformedMessage, Message
+from fusion_plugins.process.ins import Ins, InsParams, somigliana_gravity
+
+G = 9.80665
+
+
+def make(**kw) -> Ins:
+    return Ins(InsParams(**kw))
+
+
+def state(p=(0, 0, 0), v=(0, 0, 0), q=(1, 0, 0, 0), ba=(0, 0, 0), bw=(0, 0, 0)) -> np.ndarray:
+    return np.concatenate([p, v, q, ba, bw]).astype(float)
+
+
+def run(model: Ins, x: np.ndarray, u_of_t, dt: float, n: int) -> np.ndarray:
+    for k in range(n):
+        x = model.f(x, u_of_t(k * dt), dt)
+    return x
+
+
+def test_layout_and_registry():
+    from fusion.registry import default_registry
+
+    m = make()
+    assert m.layout.n == 16 and m.input_dim == 6
+    assert m.layout["q"] == slice(6, 10) and m.layout.block("q").kind == "quaternion"
+    assert default_registry().get("process", "ins") is Ins
+
+
+# --------------------------------------------------------------------------- attitude vs scipy Rotation
+def test_constant_rate_matches_scipy_exactly():
+    """eq. 48 is the exact exponential: constant body rate over many steps == one scipy rotation."""
+    m = make()
+    q0 = quat.from_euler(0.2, -0.3, 1.0)
+    w = np.array([0.3, -0.7, 1.1])
+    dt, n = 0.01, 500
+    x = run(m, state(q=q0), lambda t: np.r_[0, 0, -G, w], dt, n)
+    ref = Rotation.from_quat(q0, scalar_first=True) * Rotation.from_rotvec(w * dt * n)
+    assert quat.angle_between(x[6:10], ref.as_quat(scalar_first=True)) < 1e-12
+    np.testing.assert_allclose(quat.to_matrix(x[6:10]), ref.as_matrix(), atol=1e-12)
+
+
+def _rate(t: float) -> np.ndarray:
+    return np.array([0.8 * np.sin(2 * t), 0.5 * np.cos(3 * t), 0.3 + 0.2 * t])
+
+
+def _scipy_reference(q0: np.ndarray, T: float, h: float) -> Rotation:
+    r = Rotation.from_quat(q0, scalar_first=True)
+    steps = Rotation.from_rotvec(np.array([_rate((k + 0.5) * h) * h for k in range(int(round(T / h)))]))
+    for k in range(len(steps)):
+        r = r * steps[k]
+    return r
+
+
+def test_time_varying_rate_matches_scipy_integration():
+    """Rates sampled at mid-interval; error against a fine scipy Rotation integration is O(dt^2)."""
+    m = make()
+    q0 = quat.from_euler(-0.1, 0.4, -2.0)
+    T = 2.0
+    ref = _scipy_reference(q0, T, 1e-4).as_quat(scalar_first=True)
+    errs = []
+    for dt in (0.02, 0.01):
+        x = run(m, state(q=q0), lambda t, dt=dt: np.r_[0, 0, -G, _rate(t + dt / 2)], dt, int(round(T / dt)))
+        errs.append(float(quat.angle_between(x[6:10], ref)))
+    assert errs[1] < 2e-5
+    assert 3.0 < errs[0] / errs[1] < 5.0  # second order
+
+
+# --------------------------------------------------------------------------- vectorisation
+@pytest.mark.parametrize("kw", [{}, {"eta": 10.0, "integration": "trapezoidal"},
+                                {"earth_rate": True, "latitude_deg": -26.2}])
+def test_vectorised_equals_row_by_row(kw):
+    rng = np.random.default_rng(3)
+    m = make(**kw)
+    X = rng.normal(size=(2, 33, 16))
+    X[..., 6:10] *= 1.0 / np.linalg.norm(X[..., 6:10], axis=-1, keepdims=True) * rng.uniform(0.95, 1.05, (2, 33, 1))
+    u = rng.normal(size=6)
+    Y = m.f(X, u, 0.01)
+    assert Y.shape == X.shape
+    rows = np.array([[m.f(X[i, j], u, 0.01) for j in range(33)] for i in range(2)])
+    np.testing.assert_allclose(Y, rows, rtol=0, atol=1e-14)
+    U = rng.normal(size=(2, 33, 6))   # per-point inputs broadcast too
+    rows = np.array([[m.f(X[i, j], U[i, j], 0.01) for j in range(33)] for i in range(2)])
+    np.testing.assert_allclose(m.f(X, U, 0.01), rows, rtol=0, atol=1e-14)
+
+
+def test_f_does_not_mutate_and_needs_input():
+    m = make()
+    x = state()
+    x0 = x.copy()
+    m.f(x, np.r_[0, 0, -G, 0, 0, 0], 0.01)
+    np.testing.assert_array_equal(x, x0)
+    with pytest.raises(ValueError, match="IMU"):
+        m.f(x, None, 0.01)
+
+
+# --------------------------------------------------------------------------- kinematics
+@pytest.mark.parametrize("integration", ["euler", "trapezoidal"])
+def test_static_imu_reading_gravity_stays_still(integration):
+    """A static IMU at any attitude reads f_b = C_n^b(-g_n) (+ its biases, which the state knows)."""
+    m = make(integration=integration)
+    q0 = quat.from_euler(0.3, -0.2, 2.5)
+    ba, bw = np.array([0.05, -0.02, 0.1]), np.array([1e-3, -2e-3, 5e-4])
+    f_b = quat.to_matrix(q0).T @ np.array([0.0, 0.0, -G]) + ba
+    x0 = state(p=(1, 2, 3), q=q0, ba=ba, bw=bw)
+    x = run(m, x0, lambda t: np.r_[f_b, bw], 0.01, 1000)
+    np.testing.assert_allclose(x[0:6], x0[0:6], atol=1e-10)
+    assert quat.angle_between(x[6:10], q0) < 1e-12
+
+
+def test_static_imu_with_earth_rate_keeps_attitude():
+    lat = -26.2
+    m = make(earth_rate=True, latitude_deg=lat, gravity=G)
+    q0 = quat.from_euler(0.1, 0.05, 1.0)
+    C = quat.to_matrix(q0)
+    gyro = C.T @ m.w_ie                       # a perfect gyro senses the Earth rate
+    x = run(m, state(q=q0), lambda t: np.r_[C.T @ [0, 0, -G], gyro], 0.01, 2000)
+    assert quat.angle_between(x[6:10], q0) < 1e-10
+    x = run(make(gravity=G), state(q=q0), lambda t: np.r_[C.T @ [0, 0, -G], gyro], 0.01, 2000)
+    assert quat.angle_between(x[6:10], q0) > 1e-3   # without the option the Earth rate looks like motion
+
+
+def test_constant_acceleration_closed_form():
+    """Level, non-rotating body; accelerometer reads a - g_n. Euler (eqs. 40-41): v_N = v0 + N a dt,
+    p_N = p0 + N v0 dt + a dt^2 N(N-1)/2; trapezoidal: the exact p0 + v0 T + a T^2 / 2."""
+    a = np.array([0.4, -0.3, 0.05])
+    p0, v0 = np.array([1.0, -2.0, 0.5]), np.array([0.3, 0.1, 0.0])
+    dt, n = 0.01, 300
+    u = np.r_[a - [0, 0, G], 0, 0, 0]
+    x = run(make(), state(p=p0, v=v0), lambda t: u, dt, n)
+    np.testing.assert_allclose(x[3:6], v0 + n * a * dt, atol=1e-12)
+    np.testing.assert_allclose(x[0:3], p0 + n * v0 * dt + a * dt * dt * n * (n - 1) / 2, atol=1e-11)
+    x = run(make(integration="trapezoidal"), state(p=p0, v=v0), lambda t: u, dt, n)
+    T = n * dt
+    np.testing.assert_allclose(x[0:3], p0 + v0 * T + a * T * T / 2, atol=1e-11)
+
+
+def test_constant_acceleration_rotated_body():
+    """The same motion seen by a yawed/rolled body: the specific force is rotated into FRD."""
+    q0 = quat.from_euler(0.5, 0.2, -1.2)
+    a = np.array([0.4, -0.3, 0.05])
+    u = np.r_[quat.to_matrix(q0).T @ (a - [0, 0, G]), 0, 0, 0]
+    x = run(make(integration="trapezoidal"), state(q=q0), lambda t: u, 0.01, 200)
+    np.testing.assert_allclose(x[0:3], a * 2.0**2 / 2, atol=1e-11)
+
+
+# --------------------------------------------------------------------------- norm correction (eq. 50)
+def test_eta_drives_norm_to_one():
+    m = make(eta=20.0)
+    for scale in (1.1, 0.9):
+        x = state(q=quat.from_euler(0.2, 0.1, 0.3) * scale)
+        norms = []
+        for _ in range(100):
+            x = m.f(x, np.r_[0, 0, -G, 0.2, -0.1, 0.4], 0.01)
+            norms.append(np.linalg.norm(x[6:10]))
+        dev = np.abs(np.array(norms) - 1.0)
+        assert np.all(np.diff(dev) <= 1e-15) and dev[-1] < 1e-8
+    # eta = 0: the closed form (eq. 48) keeps the norm as it is
+    x = run(make(), state(q=np.array([1.1, 0, 0, 0])), lambda t: np.r_[0, 0, -G, 0.2, -0.1, 0.4], 0.01, 100)
+    assert abs(np.linalg.norm(x[6:10]) - 1.1) < 1e-12
+
+
+def test_eta_dt_at_least_one_is_clamped_and_counted():
+    m = make(eta=50.0)
+    x = m.f(state(q=np.array([1.2, 0, 0, 0])), np.r_[0, 0, -G, 0, 0, 0], 0.05)   # eta dt = 2.5
+    assert m.counters["eta_clamped"] == 1
+    assert abs(np.linalg.norm(x[6:10]) - 1.0) < abs(1.2 - 1.0)
+
+
+def test_normalize():
+    x = make().normalize(np.tile(state(q=(2.0, 0, 0, 0)), (3, 1)))
+    np.testing.assert_allclose(x[:, 6:10], [[1, 0, 0, 0]] * 3)
+
+
+# --------------------------------------------------------------------------- linearisation and noise
+@pytest.mark.parametrize("kw", [{}, {"eta": 20.0}, {"eta": 20.0, "integration": "trapezoidal"},
+                                {"eta": 5.0, "earth_rate": True, "latitude_deg": 45.0}])
+def test_jacobian_matches_finite_differences(kw):
+    rng = np.random.default_rng(7)
+    m = make(**kw)
+    x = np.r_[rng.normal(size=6), quat.normalize(rng.normal(size=4)) * 1.02, 0.1 * rng.normal(size=6)]
+    u = np.r_[rng.normal(size=3) + [0, 0, -G], rng.normal(size=3)]
+    h = 1e-6
+    Fn = np.array([(m.f(x + h * e, u, 0.01) - m.f(x - h * e, u, 0.01)) / (2 * h) for e in np.eye(16)]).T
+    np.testing.assert_allclose(m.jacobian(x, u, 0.01), Fn, atol=1e-8)
+
+
+def test_Q_symmetric_psd_and_scaling_in_dt():
+    m = make(accel_noise_density=2e-3, gyro_noise_density=6e-4, accel_bias_rw=1e-4, gyro_bias_rw=1e-5)
+    x = state(q=quat.from_euler(0.3, -0.1, 2.0))
+    u = np.r_[0, 0, -G, 0, 0, 0]
+    Q1, Q2 = m.Q(x, u, 0.01), m.Q(x, u, 0.02)
+    for Qm in (Q1, Q2):
+        np.testing.assert_array_equal(Qm, Qm.T)
+        assert np.linalg.eigvalsh(Qm).min() > -1e-20
+    for blk in ("v", "q", "ba", "bw"):
+        s = m.layout[blk]
+        np.testing.assert_allclose(Q2[s, s], 2 * Q1[s, s], rtol=1e-12)      # white noise: linear in dt
+    np.testing.assert_allclose(Q2[0:3, 0:3], 8 * Q1[0:3, 0:3], rtol=1e-12)  # dt^3 / 3
+    np.testing.assert_allclose(Q2[0:3, 3:6], 4 * Q1[0:3, 3:6], rtol=1e-12)  # dt^2 / 2
+    np.testing.assert_allclose(Q1[3:6, 3:6], 4e-6 * 0.01 * np.eye(3))
+    np.testing.assert_allclose(Q1[13:16, 13:16], 1e-10 * 0.01 * np.eye(3))
+    assert np.abs(Q1[6:10, 6:10] @ x[6:10]).max() < 1e-20                  # nothing along q itself
+    Qn = make(quat_norm_variance=1e-12).Q(x, u, 0.01)
+    assert np.linalg.eigvalsh(Qn).min() > 0
+
+
+def test_Q_matches_monte_carlo_of_noisy_imu():
+    """Sample IMU white noise of density N (sd N / sqrt(dt) per sample) through f: the covariance of
+    v and q after one step matches Q's blocks."""
+    rng = np.random.default_rng(11)
+    Na, Nw, dt, n = np.array([2e-3, 3e-3, 4e-3]), 6e-4, 0.01, 40000
+    m = make(accel_noise_density=tuple(Na), gyro_noise_density=Nw)
+    x = state(v=(1.0, 0.5, 0.0), q=quat.from_euler(0.4, -0.3, 1.3))
+    u = np.r_[0.2, -0.1, -G, 0.3, -0.2, 0.1]
+    noise = rng.normal(size=(n, 6)) * (np.r_[Na, [Nw] * 3] / np.sqrt(dt))
+    Y = m.f(np.broadcast_to(x, (n, 16)), u + noise, dt)
+    Qm = m.Q(x, u, dt)
+    for s in (slice(3, 6), slice(6, 10)):
+        S = np.cov(Y[:, s].T)
+        scale = np.sqrt(np.outer(np.diag(Qm[s, s]), np.diag(Qm[s, s])).max())
+        np.testing.assert_allclose(S, Qm[s, s], atol=0.05 * scale)
+
+
+# --------------------------------------------------------------------------- gravity and input
+def test_gravity_sources():
+    assert make().g == G
+    assert make(gravity=9.79).g == 9.79
+    assert abs(make(latitude_deg=0.0).g - 9.7803253) < 1e-6
+    assert abs(make(latitude_deg=90.0).g - 9.8321849) < 1e-6
+    assert abs(somigliana_gravity(45.0, 1000.0) - (9.80620 - 3.086e-3)) < 1e-5
+    assert Ins(None, BuildContext(extra={"gravity": 9.81})).g == 9.81
+    with pytest.raises(ValueError, match="latitude"):
+        InsParams(earth_rate=True)
+
+
+def test_input_from_rejects_bad_samples():
+    m = make(max_specific_force=50.0, max_rate=5.0)
+    u = m.input_from(Message(0.0, "imu", (0.1, 0.2, -9.8, 0.01, 0.02, 0.03)))
+    np.testing.assert_array_equal(u, [0.1, 0.2, -9.8, 0.01, 0.02, 0.03])
+    for bad in [(0.1, float("nan"), -9.8, 0, 0, 0), (0.1, 0.2, -60.0, 0, 0, 0), (0, 0, -9.8, 0, 6.0, 0),
+                (0, 0, -9.8, 0, 0), (0, 0, -9.8, 0, 0, float("inf")), ("x", 0, 0, 0, 0, 0)]:
+        with pytest.raises(MalformedMessage):
+            m.input_from(Message(0.0, "imu", bad))
+    make().input_from(Message(0.0, "imu", (0, 0, -1e3, 0, 0, 1e2)))   # no range configured: accepted
