@@ -38,12 +38,10 @@ class _Turn:
 def _turn_offset(psi0: float, dpsi: float, length: float) -> tuple[np.ndarray, float]:
     """Displacement (2,) over a turn starting at heading psi0, and the distance d from the turn's ends to
     the intersection of its entry and exit tangent lines (equal on both sides by symmetry)."""
-    sig = _GL_X * length
     psi = psi0 + dpsi * smoothstep(_GL_X)
     disp = length * np.array([np.sum(_GL_W * np.cos(psi)), np.sum(_GL_W * np.sin(psi))])
     e_sum = np.array([np.cos(psi0) + np.cos(psi0 + dpsi), np.sin(psi0) + np.sin(psi0 + dpsi)])
     d = float(disp @ e_sum / (e_sum @ e_sum))
-    del sig
     return disp, d
 
 
