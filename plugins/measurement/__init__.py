@@ -5,5 +5,7 @@ from fusion import hookimpl
 @hookimpl
 def fusion_register_components(registry):
     from fusion_plugins.measurement.range import RangeModel
+    from fusion_plugins.measurement.position import Position
 
     registry.add(RangeModel)
+    registry.add(Position)

@@ -1,0 +1,116 @@
+"""Measurement ``position``: a position fix of the antenna/receiver, with lever arm (paper 000 eq. 53)."""
+from __future__ import annotations
+
+import warnings
+from typing import ClassVar
+
+import numpy as np
+from pydantic import Field
+
+from fusion import quaternion as quat
+from fusion.api import BuildContext, ConfigError, MalformedMessage, MeasurementModel, Message, Observation, Params
+
+
+def static_R(fixes: np.ndarray, full: bool = False) -> np.ndarray:
+    """R from fixes (N, m) taken at one fixed point (paper 000 sec. V-B): ``diag(sd_x^2, sd_y^2, ...)``
+    (m^2), or the full sample covariance with ``full=True``."""
+    fixes = np.asarray(fixes, dtype=float)
+    if fixes.ndim != 2 or fixes.shape[0] < 2:
+        raise ValueError(f"expected at least 2 fixes of shape (N, m), got {fixes.shape}")
+    S = np.atleast_2d(np.cov(fixes.T))
+    return S if full else np.diag(np.diag(S))
+
+
+class PositionParams(Params):
+    """YAML parameters of ``position``."""
+
+    lever_arm: tuple[float, float, float] = Field(
+        (0.0, 0.0, 0.0), description="receiver position in the body frame (m, FRD): r_ABPS of eq. 53")
+    dim: int | None = Field(None, ge=1, le=3, description="measure the first dim components of p "
+                            "(default: all of them; 2 for a horizontal fix on a 3-D state)")
+    use_fix_covariance: bool = Field(True, description="use the covariance a solver attaches to its fix as R "
+                                     "(False: always the sensor's configured noise)")
+
+
+class Position(MeasurementModel):
+    """Position fix ``z = p + C_b^n(q) r`` (paper 000 eq. 53), z (m, navigation frame, NED).
+
+    Works on any layout with a ``p`` block (2-D or 3-D); ``dim`` is the size of ``p`` (or the ``dim``
+    param). The lever arm r (body frame FRD, m) is rotated by the attitude quaternion block ``q``
+    (``C_b^n`` computed from q / |q|); a state without a quaternion block has no attitude, so the lever
+    arm is then ignored, with a warning at build time (``self.note`` says so).
+
+    ``observe``: a message of ``dim`` values (or 3 for a 2-D state) is the fix, with the sensor's
+    configured R; a message of 9 values ``x y z cxx cxy cxz cyy cyz czz`` (as ``ols_trilateration``
+    emits) carries its own covariance, used as R (leading dim x dim block).
+
+    Jacobian: ``dz/dp = I``, ``dz/dq = d(C_b^n(q) r)/dq`` (analytic, fusion.quaternion.rotate_jacobian).
+    """
+
+    name: ClassVar[str] = "position"
+    Params: ClassVar[type[Params]] = PositionParams
+
+    def __init__(self, params: PositionParams | None = None, context: BuildContext | None = None):
+        super().__init__(params, context)
+        p: PositionParams = self.params  # type: ignore[assignment]
+        layout = self.context.layout
+        if layout is None or "p" not in layout:
+            blocks = [b.name for b in layout.blocks] if layout is not None else []
+            raise ConfigError(f"position needs a state with a position block 'p' (this state has {blocks})")
+        self._p = layout["p"]
+        np_ = self._p.stop - self._p.start
+        self.dim = p.dim if p.dim is not None else min(np_, 3)
+        if self.dim > np_:
+            raise ConfigError(f"position: dim {self.dim} but the state's p block has {np_} elements")
+        self.n = layout.n
+        self.lever_arm = np.asarray(p.lever_arm, dtype=float)
+        qblocks = [b.name for b in layout.blocks if b.kind == "quaternion"]
+        self._q: slice | None = None
+        self.note = ""
+        if np.any(self.lever_arm):
+            if qblocks:
+                self._q = layout["q" if "q" in qblocks else qblocks[0]]
+                # R(q) r = outer(q, q).ravel() @ _Kr: the rotated lever arm in one product (times |q|^2)
+                self._Kr = quat._K.reshape(16, 3, 3) @ self.lever_arm
+            else:
+                self.note = ("lever_arm ignored: the state has no attitude (quaternion block), so the fix is "
+                             "taken as the position p itself")
+                warnings.warn(f"position: {self.note}", stacklevel=2)
+
+    def h(self, x: np.ndarray) -> np.ndarray:
+        """Predicted fix (..., dim) (m) for states x (..., n): eq. 53."""
+        x = np.asarray(x, dtype=float)
+        z = x[..., self._p.start:self._p.start + self.dim]
+        if self._q is None:
+            return z.copy()
+        q = x[..., self._q]
+        qq = (q[..., :, None] * q[..., None, :]).reshape(q.shape[:-1] + (16,))
+        arm = (qq @ self._Kr) / qq[..., quat._DIAG16].sum(axis=-1, keepdims=True)   # C_b^n r
+        return z + arm[..., :self.dim]
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        """dh/dx (dim, n) at x (n,)."""
+        x = np.asarray(x, dtype=float)
+        H = np.zeros((self.dim, self.n))
+        H[np.arange(self.dim), self._p.start + np.arange(self.dim)] = 1.0
+        if self._q is not None:
+            H[:, self._q] = quat.rotate_jacobian(x[self._q], self.lever_arm)[:self.dim]
+        return H
+
+    def observe(self, message: Message) -> Observation | None:
+        """Observation of a fix message: ``dim`` (or 3) coordinates, or 9 values with the covariance."""
+        z = message.floats()
+        if not np.all(np.isfinite(z)):
+            raise MalformedMessage(f"position: non-finite value in {message.values!r}")
+        R = None
+        if z.size == 9:
+            cov = np.zeros((3, 3))
+            cov[np.triu_indices(3)] = z[3:]
+            cov = cov + np.triu(cov, 1).T
+            if self.params.use_fix_covariance:  # type: ignore[attr-defined]
+                R = cov[:self.dim, :self.dim]
+            z = z[:3]
+        elif z.size not in (self.dim, 3) or z.size < self.dim:
+            raise MalformedMessage(f"position expects {self.dim} coordinates (or 9 values: x y z and the "
+                                   f"covariance upper triangle), got {z.size}")
+        return Observation(message.t, z[:self.dim], self, R)
