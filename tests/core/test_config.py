@@ -56,7 +56,7 @@ def test_config_errors_name_file_line_field(tmp_path, old, new, expect):
 
 def test_yaml_syntax_error_has_line(tmp_path):
     with pytest.raises(ConfigError, match=r"sys.yaml:3: invalid YAML"):
-        load_system(write(tmp_path, "name: x\nprocess: pv\nsensors: {a: [\n"))
+        load_system(write(tmp_path, "name: x\nprocess: pv\nsensors: a: b\n"))
 
 
 def test_missing_file(tmp_path):
