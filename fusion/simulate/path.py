@@ -102,7 +102,21 @@ class WaypointPath:
         self._leg_len = leg_len
         self._d = d
         self._turn_len = {i: g[1] for i, g in turns_geo.items()}
+        self._turn_of = {}
+        j = 0
+        for i in range(1, n - 1):
+            if i in turns_geo:
+                self._turn_of[i] = j
+                j += 1
         self.heights = np.zeros(n) if heights is None else np.asarray(heights, float)
+
+    def turn_span(self, i: int) -> tuple[float, float]:
+        """Stations (m) where the turn at waypoint i starts and ends (both its station when it has none)."""
+        j = self._turn_of.get(i)
+        if j is None:
+            return float(self.stations[i]), float(self.stations[i])
+        tr = self._turns[j]
+        return tr.s0, tr.s0 + tr.length
 
     # ------------------------------------------------------------------ horizontal geometry
     def _locate(self, s: np.ndarray):

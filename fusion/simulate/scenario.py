@@ -34,6 +34,8 @@ class Waypoint(_Model):
     speed: float | None = Field(None, gt=0, description="cruise speed (m/s) of the run that starts here "
                                                          "(the start or after a stop)")
     radius: float | None = Field(None, ge=0, description="turning radius (m) of the corner here")
+    turn_speed: float | None = Field(None, gt=0, description="speed (m/s) through the corner here: the "
+                                                             "vehicle slows down before the turn")
 
     @model_validator(mode="before")
     @classmethod

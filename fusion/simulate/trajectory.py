@@ -25,20 +25,28 @@ class TrajectoryError(ValueError):
 
 
 @dataclass(frozen=True)
-class _Run:
-    t0: float   # start time
-    s0: float   # start station
-    length: float
-    speed: float
-    ramp: float  # ramp time
+class _Phase:
+    """Speed from v1 to v2 over T seconds along a quintic smoothstep (v1 == v2: cruise or stand still)."""
+
+    t0: float
+    T: float
+    s0: float
+    v1: float
+    v2: float
 
     @property
-    def duration(self) -> float:
-        return self.length / self.speed + self.ramp
+    def length(self) -> float:
+        return 0.5 * (self.v1 + self.v2) * self.T
 
 
 class WaypointTrajectory:
-    """Motion along a WaypointPath with stops (see the module docstring)."""
+    """Motion along a WaypointPath with stops and corner speeds (see the module docstring).
+
+    The speed profile is a chain of phases: standing still, cruising, or changing speed from v1 to v2 in
+    ``T = 15/8 |v2 - v1| / max_accel`` seconds (peak acceleration max_accel), covering ``(v1 + v2) T / 2``
+    metres. A run goes from rest (the start or a stop) to rest; a corner with ``turn_speed`` is driven at
+    that speed from the start to the end of its turn; between those constraints the vehicle reaches the
+    highest speed up to the cruise speed that leaves room to brake in time."""
 
     def __init__(self, spec: WaypointsSpec, dim: int = 3):
         pts = np.array([w.at[:2] for w in spec.waypoints], float)
@@ -52,52 +60,78 @@ class WaypointTrajectory:
         except PathError as exc:
             raise TrajectoryError(f"trajectory.waypoints: {exc}") from None
         self.spec = spec
-        # runs: from the start or a stop to the next stop or the end
-        runs: list[_Run] = []
-        t = spec.static_start
-        stops = [i for i, w in enumerate(spec.waypoints) if w.stop > 0 and 0 < i < len(spec.waypoints) - 1]
-        bounds = [0] + stops + [len(spec.waypoints) - 1]
-        self._stop_times: list[tuple[float, float]] = []
+        self._amax = spec.max_accel
+        n = len(spec.waypoints)
+        phases: list[_Phase] = []
+        t = 0.0
+        if spec.static_start > 0:
+            phases.append(_Phase(0.0, spec.static_start, 0.0, 0.0, 0.0))
+            t = spec.static_start
+        stops = [i for i, w in enumerate(spec.waypoints) if w.stop > 0 and 0 < i < n - 1]
+        bounds = [0] + stops + [n - 1]
         for a, b in zip(bounds[:-1], bounds[1:]):
-            s0, s1 = self.path.stations[a], self.path.stations[b]
-            v = spec.waypoints[a].speed or spec.speed
-            length = s1 - s0
-            ramp = H_PRIME_MAX * v / spec.max_accel
-            if length < v * ramp:  # too short to reach cruise speed: lower it
-                v = np.sqrt(length * spec.max_accel / H_PRIME_MAX)
-                ramp = H_PRIME_MAX * v / spec.max_accel
-            run = _Run(t, s0, length, v, ramp)
-            runs.append(run)
-            t += run.duration + spec.waypoints[b].stop
-        self._runs = runs
-        self.duration = t + spec.static_end
+            V = spec.waypoints[a].speed or spec.speed
+            # constraints (station, speed): rest at both ends, turn_speed over each corner turn in between
+            cons: list[tuple[float, float, bool]] = [(self.path.stations[a], 0.0, False)]
+            for i in range(a + 1, b):
+                vz = spec.waypoints[i].turn_speed
+                if vz is None:
+                    continue
+                z0, z1 = self.path.turn_span(i)
+                cons += [(z0, vz, False), (z1, vz, True)]  # True: hold the speed from the previous point
+            cons.append((self.path.stations[b], 0.0, False))
+            for (s0, v1, _), (s1, v2, hold) in zip(cons[:-1], cons[1:]):
+                t = self._segment(phases, t, s0, s1, v1, v2, V, hold, a, b)
+            if b < n - 1 or spec.static_end > 0:
+                rest = spec.waypoints[b].stop if b < n - 1 else spec.static_end
+                phases.append(_Phase(t, rest, self.path.stations[b], 0.0, 0.0))
+                t += rest
+        self._phases = phases
+        self._t0 = np.array([ph.t0 for ph in phases])
+        self.duration = t
+
+    def _ramp(self, u: float, w: float) -> float:
+        return H_PRIME_MAX * abs(w - u) / self._amax
+
+    def _segment(self, phases, t, s0, s1, v1, v2, V, hold, a, b) -> float:
+        """Append the phases from (s0, v1) to (s1, v2); returns the end time."""
+        L = s1 - s0
+        if hold:  # through a corner at its turn speed
+            if v1 > 0 and L > 0:
+                phases.append(_Phase(t, L / v1, s0, v1, v1))
+                t += L / v1
+            return t
+        # peak speed vp: ramps v1 -> vp -> v2 must fit in L:  15/16 (2 vp^2 - v1^2 - v2^2) / amax <= L
+        vp = min(V, np.sqrt(max((L * self._amax / (0.5 * H_PRIME_MAX) + v1 * v1 + v2 * v2) / 2.0, 0.0)))
+        if vp < max(v1, v2) - 1e-9:
+            raise TrajectoryError(f"trajectory.waypoints {a}-{b}: no room to change speed from {v1:g} to "
+                                  f"{v2:g} m/s in {L:.2f} m at max_accel {self._amax:g} m/s^2 (lower the "
+                                  "turn_speed difference or raise max_accel)")
+        vp = max(vp, v1, v2)
+        T1, T2 = self._ramp(v1, vp), self._ramp(vp, v2)
+        cruise = L - 0.5 * (v1 + vp) * T1 - 0.5 * (vp + v2) * T2
+        for ph in (_Phase(t, T1, s0, v1, vp),
+                   _Phase(t + T1, cruise / vp if vp > 0 else 0.0, s0 + 0.5 * (v1 + vp) * T1, vp, vp),
+                   _Phase(t + T1 + (cruise / vp if vp > 0 else 0.0), T2, s1 - 0.5 * (vp + v2) * T2, vp, v2)):
+            if ph.T > 1e-12:
+                phases.append(ph)
+                t = ph.t0 + ph.T
+        return t
 
     # ------------------------------------------------------------------ speed profile
     def arc(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Station s (m), speed s' (m/s) and acceleration s'' (m/s^2) along the path at times t."""
         t = np.asarray(t, float)
-        s = np.zeros(t.shape)
-        sd = np.zeros(t.shape)
-        sdd = np.zeros(t.shape)
-        for r in self._runs:
-            s[t >= r.t0] = r.s0
-            tau = t - r.t0
-            m = (tau >= 0) & (tau < r.duration)
-            if not m.any():
-                continue
-            tau = tau[m]
-            V, T, L, D = r.speed, r.ramp, r.length, r.duration
-            up, down = tau < T, tau > D - T
-            mid = ~(up | down)
-            ss, v, a = np.empty(tau.shape), np.empty(tau.shape), np.empty(tau.shape)
-            x = tau[up] / T
-            ss[up], v[up], a[up] = V * T * smoothstep_int(x), V * smoothstep(x), V * smoothstep_d1(x) / T
-            ss[mid], v[mid], a[mid] = V * T / 2 + V * (tau[mid] - T), V, 0.0
-            x = (D - tau[down]) / T
-            ss[down], v[down], a[down] = L - V * T * smoothstep_int(x), V * smoothstep(x), -V * smoothstep_d1(x) / T
-            s[m], sd[m], sdd[m] = r.s0 + ss, v, a
-        last = self._runs[-1]
-        s[t >= last.t0 + last.duration] = last.s0 + last.length
+        k = np.clip(np.searchsorted(self._t0, t, side="right") - 1, 0, len(self._phases) - 1)
+        T = np.array([ph.T for ph in self._phases])[k]
+        s0 = np.array([ph.s0 for ph in self._phases])[k]
+        v1 = np.array([ph.v1 for ph in self._phases])[k]
+        dv = np.array([ph.v2 - ph.v1 for ph in self._phases])[k]
+        tau = np.clip(t - self._t0[k], 0.0, T)
+        x = np.divide(tau, T, out=np.zeros_like(tau), where=T > 0)
+        s = s0 + v1 * tau + dv * T * smoothstep_int(x)
+        sd = v1 + dv * smoothstep(x)
+        sdd = np.divide(dv * smoothstep_d1(x), T, out=np.zeros_like(tau), where=T > 0)
         return s, sd, sdd
 
     def sample(self, t: np.ndarray) -> Kinematics:
