@@ -128,3 +128,13 @@ def test_static_R():
     np.testing.assert_allclose(np.sqrt(np.diag(R)), [0.05, 0.1, 0.2], rtol=0.05)
     assert np.count_nonzero(R - np.diag(np.diag(R))) == 0
     assert static_R(fixes, full=True).shape == (3, 3)
+
+
+def test_contract_checks():
+    from fusion import testing
+
+    for layout, kw in ((INS, {"lever_arm": ARM}), (PV2, {})):
+        m = model(layout, **kw)
+        X = testing.random_states(layout, 9, seed=3)
+        testing.check_measurement_vectorised(m, X)
+        testing.check_measurement_jacobian(m, X[0])
