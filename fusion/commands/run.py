@@ -106,9 +106,7 @@ def summarize(system: System, source: str | Path, result: dict[str, Any], settle
     track = tracker.summary()
     sensors = {}
     for name, s in system.sensors.items():
-        c = dict(s.counters)
-        c["malformed"] += parsed.malformed.get(name, 0)
-        sensors[name] = c
+        sensors[name] = dict(s.counters)  # malformed lines of configured sensors are counted by the scheduler
     for name, n in parsed.malformed.items():
         if name not in system.sensors:
             sensors.setdefault(name or "?", dict(received=0, used=0, rejected=0, malformed=0, late=0))["malformed"] += n
