@@ -18,7 +18,7 @@ __all__ = [
     "Block", "StateLayout", "Belief", "Message", "Observation", "UpdateResult", "Event",
     "Estimate", "Params", "BuildContext", "Component", "ProcessModel", "MeasurementModel",
     "Filter", "Gate", "Decoder", "Solver", "Source", "Sink", "Simulator", "FusionError",
-    "ConfigError", "InputError", "MalformedMessage", "KINDS",
+    "ConfigError", "InputError", "MalformedMessage", "RejectedMessage", "KINDS",
 ]
 
 KINDS = ("process", "measurement", "filter", "gate", "decoder", "solver", "source", "sink", "simulator")
@@ -41,6 +41,11 @@ class InputError(FusionError):
 
 class MalformedMessage(ValueError):
     """One message is malformed (bad number, wrong field count, bad checksum): counted and skipped."""
+
+
+class RejectedMessage(MalformedMessage):
+    """A well-formed message outside the sensor's limits (a NaN or an out-of-range IMU sample): counted as
+    rejected and not used."""
 
 
 # --------------------------------------------------------------------------- state layout
@@ -307,6 +312,9 @@ class ProcessModel(Component):
     def normalize(self, x: np.ndarray) -> np.ndarray:
         """Bring states (..., n) back to their manifold (unit quaternions); identity by default."""
         return x
+
+    # Optional: ``align(x0, P0, u_mean) -> (x0, P0)`` refines the initial belief from the mean input over a
+    # static start (``initial.align_s`` in the config), e.g. roll and pitch from gravity for an INS.
 
     def input_from(self, message: Message) -> np.ndarray:
         """The control input u carried by an input-sensor message (default: its values as floats)."""

@@ -52,6 +52,8 @@ class SensorSpec(_Strict):
     noise: NoiseSpec | float | list[float] | None = None
     gate: ComponentSpec | None = None
     time_offset: float = 0.0
+    max_gap: float | None = Field(None, gt=0.0, description="input sensors: report a gap between samples "
+                                  "longer than this (s)")
     enabled: bool = True
 
 
@@ -63,6 +65,8 @@ class InitialSpec(_Strict):
     sd: dict[str, float | list[float]] = Field(default_factory=dict)
     P: list[list[float]] | None = None
     from_sensor: str | None = None
+    align_s: float = Field(0.0, ge=0.0, description="static start (s) over which the process model aligns "
+                           "itself from the mean input (e.g. roll/pitch from gravity); 0: no alignment")
 
 
 class SchedulerSpec(_Strict):
@@ -109,6 +113,7 @@ class SensorRuntime:
     R: np.ndarray | None
     gate: Gate | None
     time_offset: float
+    max_gap: float | None = None
     counters: dict[str, int] = field(default_factory=lambda: dict(received=0, used=0, rejected=0, malformed=0, late=0))
 
 
@@ -263,7 +268,7 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
             gate = build_component(reg, "gate", s.gate, sctx, doc, [*loc, "gate"]) if s.gate else None
         elif process.input_dim == 0:
             raise ConfigError(f"{where}.role: 'input' but process {process.name!r} takes no control input")
-        sensors[sname] = SensorRuntime(sname, s.role, decoder, pre, model, R, gate, s.time_offset)
+        sensors[sname] = SensorRuntime(sname, s.role, decoder, pre, model, R, gate, s.time_offset, s.max_gap)
     inputs = [n for n, s in sensors.items() if s.role == "input"]
     if len(inputs) > 1:
         raise ConfigError(f"{path or 'config'}: sensors: at most one input sensor, got {inputs}")
@@ -271,6 +276,8 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
         raise ConfigError(f"{path or 'config'}: sensors: process {process.name!r} needs an input sensor (role: input)")
     if spec.initial.from_sensor and spec.initial.from_sensor not in sensors:
         raise ConfigError(f"{doc.where(['initial', 'from_sensor']) if doc else 'initial.from_sensor'}: no sensor {spec.initial.from_sensor!r}")
+    if spec.initial.align_s and not hasattr(process, "align"):
+        raise ConfigError(f"{doc.where(['initial', 'align_s']) if doc else 'initial.align_s'}: process {process.name!r} cannot align itself")
     x0, P0 = _initial(spec, process, doc)
     return System(spec, path, process, filt, sensors, x0, P0, beacons, reg)  # type: ignore[arg-type]
 

@@ -23,7 +23,7 @@ from typing import Iterable, Iterator
 
 import numpy as np
 
-from fusion.api import Belief, Estimate, Event, MalformedMessage, Message
+from fusion.api import Belief, Estimate, Event, MalformedMessage, Message, RejectedMessage
 from fusion.config import SensorRuntime, System
 
 
@@ -67,6 +67,15 @@ class Scheduler:
         self.nis: dict[str, list[tuple[float, float, int]]] = {}
         self.truth: list[Message] = []
         self._batch = hasattr(self.filter, "predict_inputs")
+        # Initialisation: x0/P0 refined by a fix of initial.from_sensor and/or alignment over a static start.
+        self._x0 = system.x0.copy()
+        self._P0 = system.P0.copy()
+        self._align_s = spec.initial.align_s
+        self._from_sensor = spec.initial.from_sensor
+        self._have_fix = self._from_sensor is None
+        self._align_u: list[np.ndarray] = []
+        self._align_t0: float | None = None
+        self._last_input_t: float | None = None
 
     # ------------------------------------------------------------------ public
     def run(self, messages: Iterable[Message | MalformedMessage]) -> Iterator[Estimate | Event]:
@@ -201,14 +210,23 @@ class Scheduler:
                 if decoded is None:
                     continue
                 u = self.process.input_from(decoded)
+            except RejectedMessage as exc:
+                sensor.counters["rejected"] += 1
+                yield Event(msg.t, "rejected", msg.sensor, f"line {msg.line}: {exc}")
+                continue
             except MalformedMessage as exc:
                 sensor.counters["malformed"] += 1
                 yield Event(msg.t, "malformed", msg.sensor, f"line {msg.line}: {exc}")
                 continue
+            if sensor.max_gap is not None and self._last_input_t is not None and msg.t - self._last_input_t > sensor.max_gap:
+                yield Event(msg.t, "gap", msg.sensor, f"no {msg.sensor} sample for {msg.t - self._last_input_t:.3f} s "
+                            f"(limit {sensor.max_gap} s); prediction held the last sample")
+            self._last_input_t = msg.t
             good.append((msg.t, u))
+        if self.belief is None:
+            good = self._align(good, sensor)
         if not good:
             return
-        self._ensure_belief(good[0][0])
         if self._batch and len(good) > 1 and self.u is not None and self._next_output > good[-1][0]:
             # Whole run of samples in one call (the filter integrates them in order, DESIGN: same math).
             ts = np.array([self.belief.t] + [t for t, _ in good])  # type: ignore[union-attr]
@@ -229,6 +247,25 @@ class Scheduler:
                 sensor.counters["used"] += 1
         self._snapshot()
 
+    def _align(self, good: list[tuple[float, np.ndarray]], sensor: SensorRuntime) -> list[tuple[float, np.ndarray]]:
+        """Before the first belief: gather the static start; create the belief once aligned (and fixed).
+        Returns the samples left to integrate after the belief exists."""
+        for i, (t, u) in enumerate(good):
+            if self._align_t0 is None:
+                self._align_t0 = t
+            if t - self._align_t0 < self._align_s or not self._have_fix:
+                self._align_u.append(u)
+                sensor.counters["used"] += 1
+                continue
+            x0, P0 = self._x0, self._P0
+            if self._align_s and self._align_u:
+                x0, P0 = self.process.align(x0, P0, np.mean(self._align_u, axis=0))  # type: ignore[attr-defined]
+            self.belief = self.filter.initial_belief(t, x0, P0)
+            self._next_output = t + self.output_dt if self.output_dt else math.inf
+            self.u = u
+            sensor.counters["used"] += 1
+            return good[i + 1:]
+        return []
     def _measure(self, sensor: SensorRuntime, msg: Message) -> Iterator[Estimate | Event]:
         try:
             obs = sensor.model.observe(msg)  # type: ignore[union-attr]
@@ -238,9 +275,16 @@ class Scheduler:
             return
         if obs is None:
             return
-        if self.belief is None and self.system.spec.initial.from_sensor == sensor.name:
-            self._initialise_from(obs)
+        if self.belief is None and self._from_sensor == sensor.name:
+            self._take_fix(obs)
             sensor.counters["used"] += 1
+            if not (self._align_s or self.process.input_dim):
+                self.belief = self.filter.initial_belief(obs.t, self._x0, self._P0)
+                self._next_output = obs.t + self.output_dt if self.output_dt else math.inf
+            return
+        if self.belief is None and (not self._have_fix or self.process.input_dim):
+            sensor.counters["rejected"] += 1
+            yield Event(obs.t, "rejected", sensor.name, "before the filter is initialised")
             return
         self._ensure_belief(obs.t)
         yield from self._predict_to(obs.t)
@@ -263,17 +307,16 @@ class Scheduler:
             if self.on_update:
                 yield Estimate(obs.t, self.belief, "update", sensor.name, result)
 
-    def _initialise_from(self, obs) -> None:
-        """Initial belief whose position block is the first observation (a fix) of ``from_sensor``."""
-        x0 = self.system.x0.copy()
-        P0 = self.system.P0.copy()
+    def _take_fix(self, obs) -> None:
+        """Put a fix of ``initial.from_sensor`` into the initial position block (latest fix wins)."""
         sl = self.system.layout["p"]
         m = len(obs.z)
-        x0[sl.start:sl.start + m] = obs.z
+        self._x0[sl.start:sl.start + m] = obs.z
         if obs.R is not None:
-            P0[sl.start:sl.start + m, sl.start:sl.start + m] = obs.R
-        self.belief = self.filter.initial_belief(obs.t, x0, P0)
-        self._next_output = obs.t + self.output_dt if self.output_dt else math.inf
+            self._P0[sl.start:sl.start + m, :] = 0.0
+            self._P0[:, sl.start:sl.start + m] = 0.0
+            self._P0[sl.start:sl.start + m, sl.start:sl.start + m] = obs.R
+        self._have_fix = True
 
     # ------------------------------------------------------------------ replay
     def _record(self, msg: Message) -> None:
