@@ -4,8 +4,13 @@ from fusion import hookimpl
 
 @hookimpl
 def fusion_register_components(registry):
+    from fusion_plugins.simulators.arrival import ArrivalTimeSimulator
+    from fusion_plugins.simulators.gps import GpsSimulator
     from fusion_plugins.simulators.imu import ImuSimulator
+    from fusion_plugins.simulators.magnetometer import MagnetometerSimulator
+    from fusion_plugins.simulators.position import PositionSimulator
     from fusion_plugins.simulators.range import RangeSimulator
 
-    registry.add(ImuSimulator)
-    registry.add(RangeSimulator)
+    for cls in (ImuSimulator, RangeSimulator, ArrivalTimeSimulator, GpsSimulator, MagnetometerSimulator,
+                PositionSimulator):
+        registry.add(cls)

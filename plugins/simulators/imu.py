@@ -44,7 +44,9 @@ class ImuSimulator(SensorSimulator):
     ``(I + S + M) f_b + b_a(t) + n_a`` (and the same for the gyros) with scale factors S (diagonal),
     misalignments M (off-diagonal), a turn-on bias plus a random walk b(t), white noise of the given
     density (sd = density * sqrt(rate)), and optional saturation. The true biases go to the truth lines as
-    ``bax bay baz bwx bwy bwz`` (the INS state blocks ba, bw). ``--noise off`` makes every sample exact.
+    ``bax bay baz bwx bwy bwz`` (the INS state blocks ba, bw) and, when scale errors are simulated, the
+    scale factors ``sax say saz swx swy swz`` (``s = 1 + S_ii``, paper 002 eq. 11: ``f~ = s f + b + w``).
+    ``--noise off`` makes every sample exact.
     """
 
     name = "imu"
@@ -92,12 +94,14 @@ class ImuSimulator(SensorSimulator):
             self._bw = self._bias(r_wb, p.gyro_bias, p.gyro_bias_sd, p.gyro_bias_rw, n, dt)
             Ea = self._errors(r_err, p.accel_scale_sd, p.misalignment_sd)
             Ew = self._errors(r_err, p.gyro_scale_sd, p.misalignment_sd)
+            self._scale = np.concatenate([1.0 + np.diag(Ea), 1.0 + np.diag(Ew)])
             sq = np.sqrt(p.rate_hz)
             f = f + f @ Ea.T + self._ba + r_an.normal(0.0, p.accel_noise_density * sq, (n, 3))
             w = w + w @ Ew.T + self._bw + r_wn.normal(0.0, p.gyro_noise_density * sq, (n, 3))
         else:
             self._ba = np.zeros((n, 3))
             self._bw = np.zeros((n, 3))
+            self._scale = np.ones(6)
         if p.accel_range is not None:
             f = np.clip(f, -p.accel_range, p.accel_range)
         if p.gyro_range is not None:
@@ -105,9 +109,16 @@ class ImuSimulator(SensorSimulator):
         vals = np.column_stack([f, w])
         return SensorOutput(t, vals.tolist())
 
+    def _has_scale(self) -> bool:
+        return self.params.accel_scale_sd > 0 or self.params.gyro_scale_sd > 0
+
     def truth_fields(self) -> tuple[str, ...]:
-        return ("bax", "bay", "baz", "bwx", "bwy", "bwz")
+        names = ("bax", "bay", "baz", "bwx", "bwy", "bwz")
+        return names + (("sax", "say", "saz", "swx", "swy", "swz") if self._has_scale() else ())
 
     def truth(self, t: np.ndarray) -> np.ndarray:
         B = np.column_stack([self._ba, self._bw])
-        return np.column_stack([np.interp(t, self._t, B[:, i]) for i in range(6)])
+        cols = [np.interp(t, self._t, B[:, i]) for i in range(6)]
+        if self._has_scale():
+            cols += [np.full(len(t), s) for s in self._scale]
+        return np.column_stack(cols)
