@@ -4,4 +4,6 @@ from fusion import hookimpl
 
 @hookimpl
 def fusion_register_components(registry):
-    pass
+    from .chi2 import Chi2Gate
+
+    registry.add(Chi2Gate)

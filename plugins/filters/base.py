@@ -1,0 +1,173 @@
+"""Building blocks shared by the five filters (Stone Soup style: share the math, not five monoliths).
+
+* :class:`KalmanBase`: the Filter base with diagnostics (``counters``, ``events``), the
+  not-positive-definite detection and recovery, gating and the process model remembered for
+  ``normalize`` in the update.
+* :func:`linear_predict`: the linear / linearised prediction (paper 001 eqs. 9-10).
+* :func:`linearised_update`: the Kalman update about a linearisation point, the step the EKF does once
+  and the IEKF iterates.
+
+Notation (FilterPy / textbook): x, P the belief; F, Q process; H, R measurement; y the innovation;
+S = H P H^T + R its covariance (``Pzz``), L_y its lower Cholesky factor; K = P H^T S^-1 the gain.
+No explicit inverse anywhere: with ``W = L_y^-1 (P H^T)^T`` and ``w = L_y^-1 y``,
+``K y = W^T w``, ``K S K^T = W^T W`` and ``y^T S^-1 y = w^T w`` (the NIS).
+"""
+from __future__ import annotations
+
+from collections import Counter, deque
+
+import numpy as np
+
+from fusion.api import Belief, Event, Filter, Gate, MeasurementModel, ProcessModel, UpdateResult
+
+from .linalg import cholesky_lower, recover_factor, solve_lower, symmetrise
+
+__all__ = ["KalmanBase", "linear_predict", "linearised_update", "as_covariance", "covariance_of"]
+
+
+def as_covariance(R, m: int) -> np.ndarray:
+    """R as an (m, m) array: a matrix as is, a vector of m variances, or a scalar variance."""
+    R = np.asarray(R, dtype=float)
+    if R.ndim == 2:
+        if R.shape != (m, m):
+            raise ValueError(f"measurement covariance R has shape {R.shape}, expected ({m}, {m})")
+        return R
+    if R.ndim == 0:
+        return np.eye(m) * float(R)
+    if R.shape != (m,):
+        raise ValueError(f"measurement variances R have shape {R.shape}, expected ({m},) or ({m}, {m})")
+    return np.diag(R)
+
+
+def covariance_of(belief: Belief) -> np.ndarray:
+    """P of a belief (from S when it is a square-root belief)."""
+    return belief.P if belief.P is not None else belief.cov
+
+
+def linear_predict(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """Predicted covariance ``F P F^T + Q`` (paper 001 eq. 10), symmetrised."""
+    return symmetrise(F @ P @ F.T + Q)
+
+
+class KalmanBase(Filter):
+    """Common base of kf, ekf, iekf, ukf and srukf.
+
+    Diagnostics: ``counters`` (a Counter: ``not_positive_definite``, ``rejected``, ``updates``,
+    ``predicts``, and filter-specific ones) and ``events`` (the last 1000 :class:`fusion.api.Event`,
+    e.g. ``not_positive_definite`` with where it happened). ``process`` is the process model of the
+    last ``predict``; the update applies its ``normalize`` to the updated mean (quaternion blocks).
+    """
+
+    MAX_EVENTS = 1000
+
+    def __init__(self, params=None, context=None):
+        super().__init__(params, context)
+        self.counters: Counter = Counter()
+        self.events: deque[Event] = deque(maxlen=self.MAX_EVENTS)
+        self.process: ProcessModel | None = None
+        self.repaired: np.ndarray | None = None
+
+    # ------------------------------------------------------------------ diagnostics
+    def report(self, t: float, kind: str, detail: str = "") -> None:
+        """Count an event of ``kind`` and keep it in ``events``."""
+        self.counters[kind] += 1
+        self.events.append(Event(float(t), kind, None, f"{self.name}: {detail}" if detail else self.name))
+
+    def factor(self, P: np.ndarray, t: float, where: str) -> np.ndarray:
+        """Lower Cholesky factor of P; a non-positive-definite P is reported and repaired (then
+        ``self.repaired`` holds the repaired covariance L L^T, else None)."""
+        L, ok = cholesky_lower(P)
+        if ok:
+            self.repaired = None
+            return L
+        self.report(t, "not_positive_definite", f"{where}: covariance not positive definite, repaired")
+        L = recover_factor(P)
+        self.repaired = L @ L.T
+        return L
+
+    def normalize(self, x: np.ndarray) -> np.ndarray:
+        return self.process.normalize(x) if self.process is not None else x
+
+    def rejected(self, belief: Belief, y: np.ndarray, S: np.ndarray, nis: float, gate: Gate | None,
+                 m: int) -> UpdateResult | None:
+        """The UpdateResult of a measurement the gate rejects (belief untouched), else None."""
+        if gate is None or gate.accept(nis, m):
+            return None
+        self.counters["rejected"] += 1
+        return UpdateResult(belief, y, S, nis, False)
+
+    # ------------------------------------------------------------------ interface
+    def initial_belief(self, t: float, x: np.ndarray, P: np.ndarray) -> Belief:
+        x = np.array(x, dtype=float)
+        P = symmetrise(np.array(P, dtype=float))
+        if P.shape != (x.shape[0], x.shape[0]):
+            raise ValueError(f"initial covariance has shape {P.shape}, expected {(x.shape[0],) * 2}")
+        return Belief(float(t), x, P=P)
+
+    def predict(self, belief: Belief, process: ProcessModel, u: np.ndarray | None, dt: float) -> Belief:
+        raise NotImplementedError
+
+    def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
+               gate: Gate | None = None) -> UpdateResult:
+        raise NotImplementedError
+
+
+def linearised_update(flt: KalmanBase, belief: Belief, model: MeasurementModel, z: np.ndarray,
+                      R: np.ndarray, gate: Gate | None, max_iterations: int = 1,
+                      tolerance: float = 0.0) -> UpdateResult:
+    """The (iterated) extended Kalman update; ``max_iterations=1`` is the EKF / linear KF update.
+
+    Iteration i linearises h about x_i (x_0 = x^-, the prior mean), Gauss-Newton on the MAP cost
+    ``|x - x^-|^2_{P^-1} + |z - h(x)|^2_{R^-1}`` (Bell & Cathey 1993)::
+
+        H_i = dh/dx (x_i),   S_i = H_i P H_i^T + R,   K_i = P H_i^T S_i^-1
+        x_{i+1} = x^- + K_i (z - h(x_i) - H_i (x^- - x_i))
+
+    until ``max|x_{i+1} - x_i| <= tolerance`` or ``max_iterations``. The covariance is the Joseph form
+    with the last K, H: ``P^+ = (I - K H) P (I - K H)^T + K R K^T`` (symmetrised). The innovation,
+    its covariance, the NIS and the gate decision are those of the prior (iteration 0), the same as
+    the EKF's.
+    """
+    from .jacobian import measurement_jacobian
+
+    x0 = belief.x
+    P = covariance_of(belief)
+    z = np.asarray(z, dtype=float).reshape(-1)
+    m = z.shape[0]
+    R = as_covariance(R, m)
+    xi = x0
+    y0 = S0 = None
+    nis = 0.0
+    iterations = 0
+    for it in range(max_iterations):
+        H = measurement_jacobian(model, xi)
+        PHt = P @ H.T
+        S = H @ PHt + R
+        Ly = flt.factor(S, belief.t, "innovation covariance")
+        if flt.repaired is not None:
+            S = flt.repaired
+        r = model.residual(z, model.h(xi))
+        W = solve_lower(Ly, PHt.T)              # L_y^-1 H P   (m, n)
+        if it == 0:
+            y0, S0 = r, symmetrise(S)
+            w = solve_lower(Ly, r)
+            nis = float(w @ w)
+            out = flt.rejected(belief, y0, S0, nis, gate, m)
+            if out is not None:
+                return out
+        else:
+            r = r - H @ (x0 - xi)
+            w = solve_lower(Ly, r)
+        x_next = x0 + w @ W                      # x^- + K r,  K r = W^T L_y^-1 r
+        iterations = it + 1
+        step = np.abs(x_next - xi).max()
+        xi = x_next
+        if step <= tolerance:
+            break
+    flt.counters["update_iterations"] += iterations
+    flt.last_iterations = iterations
+    Kt = solve_lower(Ly, W, trans=1)             # K^T = S^-1 H P   (m, n)
+    A = np.eye(x0.shape[0]) - Kt.T @ H           # I - K H
+    P1 = symmetrise(A @ P @ A.T + Kt.T @ R @ Kt)  # Joseph form
+    flt.counters["updates"] += 1
+    return UpdateResult(Belief(belief.t, flt.normalize(xi), P=P1), y0, S0, nis, True)

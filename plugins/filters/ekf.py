@@ -1,0 +1,47 @@
+"""ekf: the extended Kalman filter (papers 001, 002 and 003 use it)."""
+from __future__ import annotations
+
+import numpy as np
+
+from fusion.api import Belief, Gate, MeasurementModel, Params, ProcessModel, UpdateResult
+
+from .base import KalmanBase, covariance_of, linear_predict, linearised_update
+from .jacobian import process_jacobian
+
+
+class ExtendedKalmanFilter(KalmanBase):
+    r"""Extended Kalman filter: linearised prediction and update.
+
+    Prediction (paper 001 eqs. 9-10 with F the Jacobian at the prior mean)::
+
+        x^- = normalize(f(x, u, dt)),   F = df/dx (x, u, dt),   P^- = F P F^T + Q(x, u, dt)
+
+    Update (H = dh/dx at the prior mean)::
+
+        y = residual(z, h(x^-)),   S = H P^- H^T + R,   K = P^- H^T S^-1
+        x^+ = normalize(x^- + K y),   P^+ = (I - K H) P^- (I - K H)^T + K R K^T   (Joseph form)
+
+    Jacobians: the model's analytic ``jacobian`` when it returns one, else central differences on one
+    vectorised batch of 2n perturbed states (plugins/filters/jacobian.py). ``nis = y^T S^-1 y`` by a
+    triangular solve with the Cholesky factor of S; a non-positive-definite S is reported
+    (``counters['not_positive_definite']``) and repaired by eigenvalue clipping.
+    """
+
+    name = "ekf"
+
+    class Params(Params):
+        """The EKF has no parameters."""
+
+    def predict(self, belief: Belief, process: ProcessModel, u: np.ndarray | None, dt: float) -> Belief:
+        self.process = process
+        if dt == 0.0:
+            return belief
+        x = belief.x
+        F = process_jacobian(process, x, u, dt)
+        P1 = linear_predict(x, covariance_of(belief), F, process.Q(x, u, dt))
+        self.counters["predicts"] += 1
+        return Belief(belief.t + dt, process.normalize(process.f(x, u, dt)), P=P1)
+
+    def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
+               gate: Gate | None = None) -> UpdateResult:
+        return linearised_update(self, belief, model, z, R, gate, max_iterations=1)

@@ -1,0 +1,71 @@
+"""The IEKF reaches the maximum a posteriori point of a strongly non-linear range problem, where the
+EKF stops short; with one iteration it is the EKF."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import minimize
+
+from fusion import testing
+from fusion.api import Belief
+
+BEACONS = [[0.0, 0.0], [3.0, 0.0], [0.0, 3.0]]
+
+
+def _problem():
+    meas = testing.RangeMeasurement(testing.RangeMeasurement.Params(beacons=BEACONS, n=2))
+    truth = np.array([1.0, 0.8])
+    x_prior = np.array([2.2, 2.0])           # far from the truth on the scale of the beacon distances
+    P = np.diag([1.0, 1.0])
+    R = np.eye(3) * 0.05 ** 2
+    z = meas.h(truth) + np.array([0.03, -0.02, 0.01])
+    return meas, Belief(0.0, x_prior, P=P), R, z
+
+
+def _cost_and_grad(x, meas, prior, R, z):
+    dx = x - prior.x
+    Pi = np.linalg.inv(prior.P)
+    Ri = np.linalg.inv(R)
+    r = z - meas.h(x)
+    H = meas.jacobian(x)
+    return float(dx @ Pi @ dx + r @ Ri @ r), 2 * (Pi @ dx - H.T @ Ri @ r)
+
+
+def test_iekf_reaches_map_where_ekf_stops_short():
+    meas, prior, R, z = _problem()
+    ref = minimize(lambda x: _cost_and_grad(x, meas, prior, R, z), prior.x, jac=True, method="BFGS",
+                   options={"gtol": 1e-9})
+    assert np.linalg.norm(ref.jac) < 1e-5
+    iekf = testing.build("filter", "iekf", {"max_iterations": 50, "tolerance": 1e-12})
+    ekf = testing.build("filter", "ekf")
+    xi = iekf.update(prior, meas, z, R).belief.x
+    xe = ekf.update(prior, meas, z, R).belief.x
+    ci, gi = _cost_and_grad(xi, meas, prior, R, z)
+    ce, ge = _cost_and_grad(xe, meas, prior, R, z)
+    c0, g0 = _cost_and_grad(prior.x, meas, prior, R, z)
+    assert np.linalg.norm(gi) < 1e-6 * np.linalg.norm(g0)          # a stationary point
+    np.testing.assert_allclose(xi, ref.x, atol=1e-7)                 # the one BFGS finds
+    assert ci == pytest.approx(ref.fun, rel=1e-9)
+    assert np.linalg.norm(ge) > 1e-2 * np.linalg.norm(g0)           # the EKF stops short
+    assert ce > 10 * ci
+    assert 2 < iekf.last_iterations < 50
+
+
+def test_iekf_one_iteration_is_ekf_and_tolerance_stops_early():
+    meas, prior, R, z = _problem()
+    ekf = testing.build("filter", "ekf")
+    one = testing.build("filter", "iekf", {"max_iterations": 1})
+    a, b = ekf.update(prior, meas, z, R), one.update(prior, meas, z, R)
+    assert np.array_equal(a.belief.x, b.belief.x) and np.array_equal(a.belief.P, b.belief.P)
+    loose = testing.build("filter", "iekf", {"max_iterations": 50, "tolerance": 1e-2})
+    tight = testing.build("filter", "iekf", {"max_iterations": 50, "tolerance": 1e-12})
+    loose.update(prior, meas, z, R), tight.update(prior, meas, z, R)
+    assert loose.last_iterations < tight.last_iterations
+
+
+def test_iekf_reports_prior_innovation():
+    """Innovation, S, NIS (and so the gate decision) are the prior's, as in the EKF."""
+    meas, prior, R, z = _problem()
+    a = testing.build("filter", "ekf").update(prior, meas, z, R)
+    b = testing.build("filter", "iekf").update(prior, meas, z, R)
+    assert np.array_equal(a.innovation, b.innovation) and a.nis == b.nis

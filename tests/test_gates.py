@@ -1,0 +1,77 @@
+"""chi2 gate: thresholds from scipy.stats.chi2, n-sigma for scalars, rejection leaves the belief
+untouched and is counted."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+from scipy.stats import chi2
+
+from fusion import testing
+
+
+def _gate(**params):
+    return testing.build("gate", "chi2", params)
+
+
+@pytest.mark.parametrize("p", [0.9, 0.95, 0.997])
+@pytest.mark.parametrize("dim", [1, 2, 3, 4, 7])
+def test_threshold_is_chi2_ppf(p, dim):
+    g = _gate(probability=p)
+    th = chi2.ppf(p, dim)
+    assert g.threshold(dim) == pytest.approx(th, rel=1e-12)
+    assert g.accept(th * (1 - 1e-9), dim) and not g.accept(th * (1 + 1e-9), dim)
+    assert g.last_threshold == pytest.approx(th)
+
+
+def test_default_probability():
+    assert _gate().params.probability == 0.997
+
+
+@pytest.mark.parametrize("n", [2.0, 3.0])
+def test_n_sigma_on_scalars(n):
+    g = _gate(n_sigma=n)
+    S = 0.04                                   # innovation variance, sd 0.2
+    for y, ok in ((0.99 * n * 0.2, True), (1.01 * n * 0.2, False), (-1.01 * n * 0.2, False)):
+        assert g.accept(y * y / S, 1) is ok
+    # in m dimensions: the chi-square quantile of the same probability as +-n sigma in 1-D
+    assert g.threshold(3) == pytest.approx(chi2.ppf(chi2.cdf(n * n, 1), 3))
+
+
+def test_counts_and_nan():
+    g = _gate(probability=0.95)
+    results = [g.accept(v, 2) for v in (0.5, 100.0, 1.0, 5.9, float("nan"))]
+    assert results == [True, False, True, True, False]
+    assert g.checked == 5 and g.rejected == 2
+
+
+def test_params_validation():
+    with pytest.raises(ValidationError):
+        _gate(probability=0.9, n_sigma=3.0)
+    with pytest.raises(ValidationError):
+        _gate(probability=1.5)
+    with pytest.raises(ValidationError):
+        _gate(n_sigma=-1.0)
+    with pytest.raises(ValidationError):
+        _gate(sigma=3.0)                       # unknown key: extra=forbid
+
+
+@testing.parametrize_registered("filter")
+def test_rejected_update_leaves_belief_untouched(name):
+    """An outlier range is rejected by every filter: same belief object, NIS reported, counted."""
+    flt = testing.build("filter", name)
+    proc = testing.ConstantVelocity()
+    meas = testing.RangeMeasurement(testing.RangeMeasurement.Params(beacons=[[0.0, 0.0], [10.0, 0.0]]))
+    R = np.eye(2) * 0.01
+    b = flt.predict(flt.initial_belief(0.0, [3.0, 4.0, 0.5, 0.0], np.eye(4) * 0.1), proc, None, 0.1)
+    x_before, cov_before = b.x.copy(), b.cov.copy()
+    gate = _gate(n_sigma=3.0)
+    z_good = meas.h(b.x)
+    res = flt.update(b, meas, z_good + 0.01, R, gate=gate)
+    assert res.accepted and res.belief is not b
+    res = flt.update(b, meas, z_good + np.array([5.0, 0.0]), R, gate=gate)   # an echo, 5 m long
+    assert res.accepted is False and res.belief is b
+    assert np.array_equal(b.x, x_before) and np.array_equal(b.cov, cov_before)
+    assert res.nis > gate.threshold(2)
+    np.testing.assert_allclose(res.innovation, [5.0, 0.0], atol=0.2)
+    assert gate.rejected == 1 and gate.checked == 2 and flt.counters["rejected"] == 1
