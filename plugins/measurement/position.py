@@ -97,6 +97,14 @@ class Position(MeasurementModel):
             H[:, self._q] = quat.rotate_jacobian(x[self._q], self.lever_arm)[:self.dim]
         return H
 
+    def position_from(self, z: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """The position block value (dim,) that makes ``h`` equal the fix z at attitude x (n,): z - C_b^n r.
+        For initialising p from a first fix of a receiver that is off the state's origin."""
+        z = np.asarray(z, dtype=float)[:self.dim]
+        if self._q is None:
+            return z.copy()
+        return z - quat.rotate(np.asarray(x, dtype=float)[self._q], self.lever_arm)[:self.dim]
+
     def observe(self, message: Message) -> Observation | None:
         """Observation of a fix message: ``dim`` (or 3) coordinates, or 9 values with the covariance."""
         z = message.floats()

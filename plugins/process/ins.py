@@ -7,7 +7,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from fusion import quaternion as quat
-from fusion.api import BuildContext, MalformedMessage, Message, Params, ProcessModel, StateLayout
+from fusion.api import BuildContext, MalformedMessage, Message, Params, ProcessModel, RejectedMessage, StateLayout
 
 STANDARD_GRAVITY = 9.80665          # m/s^2
 EARTH_RATE = 7.292115e-5            # rad/s (WGS84)
@@ -57,6 +57,8 @@ class InsParams(Params):
                                       "positive definite (the norm direction is otherwise noise-free)")
     max_specific_force: float | None = Field(None, gt=0, description="sensor range (m/s^2, any axis)")
     max_rate: float | None = Field(None, gt=0, description="sensor range (rad/s, any axis)")
+    align_gyro_bias: bool = Field(True, description="initial alignment also takes the mean static gyro "
+                                  "rate as the gyro bias")
 
     @model_validator(mode="after")
     def _earth_rate_needs_latitude(self) -> "InsParams":
@@ -280,17 +282,36 @@ class Ins(ProcessModel):
     # ------------------------------------------------------------------ input
     def input_from(self, message: Message) -> np.ndarray:
         """u (6,) from an IMU message ``ax ay az gx gy gz`` (m/s^2, rad/s, FRD). Raises MalformedMessage for a
-        wrong count, a non-finite value, or a value beyond ``max_specific_force`` / ``max_rate``: the
-        sample is then rejected and counted, never integrated."""
+        wrong count or a non-number, RejectedMessage (a MalformedMessage) for a non-finite value or one
+        beyond ``max_specific_force`` / ``max_rate``: the sample is counted, never integrated."""
         u = message.floats()
         if u.shape != (6,):
             raise MalformedMessage(f"process 'ins' expects 6 IMU values (ax ay az gx gy gz), got {u.size}")
         if not np.all(np.isfinite(u)):
-            raise MalformedMessage(f"non-finite IMU value in {message.values!r}")
+            raise RejectedMessage(f"non-finite IMU value in {message.values!r}")
         p: InsParams = self.params  # type: ignore[assignment]
         if p.max_specific_force is not None and np.max(np.abs(u[:3])) > p.max_specific_force:
-            raise MalformedMessage(f"specific force {u[:3].tolist()} beyond the sensor range "
-                                   f"+-{p.max_specific_force} m/s^2")
+            raise RejectedMessage(f"specific force {u[:3].tolist()} beyond the sensor range "
+                                  f"+-{p.max_specific_force} m/s^2")
         if p.max_rate is not None and np.max(np.abs(u[3:])) > p.max_rate:
-            raise MalformedMessage(f"angular rate {u[3:].tolist()} beyond the sensor range +-{p.max_rate} rad/s")
+            raise RejectedMessage(f"angular rate {u[3:].tolist()} beyond the sensor range +-{p.max_rate} rad/s")
         return u
+
+    # ------------------------------------------------------------------ initial alignment
+    def align(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Initial alignment from the mean IMU sample ``u_mean`` (6,) of a static start (``initial.align_s``).
+
+        Roll and pitch from gravity (levelling: a static accelerometer reads ``C_n^b (-g_n) + b_a``, with
+        b_a the initial mean ``ba``); yaw is kept from ``x0`` (the config's initial attitude: gravity
+        cannot give it). With ``align_gyro_bias`` the gyro bias becomes the mean rate (minus the Earth rate
+        when modelled): a static gyro reads its bias, to ARW / sqrt(T) over T seconds. Accelerometer
+        biases are left as given (not separable from tilt). P0 is returned unchanged."""
+        x0 = np.array(x0, dtype=float, copy=True)
+        u_mean = np.asarray(u_mean, dtype=float)
+        yaw = float(quat.to_euler(x0[6:10])[2]) if np.any(x0[6:10]) else 0.0
+        q = quat.from_gravity(u_mean[:3] - x0[10:13], yaw)
+        x0[6:10] = q
+        if self.params.align_gyro_bias:  # type: ignore[attr-defined]
+            w_ie_b = quat.to_matrix(q).T @ self.w_ie if self.w_ie is not None else 0.0
+            x0[13:16] = u_mean[3:] - w_ie_b
+        return x0, np.array(P0, dtype=float, copy=True)

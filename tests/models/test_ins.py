@@ -310,3 +310,29 @@ def test_contract_checks():
         u = np.r_[0.1, -0.2, -G, 0.3, 0.1, -0.2]
         testing.check_process_vectorised(m, X, u, 0.01)
         testing.check_process_jacobian(m, X[0], u, 0.01)
+
+
+def test_align_levels_from_gravity_and_keeps_yaw():
+    m = make(gravity=G)
+    q_true = quat.from_euler(0.05, -0.08, 1.2)
+    bw = np.array([1e-3, -2e-3, 5e-4])
+    u_mean = np.r_[quat.to_matrix(q_true).T @ [0, 0, -G], bw]
+    x0 = state(q=quat.from_euler(0.0, 0.0, 1.2))        # config: level, yaw 1.2 rad
+    P0 = np.eye(16) * 0.01
+    x1, P1 = m.align(x0, P0, u_mean)
+    assert quat.angle_between(x1[6:10], q_true) < 1e-12
+    np.testing.assert_allclose(x1[13:16], bw)
+    np.testing.assert_array_equal(P1, P0)
+    np.testing.assert_array_equal(x0[6:10], quat.from_euler(0.0, 0.0, 1.2))   # input untouched
+    x2, _ = make(align_gyro_bias=False).align(x0, P0, u_mean)
+    np.testing.assert_array_equal(x2[13:16], 0.0)
+
+
+def test_input_from_out_of_range_is_a_rejection():
+    from fusion.api import RejectedMessage
+
+    m = make(max_rate=5.0)
+    with pytest.raises(RejectedMessage):
+        m.input_from(Message(0.0, "imu", (0, 0, -9.8, 0, 6.0, 0)))
+    with pytest.raises(RejectedMessage):
+        m.input_from(Message(0.0, "imu", (0, 0, float("nan"), 0, 0, 0)))

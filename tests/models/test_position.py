@@ -138,3 +138,12 @@ def test_contract_checks():
         X = testing.random_states(layout, 9, seed=3)
         testing.check_measurement_vectorised(m, X)
         testing.check_measurement_jacobian(m, X[0])
+
+
+def test_position_from_inverts_h():
+    m = model(lever_arm=ARM)
+    x = random_states(np.random.default_rng(5), 1)[0]
+    z = np.array([3.0, -1.0, 0.5])
+    x[0:3] = m.position_from(z, x)
+    np.testing.assert_allclose(m.h(x), z, atol=1e-14)
+    np.testing.assert_array_equal(model(PV2).position_from(z, np.zeros(4)), z[:2])
