@@ -18,7 +18,7 @@ from pydantic import ValidationError
 from fusion.api import BuildContext, ConfigError
 from fusion.logformat import format_line
 from fusion.simulate.base import SensorSimulator, SimContext, sample_times
-from fusion.simulate.scenario import Scenario, format_validation_error
+from fusion.simulate.scenario import Scenario, format_validation_error, yaml_line
 from fusion.simulate.trajectory import TrajectoryError, build_trajectory
 
 LOG_VERSION = "1"
@@ -27,6 +27,19 @@ LOG_VERSION = "1"
 def sensor_rng(seed: int, sensor: str) -> np.random.Generator:
     """The generator of one sensor: independent of the other sensors' names and order."""
     return np.random.default_rng(np.random.SeedSequence([int(seed), zlib.crc32(sensor.encode("utf-8"))]))
+
+
+def _located(where: str, text: str | None, msg: str) -> ConfigError:
+    """ConfigError ``file: a.b.c (line N): ...`` from a message that starts with a field path ``a.b.c: ...``."""
+    if msg.startswith(where):
+        return ConfigError(msg)
+    head, sep, rest = msg.partition(": ")
+    if sep and " " not in head and text:
+        loc = tuple(int(x) if x.isdigit() else x for x in head.split("."))
+        line = yaml_line(text, loc)
+        if line:
+            return ConfigError(f"{where}: {head} (line {line}): {rest}")
+    return ConfigError(f"{where}: {msg}")
 
 
 def build_simulators(sc: Scenario, registry=None, where: str = "<scenario>", text: str | None = None
@@ -56,7 +69,7 @@ def simulate(sc: Scenario, seed: int | None = None, noise: bool = True, registry
     try:
         traj = build_trajectory(sc.trajectory, sc.dim, sc.duration)
     except TrajectoryError as exc:
-        raise ConfigError(f"{where}: {exc}") from None
+        raise _located(where, text, str(exc)) from None
     duration = float(sc.duration if sc.duration is not None else traj.duration)
     beacons = {k: np.array(v + [0.0] * (3 - len(v)), float) for k, v in sc.beacons.items()}
     origin = (sc.origin.lat_deg, sc.origin.lon_deg, sc.origin.alt_m) if sc.origin else None
@@ -81,9 +94,12 @@ def simulate(sc: Scenario, seed: int | None = None, noise: bool = True, registry
     for order, (name, sim) in enumerate(sims.items()):
         ctx = SimContext(traj, beacons, sc.dim, sc.gravity, duration, noise, sensor_rng(seed, name),
                          origin, start)
-        out = sim.simulate(ctx)
-        header += sim.header(ctx)
-        field_lines.append(f"fields {name} " + " ".join(sim.fields(ctx)))
+        try:
+            out = sim.simulate(ctx)
+            header += sim.header(ctx)
+            field_lines.append(f"fields {name} " + " ".join(sim.fields(ctx)))
+        except ConfigError as exc:
+            raise _located(where, text, str(exc)) from None
         prec = sim.params.precision or sc.precision
         for t, vals in zip(out.t, out.values):
             rows.append((int(round(float(t) * 1e6)), order, format_line(float(t), name, vals, precision=prec)))

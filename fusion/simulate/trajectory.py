@@ -4,7 +4,7 @@ angular rate are mutually consistent, so an IMU derived from them integrates bac
 * ``WaypointTrajectory``: a vehicle or pedestrian on a WaypointPath; runs between stops follow quintic
   speed ramps (continuous acceleration and jerk); heading along the path, pitch along its slope, no roll.
 * ``RandomWalkTrajectory``: position and Euler angles random-walk by a step each interval, interpolated
-  by quintic splines (C^4), held still during a static start.
+  by quintic splines (C^4), blended in smoothly after a static start.
 """
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from scipy.interpolate import make_interp_spline
 
 from fusion.simulate.kinematics import Kinematics
 from fusion.simulate.path import PathError, WaypointPath
-from fusion.simulate.profiles import H_PRIME_MAX, smoothstep, smoothstep_d1, smoothstep_int
+from fusion.simulate.profiles import H_PRIME_MAX, smoothstep, smoothstep_d1, smoothstep_d2, smoothstep_int
 from fusion.simulate.scenario import RandomWalkTrajectory as RandomWalkSpec
 from fusion.simulate.scenario import WaypointsTrajectory as WaypointsSpec
 
@@ -183,17 +183,28 @@ class RandomWalkTrajectory:
             E.append(e)
         tk = spec.static_start + h * (np.arange(len(P)) - 2)
         self._t_still = spec.static_start
+        self._blend = 2.0 * h
         self._p0, self._e0 = p0, e0
         self._ps = make_interp_spline(tk, np.array(P), k=5)
         self._es = make_interp_spline(tk, np.array(E), k=5)
         self.duration = duration
 
     def sample(self, t: np.ndarray) -> Kinematics:
+        """The spline S(t) blended in from rest: p = p0 + w (S - p0) with w a quintic smoothstep over the
+        first two steps after the static start, so the motion starts with continuous acceleration."""
         t = np.asarray(t, float)
-        p, v, a = self._ps(t), self._ps(t, 1), self._ps(t, 2)
-        e, de = self._es(t), self._es(t, 1)
-        still = t < self._t_still - 1e-12
-        p[still], v[still], a[still], e[still], de[still] = self._p0, 0.0, 0.0, self._e0, 0.0
+        S, S1, S2 = self._ps(t), self._ps(t, 1), self._ps(t, 2)
+        E, E1 = self._es(t), self._es(t, 1)
+        x = (t - self._t_still) / self._blend
+        w = smoothstep(x)[:, None]
+        w1 = (smoothstep_d1(x) / self._blend)[:, None]
+        w2 = (smoothstep_d2(x) / self._blend ** 2)[:, None]
+        dP, dE = S - self._p0, E - self._e0
+        p = self._p0 + w * dP
+        v = w * S1 + w1 * dP
+        a = w * S2 + 2 * w1 * S1 + w2 * dP
+        e = self._e0 + w * dE
+        de = w * E1 + w1 * dE
         return Kinematics(t, p, v, a, e, de)
 
 

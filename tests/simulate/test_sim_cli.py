@@ -1,0 +1,100 @@
+"""`fusion simulate`: the log contract, determinism, and clear errors (exit 2, one line)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import parse_log
+
+from fusion.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLE = ROOT / "scenarios" / "example_2d.yaml"
+
+
+def _sim(tmp_path, *args) -> bytes:
+    out = tmp_path / "out.log"
+    assert main(["simulate", str(EXAMPLE), "-o", str(out), *args]) == 0
+    return out.read_bytes()
+
+
+def test_log_header_and_lines_follow_the_contract(tmp_path):
+    text = _sim(tmp_path).decode("utf-8")
+    lines = text.splitlines()
+    assert lines[:3] == ["# fusion-log 1", "# scenario: example_2d", "# seed: 1"]
+    msgs, header = parse_log(text)
+    assert header.fields == {"uwb": ("beacon", "range"), "truth": ("px", "py", "vx", "vy")}
+    assert "# beacon B1: 0 0 0" in lines
+    body = [ln for ln in lines if not ln.startswith("#")]
+    assert all(not ln.startswith("#") for ln in lines[lines.index(body[0]):])  # header first
+    t = np.array([float(ln.split(",", 1)[0]) for ln in body])
+    assert np.all(np.diff(t) >= 0)                                             # sorted by time
+    assert all(len(ln.split(",")[0].split(".")[1]) == 6 for ln in body[:50])  # fixed precision
+    truth_t = np.array([m.t for m in msgs["truth"]])
+    assert np.allclose(np.diff(truth_t), 0.1)                                  # highest sensor rate
+    assert all(m.values[0][0].isalpha() for m in msgs["uwb"])
+
+
+def test_same_seed_same_bytes_other_seed_other_noise(tmp_path):
+    a, b = _sim(tmp_path), _sim(tmp_path)
+    assert a == b
+    c = _sim(tmp_path, "--seed", "7")
+    assert c != a and b"# seed: 7" in c
+    truth = lambda data: [ln for ln in data.decode().splitlines() if ",truth," in ln]  # noqa: E731
+    assert truth(a) == truth(c)                                                # same trajectory
+
+
+def test_noise_off_and_stdout(tmp_path, capsys):
+    assert main(["simulate", str(EXAMPLE), "-o", "-", "--noise", "off"]) == 0
+    out = capsys.readouterr().out
+    assert "# noise: off" in out and "# uwb range_noise_sd: 0.0" in out
+
+
+@pytest.mark.parametrize("yaml, expect", [
+    ("trajectory: {type: waypoints, waypoints: [[0, 0], [1, 0]]}\nsensors: {u: {type: range}}\nbogus: 1\n",
+     "bogus (line 3): unknown field"),
+    ("trajectory: {type: waypoints, waypoints: [[0, 0], [1, 0]]}\nsensors:\n  u:\n    type: range\n"
+     "    noise_sd: -1\n", "sensors.u.noise_sd (line 5): Input should be greater than or equal to 0"),
+    ("trajectory: {type: waypoints, waypoints: [[0, 0], [1, 0]]}\nsensors: {u: {type: rnage}}\n",
+     "sensors.u.type: unknown simulator 'rnage'; did you mean 'range'?"),
+    ("trajectory: {type: spiral}\nsensors: {u: {type: range}}\n", "trajectory"),
+    ("trajectory: {type: waypoints, waypoints: [[0, 0], [1, 0]]}\nsensors: {u: {type: range, beacons: [X]}}\n",
+     "unknown beacon"),
+    ("dim: 2\nbeacons: {1A: [0, 0]}\ntrajectory: {type: waypoints, waypoints: [[0, 0], [1, 0]]}\n"
+     "sensors: {u: {type: range}}\n", "must start with a letter"),
+    ("a: [1, 2\n", "not valid YAML"),
+])
+def test_bad_scenarios_exit_2_with_one_clear_line(tmp_path, capsys, yaml, expect):
+    sc = tmp_path / "bad.yaml"
+    sc.write_text(yaml)
+    assert main(["simulate", str(sc), "-o", str(tmp_path / "x.log")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(sc) in err and expect in err, err
+    assert not (tmp_path / "x.log").exists()
+
+
+def test_missing_scenario_and_unwritable_output(tmp_path, capsys):
+    assert main(["simulate", str(tmp_path / "nope.yaml"), "-o", str(tmp_path / "x.log")]) == 2
+    assert "no such scenario file" in capsys.readouterr().err
+    assert main(["simulate", str(EXAMPLE), "-o", str(tmp_path / "no" / "dir" / "x.log")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+
+
+def test_help(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["simulate", "--help"])
+    assert e.value.code == 0
+    out = capsys.readouterr().out
+    assert "--noise" in out and "--seed" in out and "examples:" in out
+
+
+def test_simulators_are_registered_plugins():
+    from fusion.api import Simulator
+    from fusion.registry import default_registry
+    reg = default_registry()
+    names = set(reg.names("simulator"))
+    assert {"imu", "range", "arrival_time", "gps", "magnetometer", "position"} <= names
+    for name in names:
+        cls = reg.get("simulator", name)
+        assert issubclass(cls, Simulator) and cls.__doc__ and cls.Params.model_config.get("extra") == "forbid"
