@@ -33,18 +33,15 @@ def checksum(body: str) -> str:
 
 
 def _field(tok: str) -> float | str:
-    tok = tok.strip()
-    low = tok.lower()
-    if low in _NONFINITE:
-        raise MalformedMessage(f"non-finite value {tok!r}")
     try:
         v = float(tok)
     except ValueError:
-        if _LABEL.match(tok):
+        tok = tok.strip()
+        if tok.lower() not in _NONFINITE and _LABEL.match(tok):
             return tok
         raise MalformedMessage(f"bad number {tok!r}") from None
-    if not math.isfinite(v):
-        raise MalformedMessage(f"non-finite value {tok!r}")
+    if v - v != 0.0:  # nan or inf (cheaper than math.isfinite on the hot path)
+        raise MalformedMessage(f"non-finite value {tok.strip()!r}")
     return v
 
 
@@ -72,31 +69,32 @@ def parse_comment(text: str, header: Header) -> None:
 def parse_line(text: str, lineno: int | None = None) -> Message:
     """Parse one message line (not a comment, not blank). Raises MalformedMessage with the reason."""
     line = text.strip()
-    parts = line.split(",", 2)
+    parts = line.split(",")
     if len(parts) < 3:
         raise MalformedMessage("expected 't,sensor,value,...'")
-    t_txt, sensor, rest = parts
     try:
-        t = float(t_txt)
+        t = float(parts[0])
     except ValueError:
-        raise MalformedMessage(f"bad time {t_txt.strip()!r}") from None
-    if not math.isfinite(t):
-        raise MalformedMessage(f"non-finite time {t_txt.strip()!r}")
-    sensor = sensor.strip()
+        raise MalformedMessage(f"bad time {parts[0].strip()!r}") from None
+    if t - t != 0.0:
+        raise MalformedMessage(f"non-finite time {parts[0].strip()!r}")
+    sensor = parts[1].strip()
     if not _SENSOR.match(sensor):
         raise MalformedMessage(f"bad sensor name {sensor!r}")
-    rest = rest.strip()
-    if rest.startswith("$"):
-        return Message(t, sensor, (rest,), lineno)
-    m = _CHECKSUM.search(rest)
-    if m:
-        body = line[: line.rindex("*")]
+    first = parts[2].lstrip()
+    if first.startswith("$"):
+        return Message(t, sensor, (line.split(",", 2)[2].strip(),), lineno)
+    if "*" in parts[-1]:
+        m = _CHECKSUM.search(line)
+        if not m:
+            raise MalformedMessage(f"bad checksum field {parts[-1].strip()!r}")
+        body = line[: m.start()]
         if checksum(body) != m.group(1).upper():
             raise MalformedMessage(f"bad checksum *{m.group(1)} (computed *{checksum(body)})")
-        rest = rest[: m.start()]
-    if not rest:
+        parts[-1] = parts[-1][: parts[-1].rindex("*")]
+    if len(parts) == 3 and not parts[2].strip():
         raise MalformedMessage("no values")
-    return Message(t, sensor, tuple(_field(tok) for tok in rest.split(",")), lineno)
+    return Message(t, sensor, tuple([_field(tok) for tok in parts[2:]]), lineno)
 
 
 def format_value(v: float | str) -> str:
