@@ -99,10 +99,7 @@ class WaypointPath:
         self.stations = stations
         self._turns = turns
         self._leg_heading = heading
-        self._leg_len = leg_len
-        self._d = d
-        self._turn_len = {i: g[1] for i, g in turns_geo.items()}
-        self._turn_of = {}
+        self._turn_of: dict[int, int] = {}
         j = 0
         for i in range(1, n - 1):
             if i in turns_geo:

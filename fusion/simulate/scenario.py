@@ -176,7 +176,10 @@ def format_validation_error(exc: ValidationError, where: str, text: str | None, 
     """One line per problem: ``file: a.b.c (line N): message``."""
     out = []
     for err in exc.errors():
-        loc = prefix + tuple(x for x in err["loc"] if not (isinstance(x, str) and x in _UNION_TAGS))
+        raw = tuple(x for x in err["loc"] if not (isinstance(x, str) and "[" in x))  # validator wrappers
+        if len(raw) > 1 and raw[0] == "trajectory" and raw[1] in _TRAJECTORY_TAGS:
+            raw = raw[:1] + raw[2:]  # the discriminated union's tag
+        loc = prefix + raw
         path = ".".join(str(x) for x in loc) or "(top level)"
         line = yaml_line(text, loc) if text else None
         at = f" (line {line})" if line else ""
@@ -187,7 +190,7 @@ def format_validation_error(exc: ValidationError, where: str, text: str | None, 
     return "; ".join(out)
 
 
-_UNION_TAGS = {"waypoints", "random_walk", "function-before[_from_list(), Waypoint]"}
+_TRAJECTORY_TAGS = {"waypoints", "random_walk"}
 
 
 def load_scenario(path: str | Path) -> tuple[Scenario, str]:

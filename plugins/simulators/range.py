@@ -1,7 +1,6 @@
 """Range simulator: one range to a beacon a message (UWB radio or ultrasonic time of flight)."""
 from __future__ import annotations
 
-from typing import Any
 
 import numpy as np
 from pydantic import Field

@@ -58,7 +58,9 @@ def test_noise_off_and_stdout(tmp_path, capsys):
      "    noise_sd: -1\n", "sensors.u.noise_sd (line 5): Input should be greater than or equal to 0"),
     ("trajectory: {type: waypoints, waypoints: [[0, 0], [1, 0]]}\nsensors: {u: {type: rnage}}\n",
      "sensors.u.type: unknown simulator 'rnage'; did you mean 'range'?"),
-    ("trajectory: {type: spiral}\nsensors: {u: {type: range}}\n", "trajectory"),
+    ("trajectory: {type: spiral}\nsensors: {u: {type: range}}\n", "trajectory (line 1): Input tag 'spiral'"),
+    ("trajectory:\n  type: waypoints\n  waypoints: [[0, 0], {at: [1, 0], stopp: 2}]\nsensors: {u: {type: range}}\n",
+     "trajectory.waypoints.1.stopp (line 3): unknown field"),
     ("trajectory: {type: waypoints, waypoints: [[0, 0], [1, 0]]}\nsensors: {u: {type: range, beacons: [X]}}\n",
      "unknown beacon"),
     ("dim: 2\nbeacons: {1A: [0, 0]}\ntrajectory: {type: waypoints, waypoints: [[0, 0], [1, 0]]}\n"
