@@ -20,6 +20,7 @@ import numpy as np
 
 from fusion.api import Belief, Event, Filter, Gate, MeasurementModel, ProcessModel, UpdateResult
 
+from .jacobian import measurement_jacobian
 from .linalg import cholesky_lower, recover_factor, solve_lower, symmetrise
 
 __all__ = ["KalmanBase", "linear_predict", "linearised_update", "as_covariance", "covariance_of"]
@@ -66,6 +67,7 @@ class KalmanBase(Filter):
         self.events: deque[Event] = deque(maxlen=self.MAX_EVENTS)
         self.process: ProcessModel | None = None
         self.repaired: np.ndarray | None = None
+        self.last_iterations = 0
 
     # ------------------------------------------------------------------ diagnostics
     def report(self, t: float, kind: str, detail: str = "") -> None:
@@ -112,6 +114,17 @@ class KalmanBase(Filter):
         raise NotImplementedError
 
 
+_EYE: dict[int, np.ndarray] = {}
+
+
+def _eye(n: int) -> np.ndarray:
+    I = _EYE.get(n)
+    if I is None:
+        I = _EYE[n] = np.eye(n)
+        I.flags.writeable = False
+    return I
+
+
 def linearised_update(flt: KalmanBase, belief: Belief, model: MeasurementModel, z: np.ndarray,
                       R: np.ndarray, gate: Gate | None, max_iterations: int = 1,
                       tolerance: float = 0.0) -> UpdateResult:
@@ -128,46 +141,43 @@ def linearised_update(flt: KalmanBase, belief: Belief, model: MeasurementModel, 
     its covariance, the NIS and the gate decision are those of the prior (iteration 0), the same as
     the EKF's.
     """
-    from .jacobian import measurement_jacobian
-
     x0 = belief.x
     P = covariance_of(belief)
     z = np.asarray(z, dtype=float).reshape(-1)
     m = z.shape[0]
     R = as_covariance(R, m)
     xi = x0
-    y0 = S0 = None
-    nis = 0.0
-    iterations = 0
     for it in range(max_iterations):
         H = measurement_jacobian(model, xi)
-        PHt = P @ H.T
-        S = H @ PHt + R
+        HP = H @ P                               # (P H^T)^T, P symmetric
+        S = HP @ H.T + R
         Ly = flt.factor(S, belief.t, "innovation covariance")
         if flt.repaired is not None:
             S = flt.repaired
         r = model.residual(z, model.h(xi))
-        W = solve_lower(Ly, PHt.T)              # L_y^-1 H P   (m, n)
+        W = solve_lower(Ly, HP)                  # L_y^-1 H P   (m, n)
         if it == 0:
-            y0, S0 = r, symmetrise(S)
+            y0, S0 = r, S
             w = solve_lower(Ly, r)
             nis = float(w @ w)
             out = flt.rejected(belief, y0, S0, nis, gate, m)
             if out is not None:
                 return out
         else:
-            r = r - H @ (x0 - xi)
-            w = solve_lower(Ly, r)
+            w = solve_lower(Ly, r - H @ (x0 - xi))
         x_next = x0 + w @ W                      # x^- + K r,  K r = W^T L_y^-1 r
-        iterations = it + 1
+        if max_iterations == 1:
+            xi = x_next
+            break
         step = np.abs(x_next - xi).max()
         xi = x_next
         if step <= tolerance:
             break
+    iterations = it + 1
     flt.counters["update_iterations"] += iterations
     flt.last_iterations = iterations
     Kt = solve_lower(Ly, W, trans=1)             # K^T = S^-1 H P   (m, n)
-    A = np.eye(x0.shape[0]) - Kt.T @ H           # I - K H
+    A = _eye(x0.shape[0]) - Kt.T @ H             # I - K H
     P1 = symmetrise(A @ P @ A.T + Kt.T @ R @ Kt)  # Joseph form
     flt.counters["updates"] += 1
     return UpdateResult(Belief(belief.t, flt.normalize(xi), P=P1), y0, S0, nis, True)

@@ -127,15 +127,15 @@ def cholupdate(L: np.ndarray, v: np.ndarray, weight: float = 1.0) -> tuple[np.nd
     if info != 0:
         return L, False
     U1, SL, diag = _consts(p.shape[0])
-    wp2 = weight * (p * p)
+    wp = weight * p
+    wp2 = wp * p
     sn = wp2 @ U1                  # w t_{j+1} = 1 + w sum_{i<=j} p_i^2   (scaled by w: no 1/w overflow)
     sn += 1.0
+    if not sn.min() > 0.0:         # w t_1 = 1 > 0, so every ratio t_{j+1}/t_j > 0 iff every w t_{j+1} > 0;
+        return L, False            # also false for NaN
     sp = sn - wp2                  # w t_j
-    ratio = sn / sp
-    if not ratio.min() > 0.0:      # also false for NaN
-        return L, False
-    d = np.sqrt(ratio)
-    M = np.outer(p, (weight * p) / (sp * d))
+    d = np.sqrt(sn / sp)
+    M = p[:, None] * (wp / (sp * d))
     M *= SL
     M.flat[diag] = d
     return L @ M, True            # finite: NaN/inf in L or v would have made some ratio NaN

@@ -59,6 +59,7 @@ class SigmaPoints:
         self.Wm[0] = lam / c
         self.Wc = self.Wm.copy()
         self.Wc[0] += 1.0 - alpha * alpha + beta
+        self.Wc_col = self.Wc[:, None]
         self.gamma = beta - alpha * alpha
         self.sqrt_w = math.sqrt(self.w)
         eye = np.eye(n)

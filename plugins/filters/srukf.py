@@ -11,30 +11,26 @@ from fusion.api import Belief, Gate, MeasurementModel, ProcessModel, UpdateResul
 
 from .base import as_covariance
 from .jacobian import process_jacobian
-from .linalg import cholupdate, psd_sqrt_rows, qr_lower, recover_factor, solve_lower, symmetrise
+from .linalg import cholupdate, psd_sqrt_rows, qr_lower, recover_factor, solve_lower
 from .sigma_points import SigmaPoints, UnscentedParams
 from .ukf import SigmaPointFilter
 
 
-def _subtract(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a - b
-
-
 class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
     r"""Square-root UKF (paper 000 Algorithm 1, additive noise): the belief holds the lower Cholesky
-    factor S (P = S S^T, ``Belief.P`` is None) and P is never formed or factorised.
+    factor S (P = S S^T, ``Belief.P`` is None); P is never formed nor factorised.
 
-    Prediction (c = sqrt(W_c^1) = sqrt(W^i), B_Q a row square root of Q: B_Q^T B_Q = Q)::
+    Prediction (c = sqrt(W^i), i >= 1; B_Q a row square root of Q, B_Q^T B_Q = Q)::
 
         chi = [x, x + eta S_i, x - eta S_i]                               (eq. 3)
         Y_i = f(chi_i, u, dt)     (one call on the (2n+1, n) array)       (eq. 4)
         x^- = sum W_m^i Y_i                                               (eq. 5)
         S^- = qr{[c (Y_1:2n - x^-); B_Q]}                                 (eq. 6)
-        S^- = cholupdate{S^-, Y_0 - x^-, W_c^0}    (a downdate when W_c^0 < 0)   (eq. 7)
+        S^- = cholupdate{S^-, Y_0 - x^-, W_c^0}  (a downdate when W_c^0 < 0)    (eq. 7)
 
     or, for a linear process (``linear_prediction``), ``x^- = f(x)``, ``S^- = qr{[(F S)^T; B_Q]}``.
 
-    Update, sigma points redrawn from (x^-, S^-) as in the ukf (so srukf == ukf to rounding)::
+    Update, with sigma points redrawn from (x^-, S^-) as in the ukf (so srukf == ukf to rounding)::
 
         Z_i = h(chi_i),  z^ = sum W_m^i Z_i                               (eqs. 8-9)
         S_y = qr{[c (Z_1:2n - z^); B_R]},  S_y = cholupdate{S_y, Z_0 - z^, W_c^0}   (eqs. 10-11)
@@ -43,28 +39,42 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         x^+ = x^- + K (z - z^)                                            (eq. 14, as corrected)
         U = K S_y,  S^+ = cholupdate{S^-, U, -1}                           (eqs. 15-16)
 
-    ``covariance_update: downdate`` does eqs. 15-16 literally (m rank-1 downdates); the default
-    ``qr`` gets the same S^+ from one QR of a stacked matrix (Joseph-like, every term positive)::
+    ``covariance_update`` chooses how eqs. 10-16 are computed (all give the same numbers):
 
-        S^+ = qr{[c ((chi_1:2n - x^-) - K (Z_1:2n - z^)); B_R K^T]},
-        S^+ = cholupdate{S^+, K (Z_0 - z^), W_c^0}
+    * ``joint`` (default): one QR of the stacked deviations of measurement and state (the "array
+      form" of square-root filters), then one cholupdate of the joint factor for the zeroth point::
 
-    since ``sum W_c (dx - K dz)(dx - K dz)^T + K R K^T = P - K S K^T``.
+          L = qr{[c (Z_1:2n - z^), c (chi_1:2n - x^-); B_R, 0]},  L = cholupdate{L, [Z_0 - z^; 0], W_c^0}
+          L = [[S_y, 0], [P_xz S_y^-T, S^+]]
 
-    ``zeroth_point``: ``cholupdate`` (default) is Algorithm 1 as written. ``recentred`` forms every
-    covariance about the zeroth point instead of the mean, an exact identity for weights summing to 1::
+      since L L^T is the joint covariance [[P_zz, P_zx], [P_xz, P^-]] and its Cholesky factor has
+      those blocks (block Cholesky: S^+ S^+^T = P^- - P_xz P_zz^-1 P_zx = P^- - K S K^T). The gain is
+      applied by one triangular solve: ``K y = (P_xz S_y^-T)(S_y^-1 y)``.
+    * ``qr``: eqs. 10-13 as written, then S^+ from one QR of a stacked (Joseph-like) matrix,
+      ``qr{[c ((chi_1:2n - x^-) - K (Z_1:2n - z^)); B_R K^T]}`` and cholupdate{., K (Z_0 - z^), W_c^0},
+      since ``sum W_c (dx - K dz)(dx - K dz)^T + K R K^T = P - K S K^T``.
+    * ``downdate``: eqs. 10-16 literally (m rank-1 downdates by the columns of U = K S_y).
+
+    ``zeroth_point``: ``cholupdate`` is eqs. 5-7 and 9-11 as written (QR of points 1..2n about the mean,
+    then a rank-1 update, or a downdate when W_c^0 < 0, for the zeroth point). ``recentred`` (default)
+    forms the same covariances about the zeroth point instead of the mean, an identity for weights
+    summing to 1::
 
         sum W_c^i (Y_i - y^)(Y_i - y^)^T = sum_{i>=1} W^i (Y_i - Y_0)(Y_i - Y_0)^T
                                           + (beta - alpha^2) (y^ - Y_0)(y^ - Y_0)^T,
         y^ = Y_0 + sum_{i>=1} W^i (Y_i - Y_0)
 
-    so all weights are positive for beta >= alpha^2 (no downdate, one QR), and the ~-1e6 zeroth
-    weight at alpha = 1e-3 never multiplies anything: it keeps ~12 digits where the textbook form keeps
-    ~6 (benchmarks/README.md).
+    so for beta >= alpha^2 (beta = 2: always) every weight is positive and the zeroth point joins the QR
+    as one more row: no downdate, one QR per step, ~25% faster, and never a negative weight times a
+    large one (at alpha = 1e-3, W_c^0 ~ -1e6); both agree with the ukf to 1e-8 (tests) and with an
+    extended-precision reference to the same ~1e-8 at alpha = 1e-3, where the loss comes from the
+    sigma points themselves (differences of h over steps of alpha sigma; benchmarks/README.md).
+    A negative beta - alpha^2 falls back on the cholupdate downdate.
 
     The rank-1 cholupdate is vectorised (linalg.cholupdate). A failed downdate (loss of positive
     definiteness) is detected, counted in ``counters['not_positive_definite']``, reported in ``events``
     and recovered by re-factorising the symmetrised covariance with its eigenvalues clipped: never NaN.
+    Row square roots of Q and R are cached per array object (models are immutable, DESIGN.md).
     """
 
     name = "srukf"
@@ -72,11 +82,17 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
     class Params(UnscentedParams):
         """Scaled unscented transform parameters and the square-root variant."""
 
-        zeroth_point: Literal["cholupdate", "recentred"] = Field(
-            "cholupdate", description="cholupdate: Algorithm 1 (rank-1 update/downdate with W_c^0); "
-                                      "recentred: covariances about the zeroth point, no downdate")
-        covariance_update: Literal["qr", "downdate"] = Field(
-            "qr", description="qr: one QR of a stacked matrix; downdate: eqs. 15-16, m rank-1 downdates")
+        zeroth_point: Literal["recentred", "cholupdate"] = Field(
+            "recentred", description="recentred: covariances about the zeroth point, every weight "
+                                     "positive (one QR); cholupdate: eqs. 6-7 as written (QR, then a "
+                                     "rank-1 update/downdate with W_c^0)")
+        covariance_update: Literal["joint", "qr", "downdate"] = Field(
+            "joint", description="joint: one QR of the stacked measurement and state deviations; "
+                                 "qr: gain first, then one QR; downdate: eqs. 15-16, m rank-1 downdates")
+
+    def __init__(self, params=None, context=None):
+        super().__init__(params, context)
+        self._sqrt_cache: dict[str, tuple[object, np.ndarray]] = {}
 
     # ------------------------------------------------------------------ helpers
     def initial_belief(self, t: float, x: np.ndarray, P: np.ndarray) -> Belief:
@@ -89,6 +105,15 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
             return belief.S
         return self.factor(belief.P, belief.t, "srukf")
 
+    def noise_rows(self, key: str, C) -> np.ndarray:
+        """Row square root B (B^T B = C) of a noise covariance, cached for the same array object."""
+        hit = self._sqrt_cache.get(key)
+        if hit is not None and hit[0] is C:
+            return hit[1]
+        B = psd_sqrt_rows(C)
+        self._sqrt_cache[key] = (C, B)  # holds C, so its id cannot be reused while cached
+        return B
+
     def rank1(self, L: np.ndarray, v: np.ndarray, weight: float, t: float, where: str) -> np.ndarray:
         """cholupdate{L, v, weight} with recovery of a failed downdate."""
         L1, ok = cholupdate(L, v, weight)
@@ -97,32 +122,27 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         self.report(t, "not_positive_definite", f"{where}: cholupdate with weight {weight:.3g} failed, repaired")
         return recover_factor(L @ L.T + weight * np.outer(v, v))
 
-    def sqrt_transform(self, sp: SigmaPoints, Y: np.ndarray, B: np.ndarray, diff, t: float, where: str):
-        """Square-root unscented transform of the transformed points Y (2n+1, m) plus noise B^T B.
-
-        Returns ``(mean, S, D1, v0, w0)`` with ``S S^T = W sum D1_i D1_i^T + B^T B + w0 v0 v0^T``: D1
-        (2n, m) the deviations of points 1..2n (from the mean, or from Y_0 when recentred), v0 and w0
-        the zeroth-point term and its weight (eqs. 5-7 / 9-11)."""
+    def deviations(self, sp: SigmaPoints, Y: np.ndarray, diff):
+        """Mean of the transformed points Y (2n+1, m) and the deviations for the square-root
+        transform: ``(mean, D1, v0, w0)`` with covariance ``W sum D1_i D1_i^T + w0 v0 v0^T``: D1 (2n, m)
+        the deviations of points 1..2n (from the mean, or from Y_0 when recentred), v0 and w0 the
+        zeroth-point term and its weight (eqs. 5, 9)."""
         if self.params.zeroth_point == "cholupdate":
             mean = sp.Wm @ Y
             D = diff(Y, mean)
-            D1, v0, w0 = D[1:], D[0], sp.Wc[0]
-        else:
-            D1 = diff(Y[1:], Y[0])
-            v0 = sp.w * D1.sum(axis=0)
-            mean = Y[0] + v0
-            w0 = sp.gamma
-        S = qr_lower(self.stack(sp.sqrt_w * D1, B, v0, w0))
-        if w0 < 0.0:
-            S = self.rank1(S, v0, w0, t, where)
-        return mean, S, D1, v0, w0
+            return mean, D[1:], D[0], sp.Wc[0]
+        D1 = diff(Y[1:], Y[0])
+        v0 = sp.w * D1.sum(axis=0)
+        return Y[0] + v0, D1, v0, sp.gamma
 
-    @staticmethod
-    def stack(A: np.ndarray, B: np.ndarray, v0: np.ndarray, w0: float) -> np.ndarray:
-        """[A; B] plus the row sqrt(w0) v0 when w0 > 0 (a positive zeroth weight joins the QR)."""
+    def sqrt_transform(self, sp: SigmaPoints, D1: np.ndarray, B: np.ndarray, v0: np.ndarray, w0: float,
+                       t: float, where: str) -> np.ndarray:
+        """S with S S^T = W sum D1_i D1_i^T + B^T B + w0 v0 v0^T: one QR (eqs. 6, 10) and, for a
+        negative w0, one rank-1 downdate (eqs. 7, 11); a positive w0 joins the QR as a row."""
         if w0 > 0.0:
-            return np.concatenate((A, B, math.sqrt(w0) * v0[None]))
-        return np.concatenate((A, B))
+            return qr_lower(np.concatenate((sp.sqrt_w * D1, B, math.sqrt(w0) * v0[None])))
+        S = qr_lower(np.concatenate((sp.sqrt_w * D1, B)))
+        return self.rank1(S, v0, w0, t, where) if w0 < 0.0 else S
 
     # ------------------------------------------------------------------ predict
     def predict(self, belief: Belief, process: ProcessModel, u: np.ndarray | None, dt: float) -> Belief:
@@ -131,15 +151,16 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
             return belief
         x = belief.x
         S = self.sqrt_of(belief)
-        BQ = psd_sqrt_rows(process.Q(x, u, dt))
+        BQ = self.noise_rows("Q", process.Q(x, u, dt))
         self.counters["predicts"] += 1
         if self.use_linear_prediction(process):
             F = process_jacobian(process, x, u, dt)
-            S1 = qr_lower(np.concatenate(((F @ S).T, BQ)))      # F P F^T + Q, square root
+            S1 = qr_lower(np.concatenate(((F @ S).T, BQ)))         # sqrt(F P F^T + Q)
             return Belief(belief.t + dt, process.normalize(process.f(x, u, dt)), S=S1)
         sp = self.sigma_points(x.shape[0])
-        Y = process.f(x + sp.E @ S.T, u, dt)                     # eqs. 3-4, one call
-        xm, S1, _, _, _ = self.sqrt_transform(sp, Y, BQ, _subtract, belief.t, "srukf predict")  # eqs. 5-7
+        Y = process.f(x + sp.E @ S.T, u, dt)                        # eqs. 3-4, one call
+        xm, D1, v0, w0 = self.deviations(sp, Y, np.subtract)        # eq. 5
+        S1 = self.sqrt_transform(sp, D1, BQ, v0, w0, belief.t, "srukf predict")  # eqs. 6-7
         return Belief(belief.t + dt, process.normalize(xm), S=S1)
 
     # ------------------------------------------------------------------ update
@@ -149,33 +170,53 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         S = self.sqrt_of(belief)
         z = np.asarray(z, dtype=float).reshape(-1)
         m = z.shape[0]
-        BR = psd_sqrt_rows(as_covariance(R, m))
-        sp = self.sigma_points(x.shape[0])
+        n = x.shape[0]
+        BR = self.noise_rows("R", R if getattr(R, "shape", None) == (m, m) else as_covariance(R, m))
+        sp = self.sigma_points(n)
         dX = sp.E @ S.T
-        Z = model.h(x + dX)                                       # eq. 8, one call
-        zm, Sy, D1, v0, w0 = self.sqrt_transform(sp, Z, BR, model.residual, belief.t,
-                                                 "srukf innovation")        # eqs. 9-11
+        Z = model.h(x + dX)                                          # eq. 8, one call
+        zm, D1, v0, w0 = self.deviations(sp, Z, model.residual)      # eq. 9
         dX1 = dX[1:]
-        Pxz = (sp.w * dX1.T) @ D1                                 # eq. 12 (chi_0 - x^- = 0)
         y = model.residual(z, zm)
-        w = solve_lower(Sy, y)
-        nis = float(w @ w)
-        Syy = symmetrise(Sy @ Sy.T)
-        out = self.rejected(belief, y, Syy, nis, gate, m)
-        if out is not None:
-            return out
-        W = solve_lower(Sy, Pxz.T)                                # S_y^-1 P_xz^T
-        x1 = x + w @ W                                            # eq. 14: K y = W^T S_y^-1 y
-        Kt = solve_lower(Sy, W, trans=1)                          # eq. 13: K^T = S_y^-T S_y^-1 P_xz^T
-        if self.params.covariance_update == "qr":
-            A = self.stack(sp.sqrt_w * (dX1 - D1 @ Kt), BR @ Kt, v0 @ Kt, w0)
-            S1 = qr_lower(A)
+        mode = self.params.covariance_update
+        if mode == "joint":
+            k = 2 * n
+            A = np.zeros((k + m + (w0 > 0.0), m + n))
+            np.multiply(D1, sp.sqrt_w, out=A[:k, :m])
+            np.multiply(dX1, sp.sqrt_w, out=A[:k, m:])
+            A[k:k + m, :m] = BR
+            if w0 > 0.0:
+                np.multiply(v0, math.sqrt(w0), out=A[-1, :m])
+            L = qr_lower(A)                                          # eqs. 10, 12-13, 15-16 at once
             if w0 < 0.0:
-                S1 = self.rank1(S1, v0 @ Kt, w0, belief.t, "srukf update")
+                L = self.rank1(L, np.concatenate((v0, np.zeros(n))), w0, belief.t, "srukf update")  # eq. 11
+            Sy = L[:m, :m]
+            w = solve_lower(Sy, y)
+            nis = float(w @ w)
+            Syy = Sy @ Sy.T
+            out = self.rejected(belief, y, Syy, nis, gate, m)
+            if out is not None:
+                return out
+            x1 = x + L[m:, :m] @ w                                   # eq. 14: K y = (P_xz S_y^-T) S_y^-1 y
+            S1 = L[m:, m:]
         else:
-            U = Kt.T @ Sy                                         # eq. 15
-            S1 = S
-            for j in range(m):                                    # eq. 16: m downdates (m columns, not points)
-                S1 = self.rank1(S1, U[:, j], -1.0, belief.t, "srukf update")
+            Sy = self.sqrt_transform(sp, D1, BR, v0, w0, belief.t, "srukf innovation")  # eqs. 10-11
+            Pxz = (sp.w * dX1.T) @ D1                                # eq. 12 (chi_0 - x^- = 0)
+            w = solve_lower(Sy, y)
+            nis = float(w @ w)
+            Syy = Sy @ Sy.T
+            out = self.rejected(belief, y, Syy, nis, gate, m)
+            if out is not None:
+                return out
+            W = solve_lower(Sy, Pxz.T)                               # S_y^-1 P_xz^T
+            x1 = x + w @ W                                           # eq. 14: K y = W^T S_y^-1 y
+            Kt = solve_lower(Sy, W, trans=1)                         # eq. 13: K^T = S_y^-T S_y^-1 P_xz^T
+            if mode == "qr":
+                S1 = self.sqrt_transform(sp, dX1 - D1 @ Kt, BR @ Kt, v0 @ Kt, w0, belief.t, "srukf update")
+            else:
+                U = Kt.T @ Sy                                        # eq. 15
+                S1 = S
+                for j in range(m):                                   # eq. 16: m downdates (columns, not points)
+                    S1 = self.rank1(S1, U[:, j], -1.0, belief.t, "srukf update")
         self.counters["updates"] += 1
         return UpdateResult(Belief(belief.t, self.normalize(x1), S=S1), y, Syy, nis, True)

@@ -64,7 +64,9 @@ class UnscentedKalmanFilter(SigmaPointFilter):
     (default ``f(x, u, dt) + w`` and ``h(x) + v``). The augmented prediction always uses sigma points.
 
     Defaults alpha=0.5, beta=2, kappa=0 (Stone Soup's). Small alpha (1e-3, common in the literature)
-    makes W_c^0 ~ -1e6 and costs ~6 digits to cancellation (benchmarks/README.md).
+    puts the points within 1e-3 sigma of the mean, so the transform differences h over tiny steps and
+    weights them by ~1e5-1e6: it agrees with an extended-precision reference to ~1e-8 relative, against
+    ~1e-14 at alpha = 0.5 (benchmarks/README.md).
     """
 
     name = "ukf"
@@ -140,11 +142,11 @@ class UnscentedKalmanFilter(SigmaPointFilter):
             Z = model.h(x + dX)                                # 001 eq. 14, one call
         zm = sp.Wm @ Z
         dZ = model.residual(Z, zm)
-        A = dZ * sp.Wc[:, None]
+        A = dZ * sp.Wc_col
         Pzz = dZ.T @ A                                         # 001 eq. 16
         if R is not None:
             Pzz += R                                           # 001 eq. 17
-        Pxz = dX.T @ A                                         # 001 eq. 15
+        Pzx = A.T @ dX                                         # 001 eq. 15 (transposed)
         Ly = self.factor(Pzz, belief.t, "ukf innovation covariance")
         if self.repaired is not None:
             Pzz = self.repaired
@@ -154,9 +156,11 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         out = self.rejected(belief, y, Pzz, nis, gate, m)
         if out is not None:
             return out
-        W = solve_lower(Ly, Pxz.T)                             # L_y^-1 P_xz^T
+        W = solve_lower(Ly, Pzx)                               # L_y^-1 P_xz^T
         x1 = x + w @ W                                         # 001 eqs. 18-19
-        P1 = symmetrise(P - W.T @ W)                           # 001 eq. 20
+        P1 = P - W.T @ W                                       # 001 eq. 20
+        # W.T @ W is computed by BLAS syrk (numpy detects a.T @ a), exactly symmetric, so P1 is exactly
+        # symmetric when P is (tests/filters/test_filters_exactness.py checks it bit for bit)
         self.counters["updates"] += 1
         return UpdateResult(Belief(belief.t, self.normalize(x1), P=P1), y, Pzz, nis, True)
 

@@ -11,8 +11,10 @@ from fusion.api import MeasurementModel, Params, ProcessModel, StateLayout
 SIGMA_VARIANTS = [
     ("ukf", {}), ("ukf", {"linear_prediction": "never"}), ("ukf", {"linear_prediction": "always"}),
     ("srukf", {}), ("srukf", {"linear_prediction": "never"}),
-    ("srukf", {"linear_prediction": "never", "zeroth_point": "recentred"}),
+    ("srukf", {"linear_prediction": "never", "zeroth_point": "cholupdate"}),
     ("srukf", {"linear_prediction": "never", "covariance_update": "downdate"}),
+    ("srukf", {"linear_prediction": "never", "covariance_update": "qr"}),
+    ("srukf", {"linear_prediction": "never", "zeroth_point": "recentred", "covariance_update": "qr"}),
     ("srukf", {"linear_prediction": "never", "alpha": 1.0, "kappa": 1.0}),  # W_c^0 > 0: no downdate
     ("iekf", {"max_iterations": 1}),
 ]
@@ -131,10 +133,8 @@ def _max_rel(a, b):
 
 
 @pytest.mark.parametrize("params", [
-    {},
-    {"zeroth_point": "recentred"},
-    {"covariance_update": "downdate"},
-    {"zeroth_point": "recentred", "covariance_update": "downdate"},
+    {"zeroth_point": zp, "covariance_update": cu}
+    for zp in ("cholupdate", "recentred") for cu in ("joint", "qr", "downdate")
 ])
 @pytest.mark.parametrize("problem", ["range", "turn"])
 def test_srukf_equals_ukf_on_nonlinear_models(problem, params):
@@ -189,3 +189,16 @@ def test_updated_covariance_exactly_symmetric():
             assert np.array_equal(b.P, b.P.T), name
             b = flt.update(b, meas, z, R).belief
             assert np.array_equal(b.P, b.P.T), name
+
+
+@pytest.mark.parametrize("zeroth_point", ["recentred", "cholupdate"])
+def test_srukf_equals_ukf_at_small_alpha_within_the_documented_loss(zeroth_point):
+    """alpha = 1e-3 puts the sigma points within 1e-3 sigma of the mean: agreement drops from ~1e-13
+    to ~1e-8 in x (benchmarks/README.md has the table); both stay far inside 1e-6."""
+    proc, meas, _, x0, P0, R, zs = _range_problem()
+    common = {"alpha": 1e-3, "linear_prediction": "never"}
+    a = _run(testing.build("filter", "ukf", common), proc, meas, x0, P0, R, zs, 0.1)
+    b = _run(testing.build("filter", "srukf", {**common, "zeroth_point": zeroth_point}), proc, meas, x0, P0,
+             R, zs, 0.1)
+    assert _max_rel([p[0] for p in b], [p[0] for p in a]) < 1e-6
+    assert _max_rel([p[1] for p in b], [p[1] for p in a]) < 1e-8

@@ -105,7 +105,7 @@ class Identity1(MeasurementModel):
 
 
 @pytest.mark.parametrize("name,params", [
-    ("srukf", {}), ("srukf", {"zeroth_point": "recentred"}), ("ukf", {}),
+    ("srukf", {}), ("srukf", {"zeroth_point": "cholupdate"}), ("ukf", {}),
 ])
 def test_loss_of_positive_definiteness_is_recovered_without_nan(name, params):
     """alpha=1, beta=-1 at x=0, P=1: sigma points 0, +-1 -> Y = 0, 1, 1, mean 1, and the unscented
