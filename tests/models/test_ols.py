@@ -259,3 +259,32 @@ def test_motion_compensation_refers_ranges_to_the_fix_time():
     errs, s = run(motion_compensation=True, stamp="last")
     assert len(errs) == 16 and s.counters["fixes"] == 16
     assert errs[2:].max() < 0.01 and errs[-1] < 1e-4
+
+
+def test_stamp_close_refers_the_fix_to_the_closing_message():
+    """stamp: close gives the fix at the time of the message that closed the cycle (when the scheduler
+    applies it), extrapolated with the fitted velocity; its covariance grows with the extrapolation."""
+    from fusion.api import ConfigError
+
+    with pytest.raises(ConfigError, match="motion_compensation"):
+        solver(stamp="close")
+    v = np.array([0.8, -0.1, 0.0])
+    s = solver(z=-0.1, motion_compensation=True, stamp="close", accel_sd=0.0)
+    s_last = solver(z=-0.1, motion_compensation=True, stamp="last", accel_sd=0.0)
+    names = ["B2", "B3", "B4"]                                   # B5 is never heard: cycles close on a repeat
+    fixes, fixes_last = [], []
+    for c in range(16):
+        for j, n in enumerate(names):
+            t = 0.4 * c + 0.05 * j
+            x = np.array([8.0, 1.0, -0.1]) + v * t
+            msg = Message(t, "abps", (n, float(np.linalg.norm(MINE[int(n[1:]) - 1] - x))))
+            fixes += [(t, f) for f in s.feed(msg)]
+            fixes_last += s_last.feed(msg)
+    assert len(fixes) == 15
+    for t_msg, f in fixes:
+        assert f.t == t_msg                                      # the closing message's time
+    errs = [np.linalg.norm(unpack_fix(f.values)[0][:2] - (np.array([8.0, 1.0]) + v[:2] * f.t)) for _, f in fixes]
+    assert max(errs[8:]) < 1e-3 and errs[-1] < 1e-4
+    sd_close = np.sqrt(unpack_fix(fixes[-1][1].values)[1][0, 0])
+    sd_last = np.sqrt(unpack_fix(fixes_last[-1].values)[1][0, 0])
+    assert sd_close > sd_last
