@@ -260,6 +260,8 @@ class Scheduler:
             x0, P0 = self._x0, self._P0
             if self._align_s and self._align_u:
                 x0, P0 = self.process.align(x0, P0, np.mean(self._align_u, axis=0))  # type: ignore[attr-defined]
+            self._x0, self._P0 = x0, P0
+            x0, P0 = self._initial()
             self.belief = self.filter.initial_belief(t, x0, P0)
             self._next_output = t + self.output_dt if self.output_dt else math.inf
             self.u = u
@@ -279,7 +281,7 @@ class Scheduler:
             self._take_fix(obs)
             sensor.counters["used"] += 1
             if not (self._align_s or self.process.input_dim):
-                self.belief = self.filter.initial_belief(obs.t, self._x0, self._P0)
+                self.belief = self.filter.initial_belief(obs.t, *self._initial())
                 self._next_output = obs.t + self.output_dt if self.output_dt else math.inf
             return
         if self.belief is None and (not self._have_fix or self.process.input_dim):
@@ -287,6 +289,13 @@ class Scheduler:
             yield Event(obs.t, "rejected", sensor.name, "before the filter is initialised")
             return
         self._ensure_belief(obs.t)
+        if obs.t < self.belief.t:  # type: ignore[union-attr]
+            # A fix stamped before the belief (e.g. a solver's cycle time): updating at the wrong time would
+            # bias the estimate, so it is late like any other message.
+            sensor.counters["late"] += 1
+            yield Event(obs.t, "late", sensor.name, f"observation {self.belief.t - obs.t:.3f} s older than the "  # type: ignore[union-attr]
+                        "belief; dropped (stamp fixes at the closing message)")
+            return
         yield from self._predict_to(obs.t)
         R = obs.R if obs.R is not None else sensor.R
         if R is None:
@@ -308,15 +317,27 @@ class Scheduler:
                 yield Estimate(obs.t, self.belief, "update", sensor.name, result)
 
     def _take_fix(self, obs) -> None:
-        """Put a fix of ``initial.from_sensor`` into the initial position block (latest fix wins)."""
+        """Remember a fix of ``initial.from_sensor`` for the initial position (latest fix wins)."""
+        self._fix = obs
+        self._have_fix = True
+
+    def _initial(self) -> tuple[np.ndarray, np.ndarray]:
+        """x0, P0 with the position block from the remembered fix. A model with ``position_from`` (a
+        position with a lever arm) turns the fix into the state's position at the initial attitude."""
+        x0, P0 = self._x0.copy(), self._P0.copy()
+        obs = getattr(self, "_fix", None)
+        if obs is None:
+            return x0, P0
         sl = self.system.layout["p"]
         m = len(obs.z)
-        self._x0[sl.start:sl.start + m] = obs.z
+        to_state = getattr(obs.model, "position_from", None)
+        x0[sl.start:sl.start + m] = to_state(obs.z, x0)[:m] if to_state else obs.z
         if obs.R is not None:
-            self._P0[sl.start:sl.start + m, :] = 0.0
-            self._P0[:, sl.start:sl.start + m] = 0.0
-            self._P0[sl.start:sl.start + m, sl.start:sl.start + m] = obs.R
-        self._have_fix = True
+            idx = np.arange(sl.start, sl.start + m)
+            P0[idx, :] = 0.0
+            P0[:, idx] = 0.0
+            P0[np.ix_(idx, idx)] = obs.R
+        return x0, P0
 
     # ------------------------------------------------------------------ replay
     def _record(self, msg: Message) -> None:
