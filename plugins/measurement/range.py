@@ -5,21 +5,31 @@ beacons a message names. With a 2-D state and 3-D beacons the tag is at the fixe
 
 .. math::
     r_i = \\sqrt{(p_x - b_{i,x})^2 + (p_y - b_{i,y})^2 [+ (p_z - b_{i,z})^2 \\text{ or } (z_{tag} - b_{i,z})^2]}
+
+Geometry check (paper 001's "non-optimal" layout, docs/results/uwb.md): ``geometry(x, P)`` gives the GDOP of
+the sensor's beacons at the estimated position and, when the beacons are degenerate (all on one line in
+2-D, or in one plane in 3-D), how many standard deviations of the belief separate the estimate from that
+line or plane; across it, the mirror image of the position fits every range exactly. ``check(belief)``
+turns these into ``warning`` Events (thresholds ``gdop_warn`` and ``mirror_warn_sigma``).
 """
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import numpy as np
 
-from fusion.api import ConfigError, MalformedMessage, MeasurementModel, Message, Observation, Params
+from pydantic import Field
+
+from fusion.api import Belief, ConfigError, Event, MalformedMessage, MeasurementModel, Message, Observation, Params
 
 
 class RangeModel(MeasurementModel):
     """Ranges (m) from the position block ``p`` (2-D or 3-D) to named beacons (config ``beacons:``).
 
     Params: ``beacons``: the beacons this sensor may range to (default: all); ``tag_z``: the tag's height
-    (m, same frame as the beacons) used when the state is 2-D and the beacons are 3-D."""
+    (m, same frame as the beacons) used when the state is 2-D and the beacons are 3-D; ``gdop_warn`` and
+    ``mirror_warn_sigma``: thresholds of ``check`` (see the module docstring)."""
 
     name = "range"
     dim = 1
@@ -27,6 +37,11 @@ class RangeModel(MeasurementModel):
     class Params(Params):
         beacons: list[str] | None = None
         tag_z: float = 0.0
+        gdop_warn: float | None = Field(10.0, gt=0.0, description="check(): warn when the GDOP of the beacons "
+                                        "at the estimated position exceeds this (None: never)")
+        mirror_warn_sigma: float | None = Field(3.0, gt=0.0, description="check(): with beacons on one line "
+                                                "(2-D) or plane (3-D), warn when the estimate is closer to it than "
+                                                "this many standard deviations (None: never)")
 
     def __init__(self, params=None, context=None, bound: tuple[str, ...] = ()):
         super().__init__(params, context)
@@ -42,6 +57,11 @@ class RangeModel(MeasurementModel):
         if unknown:
             raise ConfigError(f"range: unknown beacon(s) {unknown}; the config defines {sorted(ctx.beacons)}")
         self._known = frozenset(names)
+        self._all = np.array([ctx.beacons[b] for b in names], float)
+        self._all_dz2 = ((self.params.tag_z - self._all[:, 2]) ** 2 if (self._all.shape[1] == 3 and self._dp == 2)
+                         else np.zeros(len(names)))
+        self._all = self._all[:, : self._dp] if self._all.shape[1] >= self._dp else self._all
+        self.degenerate = _degenerate_hull(self._all, self._dp)
         self.bound = bound
         self.dim = max(1, len(bound))
         if bound:
@@ -66,6 +86,56 @@ class RangeModel(MeasurementModel):
         H[:, self._p] = d / np.maximum(r, 1e-12)[:, None]
         return H
 
+    # ------------------------------------------------------------------ geometry check
+    def geometry(self, x: np.ndarray, P: np.ndarray | None = None) -> dict[str, float]:
+        """Geometry of the sensor's beacons at the position of the state ``x`` (n,).
+
+        ``gdop``: sqrt(trace((H^T H)^-1)) with H the unit line-of-sight rows of every beacon (inf when
+        singular): a single fix from one range to each beacon has position sd ~ GDOP x range sd.
+        ``offset_m`` (degenerate layouts only): distance of the estimate from the beacons' line (2-D) or
+        plane (3-D), m; ``offset_sigma``: that distance over the belief's sd in that direction (needs P):
+        the mirror image of the estimate across the line is 2 x offset_sigma standard deviations away.
+        """
+        p = np.asarray(x, float)[self._p]
+        if self._all.shape[1] != self._dp:
+            return {"gdop": math.nan}
+        d = p - self._all
+        r = np.sqrt(np.einsum("kd,kd->k", d, d) + self._all_dz2)
+        H = d / np.maximum(r, 1e-12)[:, None]
+        A = H.T @ H
+        w = np.linalg.eigvalsh(A)
+        gdop = math.sqrt(float(np.sum(1.0 / w))) if w.min() > 1e-12 * max(w.max(), 1e-300) else math.inf
+        out = {"gdop": gdop}
+        if self.degenerate is not None:
+            a, basis = self.degenerate
+            rel = p - a
+            perp = rel - basis @ (basis.T @ rel)
+            off = float(np.linalg.norm(perp))
+            out["offset_m"] = off
+            if P is not None:
+                n = perp / off if off > 1e-9 else _any_normal(basis, self._dp)
+                Pp = np.asarray(P, float)[self._p, self._p]
+                out["offset_sigma"] = off / math.sqrt(max(float(n @ Pp @ n), 1e-300))
+        return out
+
+    def check(self, belief: Belief, sensor: str | None = None) -> list[Event]:
+        """``warning`` Events for a degenerate geometry at the belief's mean: GDOP above ``gdop_warn``,
+        or (beacons on one line/plane) the estimate within ``mirror_warn_sigma`` sd of that line/plane, where
+        the filter can cross to the mirror image and stay there (no gate can tell: it fits the ranges)."""
+        g = self.geometry(belief.x, belief.cov)
+        ev: list[Event] = []
+        pw = self.params
+        where = ", ".join(f"{v:.2f}" for v in np.asarray(belief.x)[self._p])
+        if pw.gdop_warn is not None and g["gdop"] > pw.gdop_warn:
+            ev.append(Event(belief.t, "warning", sensor, f"range: GDOP {g['gdop']:.3g} at ({where}) exceeds "
+                            f"{pw.gdop_warn:g}: the beacons constrain the position poorly here"))
+        if pw.mirror_warn_sigma is not None and g.get("offset_sigma", math.inf) < pw.mirror_warn_sigma:
+            kind = ("point", "line", "plane")[self.degenerate[1].shape[1]]  # type: ignore[index]
+            ev.append(Event(belief.t, "warning", sensor, f"range: estimate ({where}) is {g['offset_sigma']:.2g} sd "
+                            f"({g['offset_m']:.2f} m) from the {kind} of the beacons {', '.join(sorted(self._known))}: "
+                            "its mirror image fits the ranges as well; the filter may cross to it"))
+        return ev
+
     def observe(self, message: Message) -> Observation | None:
         vals = message.values
         if len(vals) < 2 or len(vals) % 2:
@@ -83,3 +153,26 @@ class RangeModel(MeasurementModel):
         if np.any(z < 0):
             raise MalformedMessage(f"negative range {z.min()}")
         return Observation(message.t, z, self._bind(names))
+
+
+def _degenerate_hull(B: np.ndarray, dp: int, tol: float = 1e-6) -> tuple[np.ndarray, np.ndarray] | None:
+    """(point, orthonormal basis (dp, k)) of the affine hull of the beacons B (m, dp) when its dimension k
+    is below dp (all on one line in 2-D, one plane in 3-D), else None. ``tol`` is relative to the spread."""
+    if B.shape[1] != dp or B.shape[0] == 0:
+        return None
+    a = B.mean(axis=0)
+    C = B - a
+    if B.shape[0] == 1:
+        return a, np.zeros((dp, 0))
+    _, s, Vt = np.linalg.svd(C, full_matrices=True)
+    scale = max(float(s[0]), 1e-12)
+    k = int(np.sum(s > tol * scale))
+    if k >= dp:
+        return None
+    return a, Vt[:k].T
+
+
+def _any_normal(basis: np.ndarray, dp: int) -> np.ndarray:
+    """A unit vector orthogonal to the columns of ``basis`` (dp, k), k < dp."""
+    Q, _ = np.linalg.qr(np.concatenate([basis, np.eye(dp)], axis=1))
+    return Q[:, basis.shape[1]]
