@@ -4,4 +4,6 @@ from fusion import hookimpl
 
 @hookimpl
 def fusion_register_components(registry):
-    pass
+    from fusion.sinks.estimates import EstimateWriter
+
+    registry.add(EstimateWriter)

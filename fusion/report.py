@@ -1,0 +1,247 @@
+"""Human output of ``fusion run``: the summary table and the replay progress bar (rich).
+
+``print_summary(summary, console=None)``
+    Prints the summary dict of DESIGN.md "Outputs" as tables: the run (config, filter, input, duration,
+    wall time, x real time, steps, us per predict/update), sensors (received, used, rejected, malformed,
+    late), errors against truth, consistency (NEES, per-sensor NIS with the fraction inside the 95%
+    chi-square interval) and any further top-level keys (events, counters). Missing sections are skipped,
+    so a summary without truth prints without errors. ``console`` defaults to a rich Console on stdout;
+    tests pass ``Console(file=io.StringIO(), width=..)``.
+
+``progress(end_t, enabled=None, *, start_t=None, console=None, delay_s=2.0)``
+    A context manager for long replays; it yields a callable ``tick(t)`` (also ``tick.update(t)``) to be
+    called with each estimate's time (s)::
+
+        with report.progress(last_timestamp, enabled=show) as tick:
+            for est in stream:
+                tick(est.t)
+
+    The bar runs from ``start_t`` (default: the first ``t`` ticked) to ``end_t`` (the recording's last
+    time stamp; None: no total, the bar shows only the time reached). It appears only after ``delay_s``
+    seconds of wall time, so short replays print nothing, and only when ``enabled`` (default: stdout and
+    the console are terminals). It is drawn on stderr and is transient: it vanishes when the block ends,
+    leaving stdout to the summary. ``tick`` costs ~0.2 us when the bar is hidden and redraws at most
+    10 times a second.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import time
+from contextlib import contextmanager
+from typing import Any, Iterator
+
+from rich.console import Console
+from rich.table import Table
+
+__all__ = ["print_summary", "progress", "Ticker"]
+
+_SENSOR_COLUMNS = ("received", "used", "rejected", "malformed", "late")
+_ERROR_ROWS = (  # key, label, unit
+    ("position_rmse_m", "position RMSE", "m"),
+    ("position_max_m", "position max", "m"),
+    ("velocity_rmse_mps", "velocity RMSE", "m/s"),
+    ("velocity_max_mps", "velocity max", "m/s"),
+    ("attitude_rmse_deg", "attitude RMSE", "deg"),
+    ("attitude_max_deg", "attitude max", "deg"),
+)
+_ELEMENT_UNITS = {"p": "m", "v": "m/s"}  # by the block-prefixed element name (px, vy); others vary
+_KNOWN = {"config", "filter", "input", "duration_s", "wall_s", "steps", "us_per_predict", "us_per_update",
+          "sensors", "errors", "consistency"}
+
+
+def _num(v: Any, fmt: str = ".4g") -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, bool):
+        return str(v)
+    if isinstance(v, int):
+        return f"{v:,}"
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return str(v)
+    return format(f, fmt) if math.isfinite(f) else str(f)
+
+
+def _kv_table(title: str) -> Table:
+    t = Table(title=title, title_justify="left", title_style="bold", show_header=False, box=None,
+              pad_edge=False, padding=(0, 2, 0, 0))
+    t.add_column(style="cyan", no_wrap=True)
+    t.add_column()
+    return t
+
+
+def _run_table(s: dict) -> Table:
+    t = _kv_table("Run")
+    for key, label in (("config", "config"), ("filter", "filter"), ("input", "input")):
+        if key in s:
+            t.add_row(label, str(s[key]))
+    dur, wall = s.get("duration_s"), s.get("wall_s")
+    if dur is not None:
+        t.add_row("duration", f"{_num(dur)} s")
+    if wall is not None:
+        t.add_row("wall time", f"{_num(wall)} s")
+    if dur is not None and wall:
+        t.add_row("speed", f"{_num(float(dur) / float(wall), '.1f')} x real time")
+    steps = s.get("steps") or {}
+    if steps:
+        t.add_row("steps", ", ".join(f"{_num(v)} {k}" for k, v in steps.items()))
+    for key, label in (("us_per_predict", "per predict"), ("us_per_update", "per update")):
+        if s.get(key) is not None:
+            t.add_row(label, f"{_num(s[key], '.1f')} us")
+    return t
+
+
+def _sensors_table(sensors: dict) -> Table:
+    t = Table(title="Sensors", title_justify="left", title_style="bold")
+    t.add_column("sensor", style="cyan")
+    for c in _SENSOR_COLUMNS:
+        t.add_column(c, justify="right")
+    for name, c in sensors.items():
+        cells = []
+        for col in _SENSOR_COLUMNS:
+            v = c.get(col, 0)
+            bad = col in ("rejected", "malformed", "late") and v
+            cells.append(f"[yellow]{_num(v)}[/]" if bad else _num(v))
+        t.add_row(str(name), *cells)
+    return t
+
+
+def _errors_table(errors: dict) -> Table:
+    t = Table(title="Errors against truth", title_justify="left", title_style="bold",
+              caption=f"over {errors['samples']:,} estimates" if "samples" in errors else None,
+              caption_justify="left")
+    t.add_column("metric", style="cyan")
+    t.add_column("value", justify="right")
+    t.add_column("unit")
+    for key, label, unit in _ERROR_ROWS:
+        if key in errors:
+            t.add_row(label, _num(errors[key]), unit)
+    shown = {k for k, _, _ in _ERROR_ROWS} | {"samples", "element_rmse"}
+    for name, v in (errors.get("element_rmse") or {}).items():
+        t.add_row(f"{name} RMSE", _num(v), _ELEMENT_UNITS.get(name[:1], ""))
+    for key, v in errors.items():
+        if key not in shown:
+            t.add_row(key, _num(v) if not isinstance(v, dict) else str(v), "")
+    return t
+
+
+def _consistency_table(c: dict) -> Table:
+    t = Table(title="Consistency (95% chi-square interval)", title_justify="left", title_style="bold")
+    t.add_column("statistic", style="cyan")
+    t.add_column("dof", justify="right")
+    t.add_column("mean", justify="right")
+    t.add_column("inside 95%", justify="right")
+    t.add_column("samples", justify="right")
+    if "nees_mean" in c:
+        t.add_row("NEES", _num(c.get("nees_dof")), _num(c.get("nees_mean"), ".3g"),
+                  _pct(c.get("nees_in_95_fraction")), _num(c.get("nees_samples")))
+    frac, dof, n = (c.get(k) or {} for k in ("nis_in_95_fraction", "nis_dof", "nis_samples"))
+    for sensor, mean in (c.get("nis_mean") or {}).items():
+        t.add_row(f"NIS {sensor}", _num(dof.get(sensor)), _num(mean, ".3g"), _pct(frac.get(sensor)),
+                  _num(n.get(sensor)))
+    return t
+
+
+def _pct(v: Any) -> str:
+    return "-" if v is None else f"{100.0 * float(v):.1f} %"
+
+
+def print_summary(summary: dict, console: Console | None = None) -> None:
+    """Print ``summary`` (DESIGN.md "Outputs") as readable tables; see the module docstring."""
+    console = console if console is not None else Console()
+    console.print(_run_table(summary))
+    if summary.get("sensors"):
+        console.print()
+        console.print(_sensors_table(summary["sensors"]))
+    if summary.get("errors"):
+        console.print()
+        console.print(_errors_table(summary["errors"]))
+    elif summary.get("errors") is None:
+        console.print("\n[dim]no truth in the input: no errors[/]")
+    c = summary.get("consistency") or {}
+    if "nees_mean" in c or c.get("nis_mean"):
+        console.print()
+        console.print(_consistency_table(c))
+    extra = {k: v for k, v in summary.items() if k not in _KNOWN}
+    if extra:
+        console.print()
+        t = _kv_table("Other")
+        for k, v in extra.items():
+            text = ", ".join(f"{kk}: {_num(vv)}" for kk, vv in v.items()) if isinstance(v, dict) else _num(v)
+            t.add_row(k, text)
+        console.print(t)
+
+
+# --------------------------------------------------------------------------- progress
+class Ticker:
+    """The callable yielded by ``progress``: ``tick(t)`` with the sensor time reached (s)."""
+
+    def __init__(self, end_t: float | None, enabled: bool, start_t: float | None, console: Console | None,
+                 delay_s: float):
+        self.end_t = end_t
+        self.enabled = enabled
+        self.start_t = start_t
+        self.console = console
+        self.delay_s = delay_s
+        self.t: float | None = None
+        self._wall0 = time.monotonic()
+        self._next = self._wall0 + delay_s  # next wall time to look at the bar
+        self._bar = None
+        self._task = None
+
+    def __call__(self, t: float) -> None:
+        self.t = t
+        if self.start_t is None:
+            self.start_t = t
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if now < self._next:
+            return
+        self._next = now + 0.1
+        if self._bar is None:
+            self._start()
+        self._bar.update(self._task, completed=self._done(t), reached=f"t = {t:.1f} s")
+
+    update = __call__
+
+    def _done(self, t: float) -> float:
+        return max(0.0, t - (self.start_t if self.start_t is not None else t))
+
+    def _start(self) -> None:
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+        total = None
+        if self.end_t is not None and self.start_t is not None and self.end_t > self.start_t:
+            total = self.end_t - self.start_t
+        self._bar = Progress(TextColumn("[bold]replay"), BarColumn(), TextColumn("{task.percentage:>5.1f} %"),
+                             TextColumn("{task.fields[reached]}"), TimeElapsedColumn(), TimeRemainingColumn(),
+                             console=self.console, transient=True)
+        self._task = self._bar.add_task("replay", total=total, reached="")
+        self._bar.start()
+
+    @property
+    def shown(self) -> bool:
+        """Whether the bar has appeared."""
+        return self._bar is not None
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.stop()
+
+
+@contextmanager
+def progress(end_t: float | None, enabled: bool | None = None, *, start_t: float | None = None,
+             console: Console | None = None, delay_s: float = 2.0) -> Iterator[Ticker]:
+    """A progress bar for a replay up to sensor time ``end_t`` (s); see the module docstring."""
+    if console is None:
+        console = Console(stderr=True)
+    if enabled is None:
+        enabled = sys.stdout.isatty() and console.is_terminal
+    ticker = Ticker(end_t, bool(enabled), start_t, console, delay_s)
+    try:
+        yield ticker
+    finally:
+        ticker.close()
