@@ -1,7 +1,7 @@
 """Microseconds per predict and per update of every filter, beside FilterPy, measured in the same run.
 
     python benchmarks/bench_filters.py                  # the table (4-state constant velocity + 4 ranges)
-    python benchmarks/bench_filters.py --steps 3000 --rounds 9
+    python benchmarks/bench_filters.py --steps 1000 --rounds 10 --clock cpu
 
 Every filter (and FilterPy's UnscentedKalmanFilter with MerweScaledSigmaPoints of the same alpha, beta,
 kappa, and FilterPy's KalmanFilter with the Jacobians frozen at x0, as a floor) runs the same loop of
@@ -9,8 +9,10 @@ kappa, and FilterPy's KalmanFilter with the Jacobians frozen at x0, as a floor) 
 best round, so a busy machine slows all of them alike; the ratio column is FilterPy's UKF time per
 predict + update over ours.
 
-To add a model (e.g. the 16-state INS) call :func:`bench_model` with its process and measurement
-models, x0, P0, u (or None), z, R and dt; see :func:`cv_range_model` and ``main``.
+The 16-state INS (``ins`` process + ``position`` fix) runs too when those plugins are installed. To add
+a model call :func:`bench_model` with its process and measurement models, x0, P0, u (or None), z, R and
+dt; see :func:`cv_range_model`, :func:`ins_position_model` and ``main``. FilterPy gets the process
+noise ``Q(x, u, dt)`` at its prior mean before each predict, as our filters evaluate it.
 """
 from __future__ import annotations
 
@@ -81,9 +83,10 @@ def filterpy_ukf_runner(process, model, x0, P0, u, z, R, dt, steps, alpha, beta,
     ukf.predict()
     x1, P1, sig = ukf.x.copy(), ukf.P.copy(), ukf.sigmas_f.copy()
 
-    def predict():
+    def predict():  # Q(x, u, dt) at the prior mean each step, as our filters do (state-dependent Q)
         ukf.x, ukf.P = x0.copy(), P0.copy()
         for _ in range(steps):
+            ukf.Q = process.Q(ukf.x, u, dt)
             ukf.predict()
 
     def update():  # from the same prior each time, as ours
@@ -127,7 +130,7 @@ def filterpy_kf_runner(process, model, x0, P0, u, z, R, dt, steps) -> Runner:
     return Runner("FilterPy KalmanFilter (F, H frozen)", predict, update, overhead)
 
 
-def bench_model(title, process, model, x0, P0, u, z, R, dt, filters=None, steps=2000, rounds=7,
+def bench_model(title, process, model, x0, P0, u, z, R, dt, filters=None, steps=250, rounds=30,
                 alpha=0.5, beta=2.0, kappa=0.0, out=print):
     """Time the filters (a list of (registry name, params)) and FilterPy on one model; print a table.
 
@@ -229,8 +232,8 @@ FILTERS_16 = [
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--steps", type=int, default=2000, help="calls a round (default 2000)")
-    ap.add_argument("--rounds", type=int, default=7, help="rounds; each runner keeps its best (default 7)")
+    ap.add_argument("--steps", type=int, default=250, help="calls a round (default 250)")
+    ap.add_argument("--rounds", type=int, default=30, help="rounds; each runner keeps its best (default 30)")
     ap.add_argument("--alpha", type=float, default=0.5)
     ap.add_argument("--clock", choices=sorted(CLOCKS), default="wall",
                     help="wall: perf_counter (default); cpu: this thread's CPU time, steadier on a busy machine")

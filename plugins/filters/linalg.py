@@ -94,11 +94,14 @@ def psd_sqrt_rows(Q: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(w, 0.0))[:, None] * V.T
 
 
-def qr_lower(A: np.ndarray) -> np.ndarray:
+def qr_lower(A: np.ndarray, overwrite: bool = False) -> np.ndarray:
     """Lower-triangular ``L`` (n, n) with ``L L^T = A^T A`` for ``A`` (k, n), k >= n: the transposed R
-    factor of the economy QR of A (paper 000 Algorithm 1, ``qr{.}``), diagonal made non-negative."""
+    factor of the economy QR of A (paper 000 Algorithm 1, ``qr{.}``), diagonal made non-negative.
+
+    Fastest with a Fortran-ordered A the caller lets us overwrite (``overwrite=True``): no copy; the
+    workspace is given (the default makes LAPACK query it first, a second call)."""
     n = A.shape[1]
-    R = _dgeqrf(A)[0][:n]
+    R = _dgeqrf(A, lwork=n, overwrite_a=int(overwrite))[0][:n]   # lwork=n: unblocked, fastest when small
     # keep the upper triangle (below it LAPACK stores the Householder vectors), flip rows to a
     # non-negative diagonal: one product with the sign-carrying mask
     return (R * np.copysign(_consts(n)[0], R.diagonal()[:, None])).T

@@ -60,6 +60,7 @@ class SigmaPoints:
         self.Wc = self.Wm.copy()
         self.Wc[0] += 1.0 - alpha * alpha + beta
         self.Wc_col = self.Wc[:, None]
+        self.W1 = self.Wm[1:].copy()             # the weights of points 1..2n
         self.gamma = beta - alpha * alpha
         self.sqrt_w = math.sqrt(self.w)
         eye = np.eye(n)

@@ -131,17 +131,20 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
             mean = sp.Wm @ Y
             D = diff(Y, mean)
             return mean, D[1:], D[0], sp.Wc[0]
-        D1 = diff(Y[1:], Y[0])
-        v0 = sp.w * D1.sum(axis=0)
-        return Y[0] + v0, D1, v0, sp.gamma
+        Y0 = Y[0]
+        D1 = diff(Y[1:], Y0)
+        v0 = sp.W1 @ D1                        # sum_{i>=1} W^i (Y_i - Y_0) = y^ - Y_0
+        return Y0 + v0, D1, v0, sp.gamma
 
     def sqrt_transform(self, sp: SigmaPoints, D1: np.ndarray, B: np.ndarray, v0: np.ndarray, w0: float,
                        t: float, where: str) -> np.ndarray:
         """S with S S^T = W sum D1_i D1_i^T + B^T B + w0 v0 v0^T: one QR (eqs. 6, 10) and, for a
         negative w0, one rank-1 downdate (eqs. 7, 11); a positive w0 joins the QR as a row."""
         if w0 > 0.0:
-            return qr_lower(np.concatenate((sp.sqrt_w * D1, B, math.sqrt(w0) * v0[None])))
-        S = qr_lower(np.concatenate((sp.sqrt_w * D1, B)))
+            # stacked as columns of the transpose, so that A comes out Fortran-ordered for LAPACK
+            return qr_lower(np.concatenate((sp.sqrt_w * D1.T, B.T, math.sqrt(w0) * v0[:, None]), axis=1).T,
+                            overwrite=True)
+        S = qr_lower(np.concatenate((sp.sqrt_w * D1.T, B.T), axis=1).T, overwrite=True)
         return self.rank1(S, v0, w0, t, where) if w0 < 0.0 else S
 
     # ------------------------------------------------------------------ predict
@@ -155,7 +158,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         self.counters["predicts"] += 1
         if self.use_linear_prediction(process):
             F = process_jacobian(process, x, u, dt)
-            S1 = qr_lower(np.concatenate(((F @ S).T, BQ)))         # sqrt(F P F^T + Q)
+            S1 = qr_lower(np.concatenate((F @ S, BQ.T), axis=1).T, overwrite=True)   # sqrt(F P F^T + Q)
             return Belief(belief.t + dt, process.normalize(process.f(x, u, dt)), S=S1)
         sp = self.sigma_points(x.shape[0])
         Y = process.f(x + sp.E @ S.T, u, dt)                        # eqs. 3-4, one call
@@ -181,13 +184,13 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         mode = self.params.covariance_update
         if mode == "joint":
             k = 2 * n
-            A = np.zeros((k + m + (w0 > 0.0), m + n))
+            A = np.zeros((k + m + (w0 > 0.0), m + n), order="F")
             np.multiply(D1, sp.sqrt_w, out=A[:k, :m])
             np.multiply(dX1, sp.sqrt_w, out=A[:k, m:])
             A[k:k + m, :m] = BR
             if w0 > 0.0:
                 np.multiply(v0, math.sqrt(w0), out=A[-1, :m])
-            L = qr_lower(A)                                          # eqs. 10, 12-13, 15-16 at once
+            L = qr_lower(A, overwrite=True)                          # eqs. 10, 12-13, 15-16 at once
             if w0 < 0.0:
                 L = self.rank1(L, np.concatenate((v0, np.zeros(n))), w0, belief.t, "srukf update")  # eq. 11
             Sy = L[:m, :m]
