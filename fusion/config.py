@@ -80,6 +80,14 @@ class OutputSpec(_Strict):
     rate_hz: float | None = Field(None, gt=0.0)
 
 
+class EvaluationSpec(_Strict):
+    """How ``fusion run`` scores estimates against truth."""
+
+    settle_s: float = Field(0.0, ge=0.0, description="skip the first seconds in the statistics")
+    position: list[str] | None = Field(None, description="elements of the position error, e.g. [px, py] "
+                                       "for a horizontal accuracy (default: the whole block p)")
+
+
 class SystemSpec(_Strict):
     name: str
     description: str = ""
@@ -91,6 +99,7 @@ class SystemSpec(_Strict):
     sensors: dict[str, SensorSpec]
     scheduler: SchedulerSpec = Field(default_factory=SchedulerSpec)
     output: OutputSpec = Field(default_factory=OutputSpec)
+    evaluation: EvaluationSpec = Field(default_factory=EvaluationSpec)
 
     @field_validator("beacons")
     @classmethod
@@ -278,6 +287,10 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
         raise ConfigError(f"{doc.where(['initial', 'from_sensor']) if doc else 'initial.from_sensor'}: no sensor {spec.initial.from_sensor!r}")
     if spec.initial.align_s and not hasattr(process, "align"):
         raise ConfigError(f"{doc.where(['initial', 'align_s']) if doc else 'initial.align_s'}: process {process.name!r} cannot align itself")
+    for i, name in enumerate(spec.evaluation.position or []):
+        if name not in layout.names:
+            raise ConfigError(f"{doc.where(['evaluation', 'position', i]) if doc else 'evaluation.position'}: "
+                              f"state has no element {name!r}; elements are {list(layout.names)}")
     x0, P0 = _initial(spec, process, doc)
     return System(spec, path, process, filt, sensors, x0, P0, beacons, reg)  # type: ignore[arg-type]
 

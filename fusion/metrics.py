@@ -234,6 +234,8 @@ class ErrorTracker:
     :param settle_s: skip the first ``settle_s`` seconds (from the first time seen by ``add`` or
         ``add_nis(t=...)``) in the statistics; ``add`` still returns the errors.
     :param reasons: estimate reasons to evaluate (default all: ``update`` and ``output``).
+    :param position: the elements of the position error (default the block ``p``), e.g. ``["px", "py"]``
+        for a system whose accuracy is specified in the horizontal plane (paper 000's 2-D ABPS).
     :param nees_attitude: include each quaternion block in the NEES as a 3-dof attitude error
         ``dtheta = 2 vec(q_est^-1 (x) q_true)`` (rad, body frame) with covariance ``T P_qq T^T``,
         ``T = 2 [rows x,y,z of L(q_est^-1)]`` (first order; the radial direction of q drops out). With
@@ -245,8 +247,10 @@ class ErrorTracker:
     """
 
     def __init__(self, layout: StateLayout, truth: Truth | None, settle_s: float = 0.0,
-                 reasons: Collection[str] | None = None, nees_attitude: bool = True):
+                 reasons: Collection[str] | None = None, nees_attitude: bool = True,
+                 position: Sequence[str] | None = None):
         self.layout = layout
+        self.position_elements = tuple(position) if position else None
         self.settle_s = float(settle_s)
         self.reasons = None if reasons is None else frozenset(reasons)
         self.nis = NisTracker()
@@ -279,7 +283,8 @@ class ErrorTracker:
         def covered(group: list[str]) -> list[int] | None:
             return [self._elems.index(n) for n in group] if group and all(n in tr.index for n in group) else None
 
-        self._pos = covered(_group(layout, "p", ("px", "py", "pz")))
+        self._pos = covered(list(self.position_elements) if self.position_elements
+                            else _group(layout, "p", ("px", "py", "pz")))
         self._vel = covered(_group(layout, "v", ("vx", "vy", "vz")))
         self._acc = {k: _Acc() for k in ("position", "velocity", "attitude")}
         # NEES: vector/angle elements truth has (+ 3-dof attitude per quaternion block)

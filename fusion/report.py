@@ -115,10 +115,13 @@ def _errors_table(errors: dict) -> Table:
     t.add_column("metric", style="cyan")
     t.add_column("value", justify="right")
     t.add_column("unit")
+    axes = errors.get("position_elements")
     for key, label, unit in _ERROR_ROWS:
         if key in errors:
+            if axes and key.startswith("position"):
+                label = f"{label} ({' '.join(axes)})"
             t.add_row(label, _num(errors[key]), unit)
-    shown = {k for k, _, _ in _ERROR_ROWS} | {"samples", "element_rmse"}
+    shown = {k for k, _, _ in _ERROR_ROWS} | {"samples", "element_rmse", "position_elements"}
     for name, v in (errors.get("element_rmse") or {}).items():
         t.add_row(f"{name} RMSE", _num(v), _ELEMENT_UNITS.get(name[:1], ""))
     for key, v in errors.items():

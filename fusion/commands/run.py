@@ -97,7 +97,8 @@ def summarize(system: System, source: str | Path, result: dict[str, Any], settle
     names = parsed.header.fields.get("truth")
     if sched.truth and names:
         truth = Truth.from_messages(sched.truth, names)
-    tracker = ErrorTracker(system.layout, truth, settle_s=settle_s) if _accepts_settle() else ErrorTracker(system.layout, truth)
+    ev = system.spec.evaluation
+    tracker = ErrorTracker(system.layout, truth, settle_s=max(settle_s, ev.settle_s), position=ev.position)
     for est in estimates:
         tracker.add(est)
     for sensor, rows in sched.nis.items():
@@ -126,6 +127,8 @@ def summarize(system: System, source: str | Path, result: dict[str, Any], settle
     }
     if track.get("errors"):
         summary["errors"] = track["errors"]
+        if ev.position:
+            summary["errors"]["position_elements"] = list(ev.position)
     if track.get("consistency"):
         summary["consistency"] = track["consistency"]
     if sched.unused:
@@ -137,13 +140,6 @@ def summarize(system: System, source: str | Path, result: dict[str, Any], settle
         if counters:
             summary["filter_counters"] = dict(counters)
     return summary
-
-
-def _accepts_settle() -> bool:
-    import inspect
-
-    from fusion.metrics import ErrorTracker
-    return "settle_s" in inspect.signature(ErrorTracker).parameters
 
 
 def run(args: argparse.Namespace) -> int:
