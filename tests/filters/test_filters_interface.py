@@ -137,3 +137,50 @@ def test_augmented_ukf_samples_nonadditive_noise():
 
 def test_augmented_ukf_is_exact_on_linear_models():
     assert testing.check_filter_linear_exactness(testing.build("filter", "ukf", {"augmented": True})) < 1e-9
+
+
+class Counting:
+    """Wraps a model and records the shape of every f / h call."""
+
+    def __init__(self, inner):
+        self.inner, self.calls = inner, []
+
+    def __getattr__(self, name):
+        return getattr(self.inner, name)
+
+    def f(self, x, u, dt):
+        self.calls.append(np.shape(x))
+        return self.inner.f(x, u, dt)
+
+    def h(self, x):
+        self.calls.append(np.shape(x))
+        return self.inner.h(x)
+
+
+@pytest.mark.parametrize("name,params", [
+    ("ukf", {"linear_prediction": "never"}), ("srukf", {"linear_prediction": "never"}),
+    ("srukf", {"linear_prediction": "never", "zeroth_point": "cholupdate", "covariance_update": "downdate"}),
+    ("ukf", {"linear_prediction": "never", "augmented": True}),
+])
+def test_sigma_point_filters_call_the_models_once_per_step(name, params):
+    proc = Counting(testing.ConstantVelocity())
+    meas = Counting(testing.RangeMeasurement(testing.RangeMeasurement.Params(beacons=[[0.0, 0.0], [9.0, 1.0]])))
+    flt = testing.build("filter", name, params)
+    b = flt.initial_belief(0.0, [3.0, 4.0, 0.5, 0.0], np.eye(4))
+    for _ in range(3):
+        b = flt.update(flt.predict(b, proc, None, 0.1), meas, meas.h(b.x) + 0.1, np.eye(2) * 0.01).belief
+    k = 2 * (4 + 4) + 1 if params.get("augmented") else 9
+    assert proc.calls == [(k, 4)] * 3
+    k = 2 * (4 + 2) + 1 if params.get("augmented") else 9
+    assert [c for c in meas.calls if c != (4,)] == [(k, 4)] * 3
+
+
+def test_ekf_numerical_jacobians_are_one_call_each():
+    proc = Counting(testing.ConstantVelocity(testing.ConstantVelocity.Params(analytic_jacobian=False)))
+    meas = Counting(testing.RangeMeasurement(testing.RangeMeasurement.Params(
+        beacons=[[0.0, 0.0], [9.0, 1.0]], analytic_jacobian=False)))
+    ekf = testing.build("filter", "ekf")
+    b = ekf.predict(ekf.initial_belief(0.0, [3.0, 4.0, 0.5, 0.0], np.eye(4)), proc, None, 0.1)
+    assert sorted(proc.calls) == [(4,), (8, 4)]          # f(x) and one batch of 2n perturbed states
+    ekf.update(b, meas, np.array([5.0, 6.5]), np.eye(2) * 0.01)
+    assert sorted(meas.calls) == [(4,), (8, 4)]
