@@ -154,6 +154,15 @@ def plot_run(path, layout: StateLayout, estimates_t: np.ndarray, estimates_x: np
         ax.fill_between(t, -band, band, color="tab:blue", alpha=0.2, lw=0, label="+-3 sigma")
         if T is not None and name in truth.index:
             ax.plot(t, X[:, i] - T[:, truth.index[name]], color="tab:red", lw=0.8, label="error")
+        # robust limits: an initial transient (large sigma at start) must not squash the rest
+        mag = np.abs(band)
+        if T is not None and name in truth.index:
+            mag = np.fmax(mag, np.abs(X[:, i] - T[:, truth.index[name]]))
+        mag = mag[np.isfinite(mag)]
+        if mag.size:
+            lim = 1.3 * float(np.percentile(mag, 99.0))
+            if lim > 0:
+                ax.set_ylim(-lim, lim)
         ax.set_ylabel(f"{name} err (m)")
         ax.ticklabel_format(axis="y", useOffset=False)
         ax.grid(True, alpha=0.3)
