@@ -17,7 +17,7 @@ from functools import lru_cache
 
 import numpy as np
 from scipy.linalg import lapack
-from scipy.stats import chi2
+from fusion.chisquare import chi2
 
 __all__ = ["chi2_interval", "nees", "ChiSquareStat", "NisTracker"]
 

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
@@ -102,8 +101,8 @@ def summarize(system: System, source: str | Path, result: dict[str, Any], settle
     for est in estimates:
         tracker.add(est)
     for sensor, rows in sched.nis.items():
-        for _, nis, dim in rows:
-            tracker.add_nis(sensor, nis, dim)
+        for t, nis, dim in rows:
+            tracker.add_nis(sensor, nis, dim, t=t)
     track = tracker.summary()
     sensors = {}
     for name, s in system.sensors.items():
@@ -145,6 +144,7 @@ def summarize(system: System, source: str | Path, result: dict[str, Any], settle
 def run(args: argparse.Namespace) -> int:
     from fusion import report
     from fusion.sinks.estimates import EstimateWriter
+    from fusion.sinks.summary import write_summary_json
 
     from fusion.config import load_yaml
 
@@ -164,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
                 writer.close()
     summary = summarize(system, source, result)
     if args.summary_json:
-        Path(args.summary_json).write_text(json.dumps(summary, indent=2, default=_jsonable) + "\n")
+        write_summary_json(args.summary_json, summary)
     if not args.quiet:
         report.print_summary(summary)
     if args.plot:
@@ -191,14 +191,6 @@ def _duration_hint(source: str | Path) -> float | None:
     except OSError:
         return None
     return None
-
-
-def _jsonable(o: Any) -> Any:
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)
 
 
 def _plot(path: str, system: System, result: dict[str, Any]) -> None:

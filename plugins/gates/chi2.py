@@ -51,7 +51,7 @@ class Chi2Gate(Gate):
         if th is None:
             if dim < 1:
                 raise ValueError(f"gate {self.name!r}: measurement dimension must be >= 1, got {dim}")
-            from scipy.stats import chi2  # imported on first use: keeps plugin import cheap
+            from fusion.chisquare import chi2
 
             p = self.params
             if p.n_sigma is not None:

@@ -11,7 +11,7 @@ from typing import Any, ClassVar, Literal, Sequence
 import numpy as np
 from pydantic import Field
 from scipy.linalg import LinAlgError, cho_factor, cho_solve, qr, solve_triangular
-from scipy.stats import chi2
+from fusion.chisquare import chi2
 
 from fusion.api import BuildContext, ConfigError, Event, MalformedMessage, Message, Params, Solver
 
