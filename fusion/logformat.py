@@ -94,7 +94,13 @@ def parse_line(text: str, lineno: int | None = None) -> Message:
         parts[-1] = parts[-1][: parts[-1].rindex("*")]
     if len(parts) == 3 and not parts[2].strip():
         raise MalformedMessage("no values")
-    return Message(t, sensor, tuple([_field(tok) for tok in parts[2:]]), lineno)
+    try:  # fast path: all numbers
+        values = tuple(map(float, parts[2:]))
+    except ValueError:
+        return Message(t, sensor, tuple([_field(tok) for tok in parts[2:]]), lineno)
+    if sum(values) - sum(values) != 0.0:  # a nan or inf among them
+        return Message(t, sensor, tuple([_field(tok) for tok in parts[2:]]), lineno)
+    return Message(t, sensor, values, lineno)
 
 
 def format_value(v: float | str) -> str:
