@@ -32,34 +32,18 @@ from typing import Collection, Sequence
 
 import numpy as np
 
+from fusion import quaternion as quat
 from fusion.api import Estimate, Message, StateLayout
 from fusion.consistency import ChiSquareStat, NisTracker, nees
 
-__all__ = ["Truth", "ErrorTracker", "quat_mul", "quat_conj", "attitude_error_deg"]
+__all__ = ["Truth", "ErrorTracker", "attitude_error_deg"]
 
 
 # --------------------------------------------------------------------------- quaternions (scalar first)
-def quat_conj(q: np.ndarray) -> np.ndarray:
-    """Conjugate of quaternions ``q`` (..., 4), ``[w x y z]``."""
-    q = np.asarray(q, dtype=float)
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
-
-
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product ``a (x) b`` of quaternions (..., 4), scalar first, broadcast over leading axes."""
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz,
-                     aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw], axis=-1)
-
-
 def attitude_error_deg(q_true: np.ndarray, q_est: np.ndarray) -> np.ndarray:
     """Rotation angle (deg, in [0, 180]) of ``q_true^-1 (x) q_est`` for quaternions (..., 4), scalar first.
     Neither needs unit norm; ``q`` and ``-q`` give the same angle."""
-    d = quat_mul(quat_conj(q_true), q_est)
+    d = quat.multiply(quat.conjugate(np.asarray(q_true, float)), np.asarray(q_est, float))
     return np.degrees(2.0 * np.arctan2(np.linalg.norm(d[..., 1:], axis=-1), np.abs(d[..., 0])))
 
 
