@@ -206,36 +206,35 @@ def _noise_matrix(noise: NoiseSpec | float | list[float] | None, m: int, where: 
     return None
 
 
+def _fill_blocks(target: np.ndarray, values: dict[str, Any], layout, where) -> None:
+    """Write ``{block: scalar or per-element values}`` into ``target`` (n,), naming the field on error."""
+    for name, val in values.items():
+        if name not in layout:
+            raise ConfigError(f"{where(name)}: state has no block {name!r}; blocks are {[b.name for b in layout.blocks]}")
+        sl = layout[name]
+        v = np.atleast_1d(np.asarray(val, float))
+        if v.size not in (1, sl.stop - sl.start):
+            raise ConfigError(f"{where(name)}: block {name!r} has {sl.stop - sl.start} elements, got {v.size} values")
+        target[sl] = v
+
+
 def _initial(spec: SystemSpec, process: ProcessModel, doc: LocatedYAML | None) -> tuple[np.ndarray, np.ndarray]:
     lay = process.layout
+
     def where(*loc: Any) -> str:
         return doc.where(["initial", *loc]) if doc else "initial." + ".".join(map(str, loc))
     x0 = np.zeros(lay.n)
     for block in lay.blocks:
         if block.kind == "quaternion":
             x0[lay[block.name].start] = 1.0
-    for name, val in spec.initial.mean.items():
-        if name not in lay:
-            raise ConfigError(f"{where('mean', name)}: state has no block {name!r}; blocks are {[b.name for b in lay.blocks]}")
-        sl = lay[name]
-        v = np.atleast_1d(np.asarray(val, float))
-        if v.size not in (1, sl.stop - sl.start):
-            raise ConfigError(f"{where('mean', name)}: block {name!r} has {sl.stop - sl.start} elements, got {v.size} values")
-        x0[sl] = v
+    _fill_blocks(x0, spec.initial.mean, lay, lambda name: where("mean", name))
     if spec.initial.P is not None:
         P0 = np.asarray(spec.initial.P, float)
         if P0.shape != (lay.n, lay.n):
             raise ConfigError(f"{where('P')}: must be {lay.n} x {lay.n} for the state {lay!r}, got {P0.shape}")
     else:
         sd = np.ones(lay.n)
-        for name, val in spec.initial.sd.items():
-            if name not in lay:
-                raise ConfigError(f"{where('sd', name)}: state has no block {name!r}; blocks are {[b.name for b in lay.blocks]}")
-            sl = lay[name]
-            v = np.atleast_1d(np.asarray(val, float))
-            if v.size not in (1, sl.stop - sl.start):
-                raise ConfigError(f"{where('sd', name)}: block {name!r} has {sl.stop - sl.start} elements, got {v.size} values")
-            sd[sl] = v
+        _fill_blocks(sd, spec.initial.sd, lay, lambda name: where("sd", name))
         missing = [b.name for b in lay.blocks if b.name not in spec.initial.sd]
         if missing and spec.initial.sd:
             raise ConfigError(f"{where('sd')}: no standard deviation for block(s) {missing}")
