@@ -313,6 +313,8 @@ class Scheduler:
         R = obs.R if obs.R is not None else sensor.R
         if R is None:
             raise MalformedMessage(f"sensor {sensor.name!r} has no noise R in the config and its message carries none")
+        if R.shape[0] != len(obs.z) and len(obs.z) % R.shape[0] == 0:
+            R = np.kron(np.eye(len(obs.z) // R.shape[0]), R)  # R per item (a range) for a message of several
         t0 = time.perf_counter()
         result = self.filter.update(self.belief, obs.model, obs.z, R, sensor.gate)
         self.time_s["update"] += time.perf_counter() - t0

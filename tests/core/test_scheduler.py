@@ -116,3 +116,19 @@ def test_truth_and_unknown_sensors_are_not_fed():
     out = list(sched.run(msgs))
     assert len(sched.truth) == 1 and sched.unused == {"mystery": 1}
     assert any(isinstance(e, Event) and e.kind == "warning" and e.sensor == "mystery" for e in out)
+
+
+def test_message_with_several_ranges_uses_block_diagonal_R():
+    """One message 'B1 r1 B2 r2' is one joint EKF update with R = 0.1^2 I (R of the config is per range)."""
+    sys_ = system()
+    a = estimates(Scheduler(sys_), [Message(0.0, "fast", ("B1", 9.0, "B2", 12.0))])[-1]
+    x, P = sys_.x0, sys_.P0
+    b = np.array([BEACONS["B1"], BEACONS["B2"]])
+    d = x[:2] - b
+    r = np.linalg.norm(d, axis=1)
+    H = np.zeros((2, 4))
+    H[:, :2] = d / r[:, None]
+    S = H @ P @ H.T + 0.01 * np.eye(2)
+    K = P @ H.T @ np.linalg.inv(S)
+    np.testing.assert_allclose(a.update.S, S, atol=1e-12)
+    np.testing.assert_allclose(a.belief.x, x + K @ (np.array([9.0, 12.0]) - r), atol=1e-12)
