@@ -66,6 +66,9 @@ def parse_comment(text: str, header: Header) -> None:
         header.meta[m.group(1)] = m.group(2)
 
 
+_GOOD_SENSORS: set[str] = set()  # names already checked against _SENSOR (the regex costs ~1 us a line)
+
+
 def parse_line(text: str, lineno: int | None = None) -> Message:
     """Parse one message line (not a comment, not blank). Raises MalformedMessage with the reason."""
     line = text.strip()
@@ -78,11 +81,14 @@ def parse_line(text: str, lineno: int | None = None) -> Message:
         raise MalformedMessage(f"bad time {parts[0].strip()!r}") from None
     if t - t != 0.0:
         raise MalformedMessage(f"non-finite time {parts[0].strip()!r}")
-    sensor = parts[1].strip()
-    if not _SENSOR.match(sensor):
-        raise MalformedMessage(f"bad sensor name {sensor!r}")
-    first = parts[2].lstrip()
-    if first.startswith("$"):
+    sensor = parts[1]
+    if sensor not in _GOOD_SENSORS:
+        sensor = sensor.strip()
+        if not _SENSOR.match(sensor):
+            raise MalformedMessage(f"bad sensor name {sensor!r}")
+        if len(_GOOD_SENSORS) < 1000 and sensor == parts[1]:
+            _GOOD_SENSORS.add(sensor)
+    if parts[2][:1] == "$" or parts[2].lstrip().startswith("$"):
         return Message(t, sensor, (line.split(",", 2)[2].strip(),), lineno)
     if "*" in parts[-1]:
         m = _CHECKSUM.search(line)
@@ -145,20 +151,23 @@ def iter_messages(lines: Iterable[str], state: ParsedStream | None = None,
     ``.lineno``) after counting it in ``state``. Comments update ``state.header``. Field counts are
     checked against ``# fields`` when the sensor has them. Never raises on any text."""
     st = state if state is not None else ParsedStream()
+    fields = st.header.fields
     for lineno, raw in enumerate(lines, 1):
-        text = raw.strip().lstrip("\ufeff")
+        text = raw.strip()
         if not text:
             continue
-        if text.startswith("#"):
-            parse_comment(text, st.header)
-            continue
+        if text[0] == "#" or text[0] == "\ufeff":
+            text = text.lstrip("\ufeff")
+            if text.startswith("#"):
+                parse_comment(text, st.header)
+                continue
         try:
             msg = parse_line(text, lineno)
             if known_sensors is not None and msg.sensor not in known_sensors and msg.sensor != "truth":
                 raise MalformedMessage(f"unknown sensor {msg.sensor!r}")
-            names = st.header.fields.get(msg.sensor)
-            if names is not None and not (len(msg.values) == 1 and isinstance(msg.values[0], str)
-                                          and msg.values[0].startswith("$")) and len(msg.values) != len(names):
+            names = fields.get(msg.sensor)
+            if names is not None and len(msg.values) != len(names) and not (
+                    len(msg.values) == 1 and isinstance(msg.values[0], str) and msg.values[0].startswith("$")):
                 raise MalformedMessage(f"{len(msg.values)} values, but '# fields {msg.sensor}' names {len(names)}")
         except MalformedMessage as exc:
             sensor = _guess_sensor(text)
