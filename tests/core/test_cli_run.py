@@ -111,3 +111,23 @@ def test_config_without_recording_needs_input(tmp_path, capsys):
     cfg.write_text("\n".join(l for l in CONFIG.read_text().splitlines() if not l.startswith("recording:")))
     assert main(["run", str(cfg), "-q"]) == 2
     assert "--input" in capsys.readouterr().err
+
+
+def test_internal_error_mid_run_says_how_far_it_got(tmp_path, monkeypatch, capsys):
+    from fusion_plugins.measurement.range import RangeModel
+
+    original = RangeModel.observe
+
+    def broken(self, message):
+        if message.t > 30.0:
+            raise RuntimeError("plugin bug")
+        return original(self, message)
+
+    monkeypatch.setattr(RangeModel, "observe", broken)
+    out_csv = tmp_path / "est.csv"
+    assert main(["run", str(CONFIG), "-q", "--output", str(out_csv)]) == 1
+    err = capsys.readouterr().err
+    assert "internal error" in err and "plugin bug" in err and "got as far as t = 30.0" in err
+    # What was computed before the failure is on disk (flushed as it went).
+    rows = list(csv.DictReader(out_csv.open()))
+    assert rows and 29.5 < float(rows[-1]["t"]) <= 30.0
