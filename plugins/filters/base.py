@@ -109,6 +109,14 @@ class KalmanBase(Filter):
     def predict(self, belief: Belief, process: ProcessModel, u: np.ndarray | None, dt: float) -> Belief:
         raise NotImplementedError
 
+    def predict_inputs(self, belief: Belief, process: ProcessModel, us: np.ndarray, dts: np.ndarray) -> Belief:
+        """Integrate a run of input samples in order: ``us`` (k, m), sample j held over ``dts[j]`` (s).
+        The scheduler passes the samples between two measurements in one call. Here: k calls of
+        :meth:`predict` (the same numbers as sample by sample); the sigma-point filters override it."""
+        for u, dt in zip(us, dts):
+            belief = self.predict(belief, process, u, float(dt))
+        return belief
+
     def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                gate: Gate | None = None) -> UpdateResult:
         raise NotImplementedError

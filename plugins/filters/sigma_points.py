@@ -26,8 +26,8 @@ __all__ = ["SigmaPoints", "UnscentedParams"]
 
 
 class UnscentedParams(Params):
-    """Scaled unscented transform parameters (paper 000 Algorithm 1 notes, paper 001 eqs. 12-13) and the
-    prediction mode, shared by ukf and srukf."""
+    """Scaled unscented transform parameters (paper 000 Algorithm 1 notes, paper 001 eqs. 12-13), the
+    prediction mode and input batching, shared by ukf and srukf."""
 
     alpha: float = Field(0.5, gt=0.0, le=1.0, description="spread of the sigma points (0 < alpha <= 1)")
     beta: float = Field(2.0, description="prior-distribution weight on the zeroth point (2: Gaussian)")
@@ -35,6 +35,10 @@ class UnscentedParams(Params):
     linear_prediction: Literal["auto", "always", "never"] = Field(
         "auto", description="predict as the linear KF (paper 001 eqs. 9-10): auto = when the process "
                             "model is linear; always = with its (numerical) Jacobian; never = sigma points")
+    batch_inputs: bool = Field(
+        True, description="integrate a run of input samples (IMU) between measurements with one draw of "
+                          "sigma points and the noise of the whole interval (predict_inputs); false: one "
+                          "sigma-point prediction per sample")
 
 
 class SigmaPoints:

@@ -153,18 +153,26 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         if dt == 0.0:
             return belief
         x = belief.x
-        S = self.sqrt_of(belief)
-        BQ = self.noise_rows("Q", process.Q(x, u, dt))
+        Q = process.Q(x, u, dt)
         self.counters["predicts"] += 1
         if self.use_linear_prediction(process):
+            S = self.sqrt_of(belief)
+            BQ = self.noise_rows("Q", Q)
             F = process_jacobian(process, x, u, dt)
             S1 = qr_lower(np.concatenate((F @ S, BQ.T), axis=1).T, overwrite=True)   # sqrt(F P F^T + Q)
             return Belief(belief.t + dt, process.normalize(process.f(x, u, dt)), S=S1)
+        return self.sigma_predict(belief, process, lambda X: process.f(X, u, dt), lambda x0, x1: Q, dt)
+
+    def sigma_predict(self, belief: Belief, process: ProcessModel, propagate, noise, dt: float) -> Belief:
+        x = belief.x
+        S = self.sqrt_of(belief)
         sp = self.sigma_points(x.shape[0])
-        Y = process.f(x + sp.E @ S.T, u, dt)                        # eqs. 3-4, one call
+        Y = propagate(x + sp.E @ S.T)                               # eqs. 3-4, one call
         xm, D1, v0, w0 = self.deviations(sp, Y, np.subtract)        # eq. 5
+        xm = process.normalize(xm)
+        BQ = self.noise_rows("Q", noise(x, xm))
         S1 = self.sqrt_transform(sp, D1, BQ, v0, w0, belief.t, "srukf predict")  # eqs. 6-7
-        return Belief(belief.t + dt, process.normalize(xm), S=S1)
+        return Belief(belief.t + dt, xm, S=S1)
 
     # ------------------------------------------------------------------ update
     def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,

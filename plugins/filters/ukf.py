@@ -21,6 +21,7 @@ class SigmaPointFilter(KalmanBase):
         # read once: a missing pydantic attribute costs ~5 us through its AttributeError
         self._mode = self.params.linear_prediction
         self._augmented = bool(getattr(self.params, "augmented", False))
+        self._batch_inputs = bool(self.params.batch_inputs)
 
     def sigma_points(self, n: int) -> SigmaPoints:
         """Weights and deviation pattern for dimension n (cached)."""
@@ -33,6 +34,55 @@ class SigmaPointFilter(KalmanBase):
     def use_linear_prediction(self, process: ProcessModel) -> bool:
         mode = self._mode
         return mode == "always" or (mode == "auto" and process.linear and not self._augmented)
+
+    def predict_inputs(self, belief: Belief, process: ProcessModel, us: np.ndarray, dts: np.ndarray) -> Belief:
+        r"""Integrate a run of k input samples (IMU) between two measurements in one sigma-point step.
+
+        ``us`` (k, m), sample j held over ``dts[j]`` (s), T = sum dts. The sigma points are drawn once,
+        from the belief at the start of the run, and carried through all k samples (``process.f_inputs``
+        when the model has it, one vectorised call for the whole run, else k calls of ``f`` on all points);
+        the mean and covariance (or its square root) are formed once at the end, with the process noise
+        of the whole interval added once::
+
+            chi = [x, x +- eta S_i];  Y_i = f(... f(f(chi_i, u_1, dt_1), u_2, dt_2) ..., u_k, dt_k)
+            x^- = sum W_m^i Y_i;      P^- = sum W_c^i (Y_i - x^-)(Y_i - x^-)^T + Q_T
+
+        Q_T is ``process.Q_inputs(x, x^-, us, dts)`` when the model has it (ins: the noise of the interval
+        propagated through the error dynamics), else ``process.Q(x^-, mean u, T)`` (exact for a linear
+        time-invariant model such as pv). The same as k predictions sample by sample when f is linear
+        and Q_T is the propagated sum; for the INS it differs from them by the sigma points not being
+        redrawn after each sample (tests/filters/test_predict_inputs.py states the tolerances).
+        ``batch_inputs: false``, a single sample, the linear prediction and the augmented UKF predict
+        sample by sample."""
+        k = len(dts)
+        if k == 1 or not self._batch_inputs or self._augmented or self.use_linear_prediction(process):
+            return super().predict_inputs(belief, process, us, dts)
+        us = np.asarray(us, dtype=float)
+        dts = np.asarray(dts, dtype=float)
+        self.process = process
+        self.counters["predicts"] += k
+        self.counters["batched_predicts"] += 1
+        f_inputs = getattr(process, "f_inputs", None)
+        Q_inputs = getattr(process, "Q_inputs", None)
+
+        def propagate(X: np.ndarray) -> np.ndarray:
+            if f_inputs is not None:
+                return f_inputs(X, us, dts)
+            for u, dt in zip(us, dts):
+                X = process.f(X, u, float(dt))
+            return X
+
+        def noise(x0: np.ndarray, x1: np.ndarray) -> np.ndarray:
+            if Q_inputs is not None:
+                return Q_inputs(x0, x1, us, dts)
+            return process.Q(x1, us.mean(axis=0), float(dts.sum()))
+
+        return self.sigma_predict(belief, process, propagate, noise, float(dts.sum()))
+
+    def sigma_predict(self, belief: Belief, process: ProcessModel, propagate, noise, dt: float) -> Belief:
+        """The sigma-point prediction over ``dt``: ``propagate(X)`` maps the (2n+1, n) points, ``noise(x,
+        x1)`` gives the process noise from the prior mean x and the (normalised) predicted mean x1."""
+        raise NotImplementedError
 
 
 class UnscentedKalmanFilter(SigmaPointFilter):
@@ -93,13 +143,18 @@ class UnscentedKalmanFilter(SigmaPointFilter):
             return Belief(belief.t + dt, process.normalize(process.f(x, u, dt)), P=linear_predict(x, P, F, Q))
         if self.params.augmented:
             return self._predict_augmented(belief, process, u, dt, P, Q)
+        return self.sigma_predict(belief, process, lambda X: process.f(X, u, dt), lambda x0, x1: Q, dt)
+
+    def sigma_predict(self, belief: Belief, process: ProcessModel, propagate, noise, dt: float) -> Belief:
+        x = belief.x
         sp = self.sigma_points(x.shape[0])
-        S = self.factor(P, belief.t, "ukf predict")
-        Y = process.f(x + sp.E @ S.T, u, dt)                 # 000 eq. 4, one call
+        S = self.factor(covariance_of(belief), belief.t, "ukf predict")
+        Y = propagate(x + sp.E @ S.T)                        # 000 eq. 4, one call
         xm = sp.Wm @ Y                                       # 000 eq. 5
         D = Y - xm
-        P1 = (D.T * sp.Wc) @ D + Q
-        return Belief(belief.t + dt, process.normalize(xm), P=symmetrise(P1))
+        xm = process.normalize(xm)
+        P1 = (D.T * sp.Wc) @ D + noise(x, xm)
+        return Belief(belief.t + dt, xm, P=symmetrise(P1))
 
     def _predict_augmented(self, belief, process, u, dt, P, Q) -> Belief:
         n = belief.x.shape[0]
