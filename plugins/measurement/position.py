@@ -63,6 +63,7 @@ class Position(MeasurementModel):
         if self.dim > np_:
             raise ConfigError(f"position: dim {self.dim} but the state's p block has {np_} elements")
         self.n = layout.n
+        self._v = layout["v"] if "v" in layout and layout["v"].stop - layout["v"].start >= self.dim else None
         self.lever_arm = np.asarray(p.lever_arm, dtype=float)
         qblocks = [b.name for b in layout.blocks if b.kind == "quaternion"]
         self._q: slice | None = None
@@ -106,11 +107,21 @@ class Position(MeasurementModel):
         return z - quat.rotate(np.asarray(x, dtype=float)[self._q], self.lever_arm)[:self.dim]
 
     def observe(self, message: Message) -> Observation | None:
-        """Observation of a fix message: ``dim`` (or 3) coordinates, or 9 values with the covariance."""
+        """Observation of a fix message: ``dim`` (or 3) coordinates, or 9 values with the covariance, or 10:
+        the covariance and the fix's age (s: the position is of that long before the message time)."""
         z = message.floats()
         if not np.all(np.isfinite(z)):
             raise MalformedMessage(f"position: non-finite value in {message.values!r}")
         R = None
+        model: MeasurementModel = self
+        if z.size == 10:
+            if self._v is None:
+                raise MalformedMessage("position: a fix with an age needs a state with a velocity block 'v'")
+            if z[9] < 0.0:
+                raise MalformedMessage(f"position: negative fix age {z[9]}")
+            if z[9] > 0.0:
+                model = AgedPosition(self, float(z[9]))
+            z = z[:9]
         if z.size == 9:
             cov = np.zeros((3, 3))
             cov[np.triu_indices(3)] = z[3:]
@@ -121,4 +132,34 @@ class Position(MeasurementModel):
         elif z.size not in (self.dim, 3) or z.size < self.dim:
             raise MalformedMessage(f"position expects {self.dim} coordinates (or 9 values: x y z and the "
                                    f"covariance upper triangle), got {z.size}")
-        return Observation(message.t, z[:self.dim], self, R)
+        return Observation(message.t, z[:self.dim], model, R)
+
+
+class AgedPosition(MeasurementModel):
+    """A fix of the position ``age`` seconds before its time stamp: ``z = p - v age + C_b^n r`` (the
+    position model bridged to the update time with the state's velocity, first order). Bound per
+    observation by :meth:`Position.observe` for a 10-value fix message (``ols_trilateration`` with
+    ``age: true``); not a registry component."""
+
+    name: ClassVar[str] = "position (aged)"
+
+    def __init__(self, base: Position, age: float):
+        super().__init__(base.params, base.context)
+        self.base, self.age, self.dim = base, age, base.dim
+        self._v = base._v
+
+    def h(self, x: np.ndarray) -> np.ndarray:
+        """Predicted fix (..., dim) (m) for states x (..., n)."""
+        x = np.asarray(x, dtype=float)
+        return self.base.h(x) - self.age * x[..., self._v.start:self._v.start + self.dim]
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        """dh/dx (dim, n) at x (n,)."""
+        H = self.base.jacobian(x)
+        H[np.arange(self.dim), self._v.start + np.arange(self.dim)] -= self.age
+        return H
+
+    def position_from(self, z: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """The position block value that makes ``h(x)`` equal z."""
+        x = np.asarray(x, dtype=float)
+        return self.base.position_from(z, x) + self.age * x[self._v.start:self._v.start + self.dim]

@@ -214,6 +214,9 @@ class OlsParams(Params):
     consistency_sd: float | None = Field(None, gt=0, description="range sd (m) for that test (default "
                                          "range_sd; raise it to tolerate motion within a cycle)")
     max_outliers: int = Field(1, ge=0, description="ranges a cycle may drop to pass the test")
+    age: bool = Field(False, description="with stamp close: refer the ranges to their mean time instead and "
+                      "append that fix's age (s) at the closing time as a 10th value, for a measurement "
+                      "model that bridges it with the state's velocity (position: p - v age)")
     stamp: Literal["mean", "last", "close"] = Field("mean", description="fix time: mean or last of the cycle's "
                                                     "ranges, or when the cycle closed (needs motion_compensation)")
     motion_compensation: bool = Field(False, description="refer every range of a cycle to the fix time with "
@@ -247,7 +250,11 @@ class OlsTrilateration(Solver):
     or ``close`` (needs compensation: the time of the message that closed the cycle, i.e. when the
     scheduler applies the fix, so an update is never applied later than its time stamp; 0.12 m RMSE,
     fix NEES ~2.3 for 2 dof on the recording). Without compensation the fix is an average over the cycle
-    (0.145 m RMSE) and ``mean`` is its best time.
+    (0.145 m RMSE) and ``mean`` is its best time. ``age`` (with ``close``): the ranges are referred to
+    their mean time t_m (where an error of the fitted velocity hardly matters) and the message, still
+    sent at the closing time, carries the fix's age ``t_close - t_m`` as a 10th value; the ``position``
+    model then predicts it as ``p - v age + C_b^n r`` with the filter's own velocity, instead of the fix
+    extrapolating with the fitted one (whose error is shared by consecutive fixes).
 
     Outliers (1% in the ABPS recording, a longer reflected path): with redundancy (k > dim + 1) the range
     residuals are tested (chi-square, ``consistency_probability``) and the one beacon whose exclusion fits
@@ -273,6 +280,9 @@ class OlsTrilateration(Solver):
         if p.stamp == "close" and not p.motion_compensation:
             raise ConfigError("ols_trilateration: stamp: close needs motion_compensation: true (the ranges are "
                               "referred to the closing time with the fitted velocity)")
+        if p.age and p.stamp != "close":
+            raise ConfigError("ols_trilateration: age: true needs stamp: close (the age is the time from the "
+                              "position the fix gives to the closing message)")
         if self.min_beacons < p.dim + 1:
             raise ConfigError(f"ols_trilateration: min_beacons {self.min_beacons} < {p.dim + 1} needed for a {p.dim}-D fix")
         self.counters: dict[str, int] = {"cycles": 0, "fixes": 0, "qr": 0, "outliers_removed": 0,
@@ -334,12 +344,13 @@ class OlsTrilateration(Solver):
         t_end = float(times.max())
         t_ref = {"mean": float(times.mean()), "last": t_end,
                  "close": t_end if t_close is None else max(t_close, t_end)}[p.stamp]
+        t_pos = float(times.mean()) if p.age else t_ref        # the time the fix's position is of
         v, Pv = np.zeros(3), None
         if p.motion_compensation:
             fit = self._velocity(float(times.mean()))
             if fit is not None:
                 v, Pv = fit
-                B = B - v * (times - t_ref)[:, None]             # ranges referred to t_ref
+                B = B - v * (times - t_pos)[:, None]             # ranges referred to t_pos
         try:
             if len(names) < self.min_beacons:
                 raise NoFix("too_few_beacons", f"{len(names)} beacon(s) {names}, need {self.min_beacons}")
@@ -362,9 +373,9 @@ class OlsTrilateration(Solver):
         t_bar = float(np.mean(times[info["used"]]))
         if p.motion_compensation:
             # the velocity track takes the fix at the mean range time (not extrapolated: no feedback loop)
-            self._track.append((t_bar, pos + v * (t_bar - t_ref), cov))
+            self._track.append((t_bar, pos + v * (t_bar - t_pos), cov))
         if Pv is not None:                # velocity error and unmodelled acceleration over the mean offset
-            tau = abs(t_bar - t_ref)
+            tau = abs(t_bar - t_pos)
             acc = p.accel_sd * tau * (0.5 * tau + 0.5 * p.velocity_span)
             cov = cov + tau**2 * Pv + np.diag([acc**2, acc**2, acc**2 if p.dim == 3 else 0.0])
         if p.motion_compensation:
@@ -372,7 +383,10 @@ class OlsTrilateration(Solver):
         else:
             used = times[info["used"]]
             t = float(used.mean()) if p.stamp == "mean" else float(used.max())
-        return [Message(t, last.sensor, pack_fix(pos, cov), last.line)]
+        values = pack_fix(pos, cov)
+        if p.age:
+            values += (t - t_pos,)
+        return [Message(t, last.sensor, values, last.line)]
 
     def _velocity(self, t: float) -> tuple[np.ndarray, np.ndarray] | None:
         """Least-squares velocity (3,) (m/s) of the fixes of the last ``velocity_span`` s and its covariance
