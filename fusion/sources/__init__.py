@@ -5,5 +5,7 @@ from fusion import hookimpl
 @hookimpl
 def fusion_register_components(registry):
     from fusion.sources.recording import RecordingSource
+    from fusion.sources.serial import SerialSource
 
     registry.add(RecordingSource)
+    registry.add(SerialSource)

@@ -1,0 +1,160 @@
+"""Serial port source (pyserial): lines of the log format from a live device.
+
+The wire format is the recording format (DESIGN.md "Log format"): UTF-8 text, one message a line,
+``t,sensor,v1,...[*HH]``, ``\\n`` or ``\\r\\n`` line ends. A bad byte spoils only its own line (decoded with
+U+FFFD and then counted as malformed); ``record`` tees the raw bytes, exactly as received, to a file.
+
+``port`` is a device (``/dev/ttyUSB0``, ``COM3``) or any pyserial URL (``loop://``,
+``socket://host:port``, ``rfc2217://host:port``), opened with ``serial.serial_for_url``.
+
+Errors: a port that cannot be opened is an ``InputError`` ("cannot open PORT: reason"); a port that fails
+while reading (unplugged device, closed pty) is a ``PortLost`` (an ``InputError``) raised from ``lines()``
+after the last partial line is yielded, so nothing received is lost.
+"""
+from __future__ import annotations
+
+import errno
+import os
+import threading
+from typing import BinaryIO, Iterator
+
+from pydantic import Field
+
+from fusion.api import InputError, Params, Source
+
+_CHUNK = 4096  # bytes per read at most
+
+
+class PortLost(InputError):
+    """The port failed while it was being read (device unplugged, pty closed)."""
+
+
+def _reason(exc: BaseException) -> str:
+    """A short reason from a pyserial/OS error ("No such file or directory", ...)."""
+    code = getattr(exc, "errno", None)
+    if isinstance(code, int):
+        return os.strerror(code)
+    text = str(exc)
+    return text or type(exc).__name__
+
+
+def _hint(port: str, exc: BaseException) -> str:
+    code = getattr(exc, "errno", None)
+    if code == errno.EACCES:
+        return " (on Linux, add yourself to the 'dialout' group or check the device's permissions)"
+    if code == errno.ENOENT:
+        try:
+            from serial.tools.list_ports import comports
+
+            found = sorted(p.device for p in comports())
+        except Exception:  # listing ports is only a hint
+            found = []
+        return f" (ports found: {', '.join(found)})" if found else " (no serial ports found)"
+    return ""
+
+
+class SerialSource(Source):
+    """Reads lines of the log format from a serial port or pyserial URL (``loop://``, ``socket://``).
+
+    Parameters: ``port`` (device or URL), ``baud`` (bit/s, 8N1), ``timeout`` (s a read waits before the
+    reader checks whether it was closed), ``record`` (file that receives every raw byte as received)."""
+
+    name = "serial"
+    live = True  # a live stream: paced by the device, not replayed
+
+    class Params(Params):
+        port: str
+        baud: int = Field(115200, gt=0, description="bit/s (8 data bits, no parity, 1 stop bit)")
+        timeout: float = Field(0.1, gt=0.0, description="s a read waits before checking for close()")
+        record: str | None = Field(None, description="tee the raw bytes received to this file")
+
+    def __init__(self, params=None, context=None, **kwargs):
+        if params is None and kwargs:
+            params = self.Params(**kwargs)
+        super().__init__(params, context)
+        self.port = None  # the pyserial object once open
+        self._record: BinaryIO | None = None
+        self._closed = threading.Event()
+        self.bytes_received = 0
+
+    @property
+    def label(self) -> str:
+        """Where the lines come from, for the UI."""
+        return f"{self.params.port} @ {self.params.baud} baud"
+
+    def open(self) -> "SerialSource":
+        """Open the port (and the record file). InputError, one line, when it cannot be opened."""
+        if self.port is not None:
+            return self
+        import serial
+
+        p = self.params
+        try:
+            self.port = serial.serial_for_url(p.port, baudrate=p.baud, timeout=p.timeout)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise InputError(f"cannot open {p.port}: {_reason(exc)}{_hint(p.port, exc)}") from None
+        if p.record:
+            try:
+                self._record = open(p.record, "wb")
+            except OSError as exc:
+                self.port.close()
+                self.port = None
+                raise InputError(f"cannot write the record file {p.record}: {_reason(exc)}") from None
+        return self
+
+    def close(self) -> None:
+        """Ask the reader to stop (thread-safe); ``lines()`` returns within ``timeout`` seconds."""
+        self._closed.set()
+        cancel = getattr(self.port, "cancel_read", None)
+        if cancel is not None:
+            try:
+                cancel()
+            except Exception:  # the port may already be gone
+                pass
+
+    def lines(self) -> Iterator[str]:
+        """Complete lines (with their ``\\n``) as they arrive, until close() or the port fails."""
+        self.open()
+        import serial
+
+        port = self.port
+        buf = bytearray()
+        try:
+            while not self._closed.is_set():
+                try:
+                    chunk = port.read(min(_CHUNK, max(1, port.in_waiting)))
+                except (serial.SerialException, OSError) as exc:
+                    if self._closed.is_set():
+                        break
+                    if buf:
+                        yield buf.decode("utf-8", "replace")
+                        buf.clear()
+                    raise PortLost(f"lost {self.params.port}: {_reason(exc)}") from None
+                if not chunk:
+                    continue
+                self.bytes_received += len(chunk)
+                if self._record is not None:
+                    self._record.write(chunk)
+                    self._record.flush()
+                buf += chunk
+                if b"\n" not in chunk:
+                    continue
+                *done, rest = buf.split(b"\n")
+                buf = bytearray(rest)
+                for raw in done:
+                    yield raw.decode("utf-8", "replace") + "\n"
+            if buf:  # closed mid-line: the partial line too
+                yield buf.decode("utf-8", "replace")
+        finally:
+            self._shutdown()
+
+    def _shutdown(self) -> None:
+        if self.port is not None:
+            try:
+                self.port.close()
+            except Exception:  # closing a vanished device may fail; nothing to do
+                pass
+            self.port = None
+        if self._record is not None:
+            self._record.close()
+            self._record = None

@@ -1,0 +1,314 @@
+"""The data side of the live view: lines -> iter_messages -> Scheduler.push, run in a worker thread.
+
+``LiveFeed.run()`` reads a source's lines (a recording paced by sensor time, or a live port), pushes the
+messages through the scheduler and, at most ``refresh_hz`` times a second, hands an immutable
+``FeedSnapshot`` to ``post`` (the app posts it as a Textual message). A snapshot is cumulative (latest
+estimate, counters, the last events and track points), so a newer one can always replace an older one:
+a 100-200 Hz estimate stream costs the UI 10-20 refreshes a second.
+
+The UI thread only calls ``pause()``, ``resume()`` and ``stop()`` (thread-safe).
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Callable, Iterable, Iterator
+
+from fusion.api import Estimate, Event, InputError, Message
+from fusion.config import System
+from fusion.logformat import ParsedStream, iter_messages
+from fusion.scheduler import Scheduler
+
+COUNTERS = ("received", "used", "rejected", "malformed", "late")
+_SLICE = 0.05  # s: longest sleep between checks of pause/stop while pacing
+
+
+@dataclass(frozen=True)
+class LoggedEvent:
+    """An event with its sequence number (so a view appends only the ones it has not shown)."""
+
+    seq: int
+    t: float
+    kind: str
+    sensor: str | None
+    detail: str
+
+
+@dataclass(frozen=True)
+class FeedSnapshot:
+    """Everything the view shows, at one instant. ``track``/``truth`` are (north, east) points in m,
+    decimated to one per ``track_dt`` s of sensor time; ``track_total`` counts every point ever kept
+    (a view that was reset hides the ones before its mark). ``state``: waiting, running, finished,
+    lost (the source failed), stopped or error."""
+
+    source: str
+    live: bool
+    state: str
+    estimate: Estimate | None
+    counters: dict[str, dict[str, int]]
+    ignored: dict[str, int]
+    rates: dict[str, float]
+    events: tuple[LoggedEvent, ...]
+    track: tuple[tuple[float, float], ...]
+    track_total: int
+    truth: tuple[tuple[float, float], ...]
+    truth_total: int
+    lines: int
+    sensor_t: float
+    speed_ratio: float
+    wall: float = field(default_factory=time.monotonic)
+    message: str = ""
+
+
+class LiveFeed:
+    """Runs a system over a stream of lines in the calling (worker) thread.
+
+    ``lines``: an iterable of text lines; ``live``: True for a device (never paced, never blocked by
+    pause: pausing a live feed freezes only the view, so nothing the device sends is lost); ``speed``:
+    replay rate against sensor time (0: as fast as possible); ``close``: called by stop() to wake a
+    blocked reader (a serial source's close)."""
+
+    def __init__(self, system: System, lines: Iterable[str], post: Callable[[FeedSnapshot], object], *,
+                 source: str = "", live: bool = False, speed: float = 1.0, refresh_hz: float = 15.0,
+                 close: Callable[[], object] | None = None, max_events: int = 500,
+                 max_track: int = 4000, track_dt: float = 0.1):
+        self.system = system
+        self.scheduler = Scheduler(system)
+        self.parsed = ParsedStream()
+        self._lines = lines
+        self._post = post
+        self.source = source
+        self.live = live
+        self.speed = max(0.0, float(speed))
+        self.refresh_dt = 1.0 / refresh_hz if refresh_hz > 0 else 0.0
+        self._close = close
+        self._stop = threading.Event()
+        self._running = threading.Event()
+        self._running.set()
+        self.events: deque[LoggedEvent] = deque(maxlen=max_events)
+        self._seq = 0
+        self.track: deque[tuple[float, float]] = deque(maxlen=max_track)
+        self.truth: deque[tuple[float, float]] = deque(maxlen=max_track)
+        self.track_total = self.truth_total = 0
+        self.track_dt = track_dt
+        self._track_t = self._truth_t = -math.inf
+        self.estimate: Estimate | None = None
+        self.lines_read = 0
+        self.sensor_t = math.nan
+        self.state = "waiting"
+        self.message = ""
+        self._next_post = 0.0
+        self._window: deque[tuple[float, float, dict[str, int]]] = deque()
+        self._wall0: float | None = None
+        self._t_first = math.nan
+        lay = system.layout
+        self._pos = None
+        if "p" in lay and lay.block("p").size >= 2:
+            start = lay["p"].start
+            self._pos = (start, start + 1)
+            self._pos_names = lay.block("p").element_names()[:2]
+        self._truth_idx: tuple[int, int] | None | bool = None
+
+    # ------------------------------------------------------------------ control (any thread)
+    def pause(self) -> None:
+        self._running.clear()
+
+    def resume(self) -> None:
+        self._running.set()
+
+    @property
+    def paused(self) -> bool:
+        return not self._running.is_set()
+
+    def stop(self) -> None:
+        """Stop reading (returns at once; the worker ends within ~0.1 s)."""
+        self._stop.set()
+        self._running.set()
+        if self._close is not None:
+            self._close()
+
+    @property
+    def stopped(self) -> bool:
+        return self._stop.is_set()
+
+    # ------------------------------------------------------------------ the worker
+    def run(self) -> FeedSnapshot:
+        """Read until the end of the input, a lost port, or stop(); returns the final snapshot."""
+        sched = self.scheduler
+        self._emit(time.monotonic())
+        ended = False
+        try:
+            self.state = "running"
+            for item in iter_messages(self._paced(self._lines), self.parsed):
+                if isinstance(item, Message) and item.t - item.t == 0.0:
+                    self.sensor_t = item.t
+                for out in sched.push(item):
+                    self._take(out)
+                if sched.truth:
+                    self._take_truth()
+                now = time.monotonic()
+                if now >= self._next_post:
+                    self._trim()
+                    self._emit(now)
+            ended = not self._stop.is_set()
+            self.state = "finished" if ended else "stopped"
+        except InputError as exc:  # a port that vanished: keep the last state, say so
+            ended = True
+            self.state = "lost"
+            self.message = str(exc)
+            self._log(Event(self.sensor_t, "source", None, str(exc)))
+        except Exception as exc:  # a bug: report it in the view rather than killing the app
+            self.state = "error"
+            self.message = f"internal error: {type(exc).__name__}: {exc}"
+            self._log(Event(self.sensor_t, "error", None, self.message))
+        if ended:
+            try:
+                for out in sched.finish():
+                    self._take(out)
+                self._take_truth()
+            except Exception as exc:
+                self.state = "error"
+                self.message = f"internal error: {type(exc).__name__}: {exc}"
+                self._log(Event(self.sensor_t, "error", None, self.message))
+        return self._emit(time.monotonic())
+
+    def _paced(self, lines: Iterable[str]) -> Iterator[str]:
+        """The lines, counted; a replay is held while paused and paced by sensor time at ``speed``."""
+        t0 = wall0 = None
+        for raw in lines:
+            if self._stop.is_set():
+                return
+            self.lines_read += 1
+            if not self.live:
+                if not self._running.is_set():
+                    held = self._hold()
+                    if wall0 is not None:
+                        wall0 += held
+                if self.speed > 0.0:
+                    t = _time_of(raw)
+                    if t is not None:
+                        if t0 is None:
+                            t0, wall0 = t, time.monotonic()
+                        else:
+                            wall0 += self._sleep_until(wall0 + (t - t0) / self.speed)  # type: ignore[operator]
+            if self._stop.is_set():
+                return
+            yield raw
+
+    def _hold(self) -> float:
+        """Wait while paused; returns the seconds waited."""
+        start = time.monotonic()
+        if self.lines_read:
+            self._emit(start)  # the view shows where the replay stopped
+        while not self._running.wait(_SLICE):
+            pass
+        return time.monotonic() - start
+
+    def _sleep_until(self, target: float) -> float:
+        """Sleep until ``target`` (monotonic) in slices; returns the time spent paused (shifts the pacing)."""
+        held = 0.0
+        while not self._stop.is_set():
+            now = time.monotonic()
+            if now >= self._next_post:
+                self._emit(now)
+            if not self._running.is_set():
+                h = self._hold()
+                held += h
+                target += h
+                continue
+            left = target - now
+            if left <= 0.0:
+                break
+            time.sleep(min(left, _SLICE, max(self._next_post - now, 0.001)))
+        return held
+
+    # ------------------------------------------------------------------ bookkeeping
+    def _take(self, out: Estimate | Event) -> None:
+        if isinstance(out, Estimate):
+            self.estimate = out
+            if self._pos is not None and out.t - self._track_t >= self.track_dt:
+                x = out.belief.x
+                self.track.append((float(x[self._pos[0]]), float(x[self._pos[1]])))
+                self.track_total += 1
+                self._track_t = out.t
+        else:
+            self._log(out)
+
+    def _take_truth(self) -> None:
+        """Truth lines go to the plot; the scheduler's own list is emptied so a live run stays bounded."""
+        truth = self.scheduler.truth
+        if self._truth_idx is None and self._pos is not None:
+            names = self.parsed.header.fields.get("truth")
+            ok = names is not None and all(n in names for n in self._pos_names)
+            self._truth_idx = (names.index(self._pos_names[0]), names.index(self._pos_names[1])) if ok else False
+        if self._truth_idx:
+            i, j = self._truth_idx  # type: ignore[misc]
+            for msg in truth:
+                if msg.t - self._truth_t >= self.track_dt and len(msg.values) > max(i, j):
+                    try:
+                        self.truth.append((float(msg.values[i]), float(msg.values[j])))
+                    except (TypeError, ValueError):
+                        continue
+                    self.truth_total += 1
+                    self._truth_t = msg.t
+        truth.clear()
+
+    def _trim(self) -> None:
+        """Keep the scheduler's per-update NIS lists bounded on a long live run (the view does not use them)."""
+        for rows in self.scheduler.nis.values():
+            if len(rows) > 10_000:
+                del rows[:-1000]
+
+    def _log(self, ev: Event) -> None:
+        self._seq += 1
+        self.events.append(LoggedEvent(self._seq, ev.t, ev.kind, ev.sensor, ev.detail))
+
+    def counters(self) -> dict[str, dict[str, int]]:
+        """Counters by sensor as ``fusion run`` reports them (malformed lines of unknown sensors under their
+        name, or '?' when no sensor could be read from the line)."""
+        out = {name: dict(s.counters) for name, s in self.system.sensors.items()}
+        for name, n in list(self.parsed.malformed.items()):
+            if name not in self.system.sensors:
+                row = out.setdefault(name or "?", dict.fromkeys(COUNTERS, 0))
+                row["malformed"] += n
+        return out
+
+    def _emit(self, now: float) -> FeedSnapshot:
+        counters = self.counters()
+        received = {k: v["received"] for k, v in counters.items()}
+        t = self.sensor_t
+        if self._wall0 is None and t == t:
+            self._wall0, self._t_first = now, t
+        win = self._window
+        win.append((now, t, received))
+        while len(win) > 2 and now - win[1][0] >= 1.0:
+            win.popleft()
+        w0, t0, r0 = win[0]
+        ratio, rates = math.nan, {}
+        if self.state in ("running", "waiting") and now - w0 > 0.2 and t0 == t0:
+            ratio = (t - t0) / (now - w0)
+        elif self._wall0 is not None and now > self._wall0:
+            ratio = (t - self._t_first) / (now - self._wall0)
+        if t0 == t0 and t - t0 > 0.0:
+            rates = {k: (n - r0.get(k, 0)) / (t - t0) for k, n in received.items()}
+        snap = FeedSnapshot(
+            source=self.source, live=self.live, state=self.state, estimate=self.estimate, counters=counters,
+            ignored=dict(self.scheduler.unused), rates=rates, events=tuple(self.events), track=tuple(self.track),
+            track_total=self.track_total, truth=tuple(self.truth), truth_total=self.truth_total,
+            lines=self.lines_read, sensor_t=t, speed_ratio=ratio, wall=now, message=self.message)
+        self._next_post = now + self.refresh_dt
+        self._post(snap)
+        return snap
+
+
+def _time_of(raw: str) -> float | None:
+    """Sensor time of a message line (None for comments, blanks and lines without a time)."""
+    head = raw.split(",", 1)[0]
+    try:
+        t = float(head)
+    except ValueError:
+        return None
+    return t if t - t == 0.0 else None

@@ -1,0 +1,58 @@
+"""The status line: source, state, sensor time, speed against real time, filter, lines read."""
+from __future__ import annotations
+
+import time
+
+from rich.text import Text
+from textual.widgets import Static
+
+from fusion.tui.feed import FeedSnapshot
+
+_STATE_STYLE = {"running": "bold green", "waiting": "bold", "finished": "bold blue", "paused": "bold yellow",
+                "lost": "bold red", "error": "bold red", "stopped": "bold"}
+
+
+def describe(snap: FeedSnapshot, paused: bool, filter_name: str, now: float | None = None) -> Text:
+    """One line: ``replay recordings/x.log | running | t = 12.345 s | 4.0x real time | filter ukf | 1234 lines``."""
+    state = "paused" if paused and snap.state in ("running", "waiting") else snap.state
+    out = Text()
+    out.append(f" {'live' if snap.live else 'replay'} {snap.source} ")
+    out.append(f" {state.upper()} ", style="reverse " + _STATE_STYLE.get(state, "bold"))
+    parts = [f"t = {snap.sensor_t:.3f} s" if snap.sensor_t == snap.sensor_t else "t = -"]
+    if snap.speed_ratio == snap.speed_ratio and not paused:
+        parts.append(f"{snap.speed_ratio:.1f}x real time")
+    parts += [f"filter {filter_name}", f"{snap.lines} lines"]
+    if snap.live and snap.state == "running" and now is not None and now - snap.wall > 2.0:
+        parts.append(f"no data for {now - snap.wall:.0f} s")
+    out.append(" | " + " | ".join(parts))
+    if snap.message:
+        out.append(" | ")
+        out.append(snap.message, style="bold red")
+    return out
+
+
+class StatusLine(Static):
+    """Shows ``describe()`` of the latest snapshot; ``text`` is its plain text."""
+
+    DEFAULT_CSS = """
+    StatusLine { height: 1; background: $panel; }
+    """
+
+    def __init__(self, filter_name: str, **kwargs) -> None:
+        super().__init__("", **kwargs)
+        self.filter_name = filter_name
+        self.text = ""
+        self._snap: FeedSnapshot | None = None
+        self._paused = False
+
+    def show(self, snap: FeedSnapshot, paused: bool) -> None:
+        self._snap, self._paused = snap, paused
+        self.tick()
+
+    def tick(self) -> None:
+        """Re-render (also called by a timer so 'no data for N s' counts up on a silent port)."""
+        if self._snap is None:
+            return
+        line = describe(self._snap, self._paused, self.filter_name, time.monotonic())
+        self.text = line.plain
+        self.update(line)
