@@ -245,7 +245,7 @@ class Ins(ProcessModel):
         Vectorised over the samples too, which is exact because within the run the biases are constant
         (eqs. 51-52) and, without eta and Earth rate, the rotation increments do not depend on the
         attitude: with a_j = u_j - b_a, dq_j = [cos s_j, sinc s_j w_j dt_j / 2] (eqs. 43-49) and the prefix
-        products P_j = dq_0 (x) ... (x) dq_{j-1} (a log-depth scan), q_j = q_0 (x) P_j and
+        products P_j = dq_0 (x) ... (x) dq_{j-1} (one 4 x 4 product per sample on all points), q_j = q_0 (x) P_j and
         C_j = C(q_0) C(P_j), so with b_j = C(P_j) a_j (Euler) or (C(P_j) + C(P_j+1)) a_j / 2 (trapezoidal)::
 
             v_k = v_0 + C(q_0) sum_j b_j dt_j + g_n T
@@ -264,21 +264,18 @@ class Ins(ProcessModel):
         lead = x.shape[:-1]
         X = x.reshape(-1, 16).T                                  # (16, N)
         N = X.shape[1]
-        aw = us.T[:, None, :] - X[10:16, :, None]                # (6, N, k): [a, w] per point and sample
-        half = aw[3:] * (0.5 * dts)
-        s = np.sqrt((half * half).sum(axis=0))
+        half = (us[:, 3:, None] - X[13:16]) * (0.5 * dts)[:, None, None]   # (k, 3, N): w dt / 2, eqs. 43-45
+        s = np.sqrt(np.einsum("kin,kin->kn", half, half))       # eq. 49
         s_ = np.maximum(s, 1e-300)
-        D = np.empty((4, N, k + 1))                              # D[..., j] = P_j, P_0 = 1
-        D[:, :, 0] = _ONE[:, None]
-        D[0, :, 1:] = np.cos(s)
-        np.multiply(np.sin(s_) / s_, half, out=D[1:, :, 1:])
-        d = 1
-        while d <= k:                                            # Hillis-Steele inclusive scan
-            m = k + 1 - d
-            D[:, :, d:] = (_T16T @ (D[:, None, :, :m] * D[None, :, :, d:]).reshape(16, N * m)).reshape(4, N, m)
-            d *= 2
-        RP = (_K10T[:9] @ (D[:, None] * D[None, :]).reshape(16, N * (k + 1))).reshape(3, 3, N, k + 1)
-        a = aw[:3]
+        D = np.empty((k + 1, 4, N))                              # D[j] = P_j = dq_0 (x) ... (x) dq_{j-1}
+        D[0] = _ONE[:, None]
+        D[1:, 0] = np.cos(s)
+        np.multiply((np.sin(s_) / s_)[:, None], half, out=D[1:, 1:])
+        for j in range(1, k + 1):                                # a loop of 4 x 4 products on (4, N) rows beats
+            np.matmul(_T16T, (D[j - 1][:, None] * D[j]).reshape(16, N), out=D[j])   # a log-depth scan here
+        RP = (_K10T[:9] @ (D[:, :, None] * D[:, None, :]).transpose(1, 2, 0, 3).reshape(16, (k + 1) * N))
+        RP = RP.reshape(3, 3, k + 1, N)                          # C(P_j) (unit P_j: R = C)
+        a = us[:, :3].T[:, :, None] - X[10:13, None, :]          # (3, k, N): a_j = u_j - b_a, eq. 37
         T = float(dts.sum())
         wts = np.empty((k, 2))
         wts[:, 0] = dts
@@ -287,11 +284,11 @@ class Ins(ProcessModel):
             wts[:, 1] += 0.5 * dts * dts
         g_p = self._g_col * wts[:, 1].sum()
         if self._trap:
-            b = ((RP[..., :-1] + RP[..., 1:]) * a).sum(axis=1)   # (3, N, k): twice b_j
+            b = ((RP[:, :, :-1] + RP[:, :, 1:]) * a).sum(axis=1)    # (3, k, N): twice b_j
             wts *= 0.5
         else:
-            b = (RP[..., :-1] * a).sum(axis=1)
-        B = (b.reshape(3 * N, k) @ wts).reshape(1, 3, N, 2)      # [sum b dt, sum b w] in the frame of q_0
+            b = (RP[:, :, :-1] * a).sum(axis=1)
+        B = np.tensordot(b, wts, axes=(1, 0))[None]              # (1, 3, N, 2): [sum b dt, sum b w], frame of q_0
         q0 = X[6:10]
         Rn = _K10T @ (q0[:, None] * q0[None, :]).reshape(16, N)
         CB = ((Rn[:9] / Rn[9]).reshape(3, 3, N, 1) * B).sum(axis=1)   # (3, N, 2)
@@ -299,14 +296,15 @@ class Ins(ProcessModel):
         v0 = X[3:6]
         out[3:6] = v0 + CB[..., 0] + self._g_col * T
         out[0:3] = X[0:3] + v0 * T + CB[..., 1] + g_p
-        np.matmul(_T16T, (q0[:, None] * D[None, :, :, -1]).reshape(16, N), out=out[6:10])
+        np.matmul(_T16T, (q0[:, None] * D[-1][None, :]).reshape(16, N), out=out[6:10])
         out[10:16] = X[10:16]
         return out.T.reshape(lead + (16,))
 
     def normalize(self, x: np.ndarray) -> np.ndarray:
-        """Renormalise the quaternion block of states x (..., 16) to unit norm."""
+        """Renormalise the quaternion block of states x (..., 16) to unit norm (a new array)."""
         x = np.array(x, dtype=float, copy=True)
-        x[..., 6:10] = quat.normalize(x[..., 6:10])
+        q = x[..., 6:10]
+        q /= np.sqrt((q * q).sum(axis=-1, keepdims=True))
         return x
 
     # ------------------------------------------------------------------ linearisation
