@@ -1,0 +1,154 @@
+"""Vectorised kernels of the ``ins`` process for a run of IMU samples integrated in one step (the filters'
+``predict_inputs``): :func:`integrate_inputs` (the mean propagation, exact against sample-by-sample
+:meth:`Ins.f <fusion_plugins.process.ins.Ins.f>`) and :func:`interval_noise` (the process noise of the
+interval). Kept apart from ins.py so that each module stays small; the maths is paper 000 eqs. 33-52.
+
+States are handled component-first, ``(16, N)`` (one row per element, one column per sigma point), so
+every product is one BLAS call on whole rows instead of N tiny ones.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from fusion import quaternion as quat
+
+__all__ = ["integrate_inputs", "interval_noise", "K10T", "T16T"]
+
+# [R(q).ravel(), |q|^2] = outer(q, q).ravel() @ K10 (one product gives the rotation matrix and its normaliser)
+K10 = np.concatenate([quat._K, np.eye(16)[:, quat._DIAG16].sum(axis=1, keepdims=True)], axis=1)
+# The same forms transposed, for states stored component-first ((16, N): one row per element, one column
+# per sigma point): every product below is then one BLAS gemm on whole rows instead of N tiny ones.
+K10T = np.ascontiguousarray(K10.T)          # (10, 16): [R(q) rows (9), |q|^2] = K10T @ outer(q, q)
+T16T = np.ascontiguousarray(quat._T16.T)     # (4, 16):  p (x) q = T16T @ outer(p, q)
+_ONE = np.array([1.0, 0.0, 0.0, 0.0])
+_GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(4)   # on [-1, 1]; mapped to [0, 1] below
+_GL_NODES, _GL_WEIGHTS = 0.5 * (_GL_NODES + 1.0), 0.5 * _GL_WEIGHTS
+_EYE15 = np.eye(15)
+_EYE3 = np.eye(3)
+_G16 = np.zeros((16, 15))                      # error state [dp dv dth dba dbw] -> state (q rows set per call)
+_G16[0:6, 0:6] = np.eye(6)
+_G16[10:16, 9:15] = np.eye(6)
+
+
+def _GL_POWERS(T: float) -> np.ndarray:
+    """(4, 3): [s, s^2 / 2, s^3 / 6] at the Gauss-Legendre nodes s of [0, T]."""
+    s = _GL_NODES * T
+    return np.stack((s, 0.5 * s * s, s * s * s / 6.0), axis=1)
+
+
+def integrate_inputs(x: np.ndarray, us: np.ndarray, dts: np.ndarray, g_col: np.ndarray,
+                     trapezoidal: bool) -> np.ndarray:
+    """States x (..., 16) after the IMU samples ``us`` (k, 6), each held over ``dts`` (k,) (s), without
+    eta and Earth rate (see :meth:`Ins.f_inputs`); ``g_col`` (3, 1) is g_n. The same numbers as k
+    calls of ``Ins.f`` to rounding (~1e-15).
+
+    Vectorised over the samples too, which is exact because within the run the biases are constant
+    (eqs. 51-52) and, without eta and Earth rate, the rotation increments do not depend on the
+    attitude: with a_j = u_j - b_a, dq_j = [cos s_j, sinc s_j w_j dt_j / 2] (eqs. 43-49) and the prefix
+    products P_j = dq_0 (x) ... (x) dq_{j-1} (one 4 x 4 product per sample on all points),
+    q_j = q_0 (x) P_j and C_j = C(q_0) C(P_j), so with b_j = C(P_j) a_j (Euler) or (C(P_j) + C(P_j+1)) a_j / 2 (trapezoidal)::
+
+        v_k = v_0 + C(q_0) sum_j b_j dt_j + g_n T
+        p_k = p_0 + v_0 T + C(q_0) sum_j b_j w_j + g_n sum_j w_j,   w_j = dt_j r_j (+ dt_j^2 / 2)
+
+    with T = sum dt_j and r_j = sum_{i>j} dt_i."""
+    k = dts.shape[0]
+    lead = x.shape[:-1]
+    X = x.reshape(-1, 16).T                                  # (16, N)
+    N = X.shape[1]
+    half = (us[:, 3:, None] - X[13:16]) * (0.5 * dts)[:, None, None]   # (k, 3, N): w dt / 2, eqs. 43-45
+    s = np.sqrt(np.einsum("kin,kin->kn", half, half))       # eq. 49
+    s_ = np.maximum(s, 1e-300)
+    D = np.empty((k + 1, 4, N))                              # D[j] = P_j = dq_0 (x) ... (x) dq_{j-1}
+    D[0] = _ONE[:, None]
+    D[1:, 0] = np.cos(s)
+    np.multiply((np.sin(s_) / s_)[:, None], half, out=D[1:, 1:])
+    for j in range(1, k + 1):                                # a loop of 4 x 4 products on (4, N) rows beats
+        np.matmul(T16T, (D[j - 1][:, None] * D[j]).reshape(16, N), out=D[j])   # a log-depth scan here
+    RP = (K10T[:9] @ (D[:, :, None] * D[:, None, :]).transpose(1, 2, 0, 3).reshape(16, (k + 1) * N))
+    RP = RP.reshape(3, 3, k + 1, N)                          # C(P_j) (unit P_j: R = C)
+    a = us[:, :3].T[:, :, None] - X[10:13, None, :]          # (3, k, N): a_j = u_j - b_a, eq. 37
+    T = float(dts.sum())
+    wts = np.empty((k, 2))
+    wts[:, 0] = dts
+    np.multiply(dts, T - np.cumsum(dts), out=wts[:, 1])
+    if trapezoidal:
+        wts[:, 1] += 0.5 * dts * dts
+    g_p = g_col * wts[:, 1].sum()
+    if trapezoidal:
+        b = ((RP[:, :, :-1] + RP[:, :, 1:]) * a).sum(axis=1)    # (3, k, N): twice b_j
+        wts *= 0.5
+    else:
+        b = (RP[:, :, :-1] * a).sum(axis=1)
+    B = np.tensordot(b, wts, axes=(1, 0))[None]              # (1, 3, N, 2): [sum b dt, sum b w], frame of q_0
+    q0 = X[6:10]
+    Rn = K10T @ (q0[:, None] * q0[None, :]).reshape(16, N)
+    CB = ((Rn[:9] / Rn[9]).reshape(3, 3, N, 1) * B).sum(axis=1)   # (3, N, 2)
+    out = np.empty((16, N))
+    v0 = X[3:6]
+    out[3:6] = v0 + CB[..., 0] + g_col * T
+    out[0:3] = X[0:3] + v0 * T + CB[..., 1] + g_p
+    np.matmul(T16T, (q0[:, None] * D[-1][None, :]).reshape(16, N), out=out[6:10])
+    out[10:16] = X[10:16]
+    return out.T.reshape(lead + (16,))
+
+
+def interval_noise(x0: np.ndarray, x1: np.ndarray, dts: np.ndarray, g_n: np.ndarray, var_a: np.ndarray,
+                   var_w: np.ndarray, var_ba: np.ndarray, var_bw: np.ndarray, qc_diag: np.ndarray | None,
+                   qnv: float) -> np.ndarray:
+    """Process noise (16, 16) of the interval T = sum dts from the means x0 (before) and x1 (after);
+    ``var_*`` the noise densities squared (3,), ``qc_diag`` their diagonal when all are isotropic, ``qnv``
+    the quaternion-norm variance per sample.
+
+    The noise of the whole interval T = sum dts, propagated through the linearised error dynamics
+    rather than summed per sample (a sum would miss that early accelerometer noise moves p by the
+    end, and that gyro noise tilts the specific force into v). Error state e = [dp, dv, dth, dba, dbw]
+    (dth a navigation-frame attitude error, q_true = exp(dth / 2) (x) q), constant over the interval::
+
+        de/dt = F e + noise,   F: dp <- dv (I),  dv <- dth (-[f_n x]),  dv <- dba (-C),  dth <- dbw (-C)
+        Q_c = blkdiag(0, C N_a^2 C^T, C N_w^2 C^T, N_ba^2, N_bw^2)
+        Q_e = int_0^T e^{F s} Q_c e^{F^T s} ds = sum_{i,j<=3} F^i Q_c F^j^T T^{i+j+1} / (i! j! (i+j+1))
+
+    exact for constant F because F^4 = 0 (the chain dbw -> dth -> dv -> dp): the integrand is a
+    polynomial of degree 6 in s, integrated exactly by 4-point Gauss-Legendre quadrature. f_n is the
+    mean specific force in the navigation frame, (v1 - v0) / T - g_n; C the attitude at mid-interval;
+    dth maps to q at the end as ``dq = [0, dth] (x) q1 / 2``. For one sample of dt this is :meth:`Q` plus the
+    couplings of order dt^2 and higher that :meth:`Q` leaves to the propagation of later steps."""
+    dts = np.asarray(dts, dtype=float)
+    T = float(dts.sum())
+    x0 = np.asarray(x0, dtype=float)
+    x1 = np.asarray(x1, dtype=float)
+    fn = (x1[3:6] - x0[3:6]) / T - g_n
+    qm = x0[6:10] + x1[6:10]
+    Rn = K10T @ (qm[:, None] * qm).reshape(16)
+    C = (Rn[:9] / Rn[9]).reshape(3, 3)                       # C_b^n at mid-interval
+    F = np.zeros((15, 15))
+    F[0:3, 3:6] = _EYE3
+    F[3:6, 6:9] = ((0.0, fn[2], -fn[1]), (-fn[2], 0.0, fn[0]), (fn[1], -fn[0], 0.0))   # -[f_n x]
+    F[3:6, 9:12] = F[6:9, 12:15] = -C
+    F2 = F @ F
+    # Phi(s_m) = e^{F s_m} = I + F s + F^2 s^2 / 2 + F^3 s^3 / 6 at the 4 Gauss-Legendre nodes s_m
+    Phi = (_GL_POWERS(T) @ np.stack((F, F2, F2 @ F)).reshape(3, 225)).reshape(4, 15, 15) + _EYE15
+    q = x1[6:10]
+    q0, q1, q2, q3 = q
+    G = _G16.copy()
+    G[6:10, 6:9] = ((-0.5 * q1, -0.5 * q2, -0.5 * q3), (0.5 * q0, 0.5 * q3, -0.5 * q2),
+                    (-0.5 * q3, 0.5 * q0, 0.5 * q1), (0.5 * q2, -0.5 * q1, 0.5 * q0))   # [0, dth] (x) q / 2
+    GPhi = G @ Phi                                           # (4, 16, 15)
+    w = _GL_WEIGHTS * T
+    if qc_diag is not None:                                  # isotropic white noises: Q_c diagonal
+        A = GPhi * np.sqrt(np.multiply.outer(w, qc_diag))[:, None, :]
+        A = A.transpose(1, 0, 2).reshape(16, 60)
+        Qm = A @ A.T                                         # sum_m w_m G Phi_m Q_c Phi_m^T G^T
+    else:
+        Qc = np.zeros((15, 15))
+        Qc[3:6, 3:6] = (C * var_a) @ C.T
+        Qc[6:9, 6:9] = (C * var_w) @ C.T
+        Qc[9:12, 9:12] = np.diag(var_ba)
+        Qc[12:15, 12:15] = np.diag(var_bw)
+        L = (GPhi @ Qc) * w[:, None, None]
+        Qm = L.transpose(1, 0, 2).reshape(16, 60) @ GPhi.transpose(0, 2, 1).reshape(60, 16)
+        Qm = 0.5 * (Qm + Qm.T)
+    if qnv:
+        Qm[6:10, 6:10] += np.outer(q, q) * (qnv * len(dts) / (q @ q))
+    return Qm
