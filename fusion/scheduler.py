@@ -147,15 +147,15 @@ class Scheduler:
                 if len(pending) >= _BATCH_MAX or msg.t >= self._next_output:
                     yield from self._flush_inputs()
                 continue
-            if pending:
-                yield from self._flush_inputs()
+            # Pending inputs stay pending through measurements that produce no observation (ranges a
+            # solver gathers); _measure flushes them, up to its own time, when it needs the belief.
             yield from self._process(msg)
         if until == math.inf and pending:
             yield from self._flush_inputs()
 
-    def _flush_inputs(self) -> Iterator[Estimate | Event]:
+    def _flush_inputs(self, until: float | None = None) -> Iterator[Estimate | Event]:
         batch, self._pending = self._pending, []
-        yield from self._inputs(batch)
+        yield from self._inputs(batch, until)
 
     def _process(self, msg: Message) -> Iterator[Estimate | Event]:
         if not self._replaying:
@@ -213,8 +213,9 @@ class Scheduler:
         self.time_s["predict"] += time.perf_counter() - t0
         self.steps["predict"] += 1
 
-    def _inputs(self, msgs: list[Message]) -> Iterator[Estimate | Event]:
-        """Integrate input samples in order (the held sample propagates up to each new sample time)."""
+    def _inputs(self, msgs: list[Message], until: float | None = None) -> Iterator[Estimate | Event]:
+        """Integrate input samples in order (the held sample propagates up to each new sample time);
+        with ``until``, the last sample is held up to that time in the same batch."""
         sensor = self.sensors[msgs[0].sensor]
         good: list[tuple[float, np.ndarray]] = []
         for msg in msgs:
@@ -240,10 +241,12 @@ class Scheduler:
             good = self._align(good, sensor)
         if not good:
             return
-        if self._batch and len(good) > 1 and self.u is not None and self._next_output > good[-1][0]:
+        end = until if until is not None and until >= good[-1][0] else None
+        last_t = good[-1][0] if end is None else end
+        if self._batch and (len(good) > 1 or end is not None) and self.u is not None and self._next_output > last_t:
             # Whole run of samples in one call (the filter integrates them in order, DESIGN: same math).
-            ts = np.array([self.belief.t] + [t for t, _ in good])  # type: ignore[union-attr]
-            us = np.vstack([self.u] + [u for _, u in good[:-1]])
+            ts = np.array([self.belief.t] + [t for t, _ in good] + ([end] if end is not None else []))  # type: ignore[union-attr]
+            us = np.vstack([self.u] + [u for _, u in (good if end is not None else good[:-1])])
             dts = np.diff(ts)
             keep = dts > 0
             if keep.any():
@@ -290,6 +293,8 @@ class Scheduler:
             return
         if obs is None:
             return
+        if self._pending:
+            yield from self._flush_inputs(until=obs.t)
         if self.belief is None and self._from_sensor == sensor.name:
             self._take_fix(obs)
             sensor.counters["used"] += 1
