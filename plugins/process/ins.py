@@ -11,6 +11,8 @@ from fusion.api import BuildContext, MalformedMessage, Message, Params, ProcessM
 
 from .ins_batch import K10T as _K10T, T16T as _T16T, integrate_inputs, interval_noise
 
+_EYE3 = np.eye(3)
+
 STANDARD_GRAVITY = 9.80665          # m/s^2
 EARTH_RATE = 7.292115e-5            # rad/s (WGS84)
 
@@ -57,6 +59,11 @@ class InsParams(Params):
                                       "positive definite (the norm direction is otherwise noise-free)")
     max_specific_force: float | None = Field(None, gt=0, description="sensor range (m/s^2, any axis)")
     max_rate: float | None = Field(None, gt=0, description="sensor range (rad/s, any axis)")
+    hold_after: float | None = Field(None, gt=0, description="s: a sample held longer than this (an IMU gap) "
+                                     "adds hold noise over the excess time (None: never)")
+    hold_accel_rw: float = Field(0.7, ge=0, description="m/s^3/sqrt(Hz): random walk of the true specific "
+                                 "force away from a held sample (the vehicle's manoeuvres)")
+    hold_rate_rw: float = Field(1.0, ge=0, description="rad/s^2/sqrt(Hz): the same for the angular rate")
     align_gyro_bias: bool = Field(True, description="initial alignment also takes the mean static gyro "
                                   "rate as the gyro bias")
 
@@ -157,6 +164,7 @@ class Ins(ProcessModel):
                          if self._iso_w and np.ptp(self._var_a) == 0.0 else None)
         self.counters: dict[str, int] = {"eta_clamped": 0}
         self._max_f, self._max_w = p.max_specific_force, p.max_rate
+        self._hold = p.hold_after
 
     # ------------------------------------------------------------------ propagation
     def _eta_dt(self, dt: float) -> float:
@@ -332,7 +340,22 @@ class Ins(ProcessModel):
         if qnv:
             Qqq += qq * (qnv / (q @ q))
         Qm[6:10, 6:10] = Qqq
+        if self._hold is not None and dt > self._hold:
+            self._add_hold_noise(Qm, q, dt - self._hold)
         return Qm
+
+    def _add_hold_noise(self, Qm: np.ndarray, q: np.ndarray, e: float) -> None:
+        """A sample held ``e`` s longer than ``hold_after`` (a gap): the true input walks away from it
+        (random walks of densities ``hold_accel_rw``, ``hold_rate_rw`` started at the hold), so the
+        velocity and attitude errors grow as e^1.5 and the position error as e^2.5: negligible for a
+        dropped sample, wide enough after a long gap that the fixes are not gated out."""
+        p: InsParams = self.params  # type: ignore[assignment]
+        na, e2 = p.hold_accel_rw ** 2, e * e
+        Qm[3:6, 3:6] += _EYE3 * (na * e2 * e / 3.0)
+        Qm[0:3, 3:6] += _EYE3 * (na * e2 * e2 / 8.0)
+        Qm[3:6, 0:3] += _EYE3 * (na * e2 * e2 / 8.0)
+        Qm[0:3, 0:3] += _EYE3 * (na * e2 * e2 * e / 20.0)
+        Qm[6:10, 6:10] += (np.diag(np.full(4, q @ q)) - q[:, None] * q) * (p.hold_rate_rw ** 2 * e2 * e / 12.0)
 
     def Q_inputs(self, x0: np.ndarray, x1: np.ndarray, us: np.ndarray, dts: np.ndarray) -> np.ndarray:
         """Process noise (16, 16) of a run of samples integrated in one step (:meth:`f_inputs`), from the
@@ -341,8 +364,13 @@ class Ins(ProcessModel):
         specific force into v, early accelerometer noise moves p by the end), exactly for a constant
         specific force (``ins_batch.interval_noise``). For one sample it is :meth:`Q` plus the couplings
         of order dt^2 and higher that :meth:`Q` leaves to the propagation of later steps."""
-        return interval_noise(x0, x1, dts, self.g_n, self._var_a, self._var_w, self._var_ba, self._var_bw,
-                              self._qc_diag, self.params.quat_norm_variance)  # type: ignore[attr-defined]
+        Qm = interval_noise(x0, x1, dts, self.g_n, self._var_a, self._var_w, self._var_ba, self._var_bw,
+                            self._qc_diag, self.params.quat_norm_variance)  # type: ignore[attr-defined]
+        if self._hold is not None:
+            e = float(np.maximum(np.asarray(dts) - self._hold, 0.0).sum())
+            if e > 0.0:
+                self._add_hold_noise(Qm, np.asarray(x1, dtype=float)[6:10], e)
+        return Qm
 
     # ------------------------------------------------------------------ input
     def input_from(self, message: Message) -> np.ndarray:
