@@ -1,0 +1,88 @@
+"""Additions for the ABPS/INS system (issue 5): a fix with an age (ols_trilateration ``age`` + the position
+model's ``p - v age``), the INS hold noise over an IMU gap, the pivoted-Cholesky row square root."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fusion import testing
+from fusion.api import BuildContext, ConfigError, MalformedMessage, Message, StateLayout
+from fusion_plugins.filters.linalg import psd_sqrt_rows
+from fusion_plugins.measurement.position import AgedPosition, Position, PositionParams
+from fusion_plugins.solvers.ols_trilateration import OlsParams, OlsTrilateration, pack_fix, unpack_fix
+
+INS = StateLayout.parse("p:3 v:3 q:4:quaternion ba:3 bw:3")
+MINE = np.array([[0.0, 0.1, -0.9], [5.0, 2.9, -0.9], [10.0, 0.1, -0.9], [15.0, 2.9, -0.9]])
+
+
+def test_fix_with_age_is_predicted_through_the_velocity():
+    m = Position(PositionParams(lever_arm=(0.2, 0.0, -0.4)), BuildContext(layout=INS))
+    cov = np.diag([0.01, 0.02, 0.09])
+    obs = m.observe(Message(3.0, "abps", pack_fix(np.array([4.0, 5.0, 6.0]), cov) + (0.15,)))
+    assert isinstance(obs.model, AgedPosition) and obs.model.age == 0.15 and obs.t == 3.0
+    np.testing.assert_allclose(obs.R, cov)
+    X = testing.random_states(INS, 7, seed=4)
+    np.testing.assert_allclose(obs.model.h(X), m.h(X) - 0.15 * X[:, 3:6], atol=1e-15)
+    testing.check_measurement_vectorised(obs.model, X)
+    testing.check_measurement_jacobian(obs.model, X[0])
+    np.testing.assert_allclose(obs.model.h(np.r_[obs.model.position_from(obs.z, X[0]), X[0, 3:]]), obs.z, atol=1e-12)
+    assert m.observe(Message(3.0, "abps", pack_fix(np.zeros(3), cov) + (0.0,))).model is m
+    with pytest.raises(MalformedMessage, match="negative"):
+        m.observe(Message(3.0, "abps", pack_fix(np.zeros(3), cov) + (-0.1,)))
+    pv = Position(PositionParams(), BuildContext(layout=StateLayout.parse("p:3")))
+    with pytest.raises(MalformedMessage, match="velocity"):
+        pv.observe(Message(3.0, "abps", pack_fix(np.zeros(3), cov) + (0.1,)))
+
+
+def test_ols_age_refers_the_fix_to_the_mean_range_time():
+    beacons = {f"B{i + 1}": b for i, b in enumerate(MINE)}
+    with pytest.raises(ConfigError, match="stamp: close"):
+        OlsTrilateration(OlsParams(age=True, motion_compensation=True), BuildContext(beacons=beacons))
+    s = OlsTrilateration(OlsParams(z=-0.75, motion_compensation=True, stamp="close", age=True, accel_sd=0.0),
+                         BuildContext(beacons=beacons, sensor="abps"))
+    v = np.array([0.8, -0.1, 0.0])
+    fixes = []
+    for c in range(12):
+        for j, n in enumerate(["B1", "B2", "B3", "B4"]):
+            t = 0.4 * c + 0.05 * j
+            x = np.array([4.0, 1.0, -0.75]) + v * t
+            for f in s.feed(Message(t, "abps", (n, float(np.linalg.norm(MINE[j] - x))))):
+                fixes.append((t, f))
+    assert len(fixes) == 12
+    for t_close, f in fixes:
+        assert f.t == t_close and len(f.values) == 10
+        age = f.values[9]
+        assert age == pytest.approx(0.075)                       # mean of 0, 0.05, 0.10, 0.15 before 0.15
+        pos = unpack_fix(f.values[:9])[0]
+        truth = np.array([4.0, 1.0, -0.75]) + v * (f.t - age)   # the position at the mean range time
+        err = np.linalg.norm(pos[:2] - truth[:2])
+        if t_close > 2.5:                                        # once the track holds compensated fixes only
+            assert err < 1e-3
+    assert err < 1e-5                                            # the velocity track converges
+
+
+def test_ins_hold_noise_grows_only_past_hold_after():
+    base = testing.build("process", "ins", {})
+    held = testing.build("process", "ins", {"hold_after": 0.015, "hold_accel_rw": 0.7, "hold_rate_rw": 1.0})
+    x = INS.vector({"q": [1, 0, 0, 0]})
+    u = np.r_[0, 0, -9.8, 0, 0, 0]
+    np.testing.assert_array_equal(held.Q(x, u, 0.01), base.Q(x, u, 0.01))
+    d = held.Q(x, u, 0.02) - base.Q(x, u, 0.02)                  # one dropped sample: negligible
+    assert 0 < d[3, 3] < 1e-7
+    d = held.Q(x, u, 1.015) - base.Q(x, u, 1.015)                # a 1 s gap: v sd 0.4 m/s, tilt ~0.3 rad
+    assert d[3, 3] == pytest.approx(0.49 / 3) and d[0, 0] == pytest.approx(0.49 / 20)
+    assert np.linalg.eigvalsh(held.Q(x, u, 1.015)).min() > -1e-15
+    dts = np.r_[np.full(5, 0.01), 1.015, np.full(5, 0.01)]
+    us = np.tile(u, (11, 1))
+    x1 = held.normalize(held.f_inputs(x, us, dts))
+    dQ = held.Q_inputs(x, x1, us, dts) - base.Q_inputs(x, x1, us, dts)
+    assert dQ[3, 3] == pytest.approx(0.49 / 3)
+
+
+@pytest.mark.parametrize("rank", [16, 15, 9, 1])
+def test_psd_sqrt_rows_of_singular_matrices(rank):
+    rng = np.random.default_rng(rank)
+    A = rng.normal(size=(rank, 16))
+    Q = A.T @ A
+    B = psd_sqrt_rows(Q)
+    np.testing.assert_allclose(B.T @ B, Q, atol=1e-12 * np.abs(Q).max())
