@@ -16,7 +16,7 @@ from __future__ import annotations
 import errno
 import os
 import threading
-from typing import BinaryIO, Iterator
+from typing import BinaryIO, Callable, Iterator
 
 from pydantic import Field
 
@@ -75,7 +75,12 @@ class SerialSource(Source):
         self.port = None  # the pyserial object once open
         self._record: BinaryIO | None = None
         self._closed = threading.Event()
+        self._lock = threading.Lock()
+        self._reading = False
         self.bytes_received = 0
+        # Called in the reading thread each time a read times out with nothing (a consumer blocked in
+        # lines() can refresh its view of a silent port).
+        self.on_idle: Callable[[], object] | None = None
 
     @property
     def label(self) -> str:
@@ -95,7 +100,7 @@ class SerialSource(Source):
             raise InputError(f"cannot open {p.port}: {_reason(exc)}{_hint(p.port, exc)}") from None
         if p.record:
             try:
-                self._record = open(p.record, "wb")
+                self._record = open(p.record, "xb")  # never overwrite: nothing the user gave is lost
             except OSError as exc:
                 self.port.close()
                 self.port = None
@@ -104,7 +109,12 @@ class SerialSource(Source):
 
     def close(self) -> None:
         """Ask the reader to stop (thread-safe); ``lines()`` returns within ``timeout`` seconds."""
-        self._closed.set()
+        with self._lock:
+            self._closed.set()
+            reading = self._reading
+        if not reading:  # nobody reads: release the port and the record file now
+            self._shutdown()
+            return
         cancel = getattr(self.port, "cancel_read", None)
         if cancel is not None:
             try:
@@ -114,12 +124,15 @@ class SerialSource(Source):
 
     def lines(self) -> Iterator[str]:
         """Complete lines (with their ``\\n``) as they arrive, until close() or the port fails."""
-        self.open()
+        with self._lock:
+            if self._closed.is_set():
+                return
+            self._reading = True
         import serial
 
-        port = self.port
         buf = bytearray()
         try:
+            port = self.open().port
             while not self._closed.is_set():
                 try:
                     chunk = port.read(min(_CHUNK, max(1, port.in_waiting)))
@@ -131,6 +144,8 @@ class SerialSource(Source):
                         buf.clear()
                     raise PortLost(f"lost {self.params.port}: {_reason(exc)}") from None
                 if not chunk:
+                    if self.on_idle is not None:
+                        self.on_idle()
                     continue
                 self.bytes_received += len(chunk)
                 if self._record is not None:
@@ -146,6 +161,7 @@ class SerialSource(Source):
             if buf:  # closed mid-line: the partial line too
                 yield buf.decode("utf-8", "replace")
         finally:
+            self._reading = False
             self._shutdown()
 
     def _shutdown(self) -> None:

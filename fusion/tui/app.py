@@ -34,7 +34,7 @@ class FusionApp(App):
     TITLE = "fusion"
     CSS = """
     #main { height: 1fr; }
-    #left { width: 62; }
+    #left { width: 60; }
     #right { width: 1fr; }
     StateTable, SensorCounters, EventLog { border: round $primary-darken-2; }
     EventLog { height: 12; }
@@ -161,4 +161,7 @@ def make_app(config_path_or_system: str | Path | System, source: Any = None, *, 
         options = dict(lines=source.lines(), source=getattr(source, "label", source.name),
                        live=bool(getattr(source, "live", False)), close=getattr(source, "close", None))
     options.update(speed=speed, refresh_hz=refresh_hz)
-    return FusionApp(system, options)
+    app = FusionApp(system, options)
+    if hasattr(source, "on_idle"):
+        source.on_idle = app.feed.idle  # a silent port still shows the last lines it sent
+    return app

@@ -57,6 +57,7 @@ class FeedSnapshot:
     truth: tuple[tuple[float, float], ...]
     truth_total: int
     lines: int
+    data_wall: float
     sensor_t: float
     speed_ratio: float
     wall: float = field(default_factory=time.monotonic)
@@ -97,6 +98,8 @@ class LiveFeed:
         self._track_t = self._truth_t = -math.inf
         self.estimate: Estimate | None = None
         self.lines_read = 0
+        self._emitted_lines = -1
+        self._data_wall = time.monotonic()
         self.sensor_t = math.nan
         self.state = "waiting"
         self.message = ""
@@ -104,6 +107,7 @@ class LiveFeed:
         self._window: deque[tuple[float, float, dict[str, int]]] = deque()
         self._wall0: float | None = None
         self._t_first = math.nan
+        self._t_start = math.nan  # time of the first message
         lay = system.layout
         self._pos = None
         if "p" in lay and lay.block("p").size >= 2:
@@ -134,6 +138,10 @@ class LiveFeed:
     def stopped(self) -> bool:
         return self._stop.is_set()
 
+    def idle(self) -> None:
+        """Called by a live source in the reading thread when a read timed out: shows what is pending."""
+        self._maybe_emit(time.monotonic())
+
     # ------------------------------------------------------------------ the worker
     def run(self) -> FeedSnapshot:
         """Read until the end of the input, a lost port, or stop(); returns the final snapshot."""
@@ -144,6 +152,8 @@ class LiveFeed:
             self.state = "running"
             for item in iter_messages(self._paced(self._lines), self.parsed):
                 if isinstance(item, Message) and item.t - item.t == 0.0:
+                    if self.sensor_t != self.sensor_t:
+                        self._t_start = item.t
                     self.sensor_t = item.t
                 for out in sched.push(item):
                     self._take(out)
@@ -182,6 +192,7 @@ class LiveFeed:
             if self._stop.is_set():
                 return
             self.lines_read += 1
+            self._data_wall = time.monotonic()
             if not self.live:
                 if not self._running.is_set():
                     held = self._hold()
@@ -212,8 +223,7 @@ class LiveFeed:
         held = 0.0
         while not self._stop.is_set():
             now = time.monotonic()
-            if now >= self._next_post:
-                self._emit(now)
+            self._maybe_emit(now)
             if not self._running.is_set():
                 h = self._hold()
                 held += h
@@ -276,6 +286,11 @@ class LiveFeed:
                 row["malformed"] += n
         return out
 
+    def _maybe_emit(self, now: float) -> None:
+        """Emit when due and something new was read since the last snapshot."""
+        if now >= self._next_post and self.lines_read != self._emitted_lines:
+            self._emit(now)
+
     def _emit(self, now: float) -> FeedSnapshot:
         counters = self.counters()
         received = {k: v["received"] for k, v in counters.items()}
@@ -292,14 +307,17 @@ class LiveFeed:
             ratio = (t - t0) / (now - w0)
         elif self._wall0 is not None and now > self._wall0:
             ratio = (t - self._t_first) / (now - self._wall0)
-        if t0 == t0 and t - t0 > 0.0:
+        if self.state not in ("running", "waiting") and t - self._t_start > 0.0:
+            rates = {k: n / (t - self._t_start) for k, n in received.items()}  # the run's mean
+        elif t0 == t0 and t - t0 > 0.0:
             rates = {k: (n - r0.get(k, 0)) / (t - t0) for k, n in received.items()}
         snap = FeedSnapshot(
             source=self.source, live=self.live, state=self.state, estimate=self.estimate, counters=counters,
             ignored=dict(self.scheduler.unused), rates=rates, events=tuple(self.events), track=tuple(self.track),
             track_total=self.track_total, truth=tuple(self.truth), truth_total=self.truth_total,
-            lines=self.lines_read, sensor_t=t, speed_ratio=ratio, wall=now, message=self.message)
+            lines=self.lines_read, data_wall=self._data_wall, sensor_t=t, speed_ratio=ratio, wall=now, message=self.message)
         self._next_post = now + self.refresh_dt
+        self._emitted_lines = self.lines_read
         self._post(snap)
         return snap
 

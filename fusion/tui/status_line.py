@@ -22,8 +22,8 @@ def describe(snap: FeedSnapshot, paused: bool, filter_name: str, now: float | No
     if snap.speed_ratio == snap.speed_ratio and not paused:
         parts.append(f"{snap.speed_ratio:.1f}x real time")
     parts += [f"filter {filter_name}", f"{snap.lines} lines"]
-    if snap.live and snap.state == "running" and now is not None and now - snap.wall > 2.0:
-        parts.append(f"no data for {now - snap.wall:.0f} s")
+    if snap.live and snap.state == "running" and now is not None and now - snap.data_wall > 2.0:
+        parts.append(f"no data for {now - snap.data_wall:.0f} s")
     out.append(" | " + " | ".join(parts))
     if snap.message:
         out.append(" | ")

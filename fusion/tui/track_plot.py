@@ -16,7 +16,7 @@ from textual.widget import Widget
 from fusion.tui.canvas import BrailleCanvas
 from fusion.tui.feed import FeedSnapshot
 
-EST, TRUTH, BEACON, NOW = "bold cyan", "grey62", "bold red", "bold yellow"
+EST, TRUTH, BEACON, NOW = "bold cyan", "#a0a0a0", "bold red", "bold yellow"
 
 
 class TrackPlot(Widget):

@@ -1,5 +1,6 @@
 """The live view driven headless (App.run_test + pilot): replay equals `fusion run`, counters, keys."""
 import asyncio
+import re
 import time
 from pathlib import Path
 
@@ -56,8 +57,7 @@ def test_replay_at_speed_0_shows_the_final_estimate_of_fusion_run():
             table = app.query_one(StateTable)
             sd = np.sqrt(np.diag(final.belief.P))
             for i, name in enumerate(("px", "py", "vx", "vy")):
-                element, value, sigma, unit = table.get_row(name)
-                assert element == name
+                value, sigma, unit = table.cells[name]
                 assert abs(float(value) - final.belief.x[i]) <= 5e-5
                 assert abs(float(sigma) - sd[i]) <= 5e-3 * sd[i]
                 assert unit == ("m" if name.startswith("p") else "m/s")
@@ -66,9 +66,10 @@ def test_replay_at_speed_0_shows_the_final_estimate_of_fusion_run():
             counters = app.query_one(SensorCounters)
             assert snap.counters == summary["sensors"]
             assert counters.values == summary["sensors"]
-            row = counters.get_row("uwb")
-            assert row[:6] == ["uwb", *(str(summary["sensors"]["uwb"][k]) for k in
-                                        ("received", "used", "rejected", "malformed", "late"))]
+            row = counters.cells["uwb"]
+            assert row[:6] == ("uwb", *(str(summary["sensors"]["uwb"][k]) for k in
+                                        ("received", "used", "rejected", "malformed", "late")))
+            assert re.search(r"^uwb +2684 +2684 +0 +0 +0 +40\.\d$", str(counters.render()), re.M)
             status = app.query_one(StatusLine).text
             assert "FINISHED" in status and "example_2d.log" in status and "filter ukf" in status
             assert app.query_one(TrackPlot).points_shown > 100
@@ -79,51 +80,37 @@ def test_replay_at_speed_0_shows_the_final_estimate_of_fusion_run():
     asyncio.run(drive())
 
 
-def test_pause_holds_a_replay_and_resume_continues():
-    async def drive():
-        app = make_app(CONFIG, speed=5)
-        async with app.run_test(size=SIZE) as pilot:
-            await until(pilot, lambda: app.feed.lines_read > 40, what="the replay to start")
-            await pilot.press("p")
-            assert app.paused and app.feed.paused
-            await pilot.pause(0.15)
-            held = app.feed.lines_read
-            shown_t = app.latest.sensor_t
-            await pilot.pause(0.4)
-            assert app.feed.lines_read == held
-            assert "PAUSED" in app.query_one(StatusLine).text
-            assert app.query_one(StateTable).border_title.startswith("state at t")
-            assert app.latest.sensor_t == shown_t
-            await pilot.press("p")
-            assert not app.paused
-            await until(pilot, lambda: app.feed.lines_read > held + 20, what="the replay to resume")
-            assert "RUNNING" in app.query_one(StatusLine).text or finished(app)
-            await pilot.press("q")
-        assert app.feed.stopped
-
-    asyncio.run(drive())
-
-
-def test_reset_view_clears_trail_and_events_then_keeps_drawing(tmp_path):
+def test_keys_pause_holds_the_replay_reset_clears_the_view_quit_stops(tmp_path):
     log = tmp_path / "bad.log"
     lines = RECORDING.read_text().splitlines()
     lines.insert(30, "0.6,uwb,B1,not-a-number")
     log.write_text("\n".join(lines) + "\n")
 
     async def drive():
-        app = make_app(CONFIG, log, speed=8)
+        app = make_app(CONFIG, log, speed=4)
         async with app.run_test(size=SIZE) as pilot:
-            plot, events = app.query_one(TrackPlot), app.query_one(EventLog)
-            await until(pilot, lambda: plot.points_shown > 10 and events.lines_text, what="a trail and an event")
-            await pilot.press("p")  # hold the replay so that nothing new arrives while we look
+            plot, events, status = app.query_one(TrackPlot), app.query_one(EventLog), app.query_one(StatusLine)
+            await until(pilot, lambda: plot.points_shown > 5 and events.lines_text, what="a trail and an event")
+            # p: a replay stops reading; the view holds still.
+            await pilot.press("p")
+            assert app.paused and app.feed.paused
+            await pilot.pause(0.1)
+            held, shown = app.feed.lines_read, app.latest.sensor_t
+            await pilot.pause(0.3)
+            assert app.feed.lines_read == held and app.latest.sensor_t == shown
+            assert "PAUSED" in status.text
+            # r: the trail and the event log shown so far are forgotten.
             await pilot.press("r")
             assert plot.points_shown == 0 and not events.lines_text
-            await pilot.pause(0.2)
-            assert plot.points_shown == 0
+            # p again: the replay goes on, the plot draws the new points only.
             await pilot.press("p")
-            await until(pilot, lambda: plot.points_shown > 3, what="new points after reset")
+            assert not app.paused
+            await until(pilot, lambda: app.feed.lines_read > held + 20 and plot.points_shown > 3,
+                        what="the replay to resume")
             assert plot.points_shown < app.latest.track_total
+            assert "RUNNING" in status.text or finished(app)
             await pilot.press("q")
+        assert app.feed.stopped
 
     asyncio.run(drive())
 
@@ -162,6 +149,6 @@ def test_malformed_lines_are_counted_and_logged_with_line_numbers(tmp_path):
                 assert f"line {i}:" in text
             assert "malformed" in text and "bad checksum" in text
             assert app.latest.ignored == {"sonar": 1}
-            assert app.query_one(SensorCounters).get_row("ignored:sonar")[0] == "sonar (not in config)"
+            assert app.query_one(SensorCounters).cells["ignored:sonar"][0] == "sonar (not in config)"
 
     asyncio.run(drive())

@@ -1,0 +1,106 @@
+"""``fusion tui [CONFIG]``: the live view (Textual) of a serial device or of a replayed recording.
+
+    fusion tui --port /dev/ttyS0                       # live, default config configs/abps_ins.yaml
+    fusion tui configs/uwb_pv_ukf.yaml --port /dev/ttyUSB0 --baud 115200 --record today.log
+    fusion tui configs/uwb_pv_ukf.yaml --speed 4       # the config's recording at 4x real time
+    fusion tui configs/example_2d.yaml --input walk.log --speed 0
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+from fusion.api import ConfigError, FusionError, InputError
+
+DEFAULT_CONFIG = Path("configs") / "abps_ins.yaml"
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("tui", help="live view of the state from a serial port or a replayed recording",
+                       description="Live view (state with 1-sigma, per-sensor counters, events, horizontal track) "
+                                   "of the estimator a config composes, fed by a serial device (--port) or by a "
+                                   "recording replayed at --speed x real time (the config's own, or --input). "
+                                   "Keys: q quit, p pause/resume, r reset view.")
+    p.add_argument("config", nargs="?", metavar="CONFIG",
+                   help=f"system YAML (default: {DEFAULT_CONFIG} when it exists)")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--port", metavar="PORT",
+                     help="serial device (/dev/ttyUSB0, COM3) or pyserial URL (socket://host:port, loop://)")
+    src.add_argument("--input", "-i", metavar="LOG", help="replay this recording instead of the config's own")
+    p.add_argument("--baud", type=int, default=115200, help="with --port: bit/s, 8N1 (default 115200)")
+    p.add_argument("--record", metavar="PATH",
+                   help="with --port: write every raw byte received to PATH (a recording; must not exist)")
+    p.add_argument("--speed", type=float, default=None,
+                   help="replays: x real time by sensor time (default 1; 0 = as fast as possible)")
+    p.add_argument("--filter", metavar="NAME", help="use this filter instead of the config's (kf, ekf, iekf, ukf, srukf)")
+    p.add_argument("--filter-param", metavar="KEY=VALUE", action="append", default=[],
+                   help="set a filter parameter (repeatable; VALUE is YAML, e.g. alpha=0.5)")
+    p.add_argument("--refresh", type=float, default=15.0, metavar="HZ",
+                   help="view refreshes per second (default 15; estimates in between are coalesced)")
+    p.set_defaults(func=run)
+
+
+def _config_path(config: str | None) -> Path:
+    if config is not None:
+        return Path(config)
+    import fusion
+
+    for base in (Path.cwd(), Path(fusion.__file__).resolve().parents[1]):
+        if (base / DEFAULT_CONFIG).is_file():
+            return base / DEFAULT_CONFIG
+    raise ConfigError(f"no CONFIG given and the default {DEFAULT_CONFIG} was not found; give a system YAML, "
+                      "e.g. fusion tui configs/example_2d.yaml --port /dev/ttyUSB0")
+
+
+def build_app(args: argparse.Namespace):
+    """The app the arguments describe; every usage, config and input error is raised here, before the UI
+    takes the terminal."""
+    from fusion.commands.run import filter_override
+    from fusion.config import load_yaml
+    from fusion.tui.app import make_app
+
+    if args.record and not args.port:
+        raise ConfigError("--record tees a live --port to a file; a replayed recording is already on disk")
+    if args.port and args.speed is not None:
+        raise ConfigError("--speed applies to replays; a live --port runs at the device's pace")
+    if args.speed is not None and not (math.isfinite(args.speed) and args.speed >= 0.0):
+        raise ConfigError(f"--speed {args.speed}: expected a number >= 0 (0 = as fast as possible)")
+    if args.baud <= 0:
+        raise ConfigError(f"--baud {args.baud}: expected a positive rate in bit/s, e.g. 115200")
+    if not (0.5 <= args.refresh <= 60.0):
+        raise ConfigError(f"--refresh {args.refresh}: expected 0.5 to 60 refreshes per second")
+    if args.input == "-":
+        raise ConfigError("--input -: the live view reads its keys from the terminal, so it cannot replay stdin; "
+                          "give a file, a --port (socket://host:port for a network stream), or use fusion run")
+    if args.record and Path(args.record).exists():
+        raise InputError(f"--record {args.record}: the file exists; choose a new name (nothing is overwritten)")
+    config = _config_path(args.config)
+    doc = load_yaml(config)
+    override = filter_override(doc.data.get("filter", "ekf"), args.filter, args.filter_param)
+    source = args.input
+    if args.port:
+        from fusion.sources.serial import SerialSource
+
+        source = SerialSource(port=args.port, baud=args.baud, record=args.record)
+    speed = 1.0 if args.speed is None else args.speed
+    return make_app(config, source, speed=speed, refresh_hz=args.refresh, filter_override=override)
+
+
+def run(args: argparse.Namespace) -> int:
+    app = build_app(args)
+    app.run()
+    snap = app.latest
+    if snap is None:
+        return 0
+    note = f"fusion tui: {snap.lines} lines from {snap.source}"
+    if args.record:
+        note += f"; raw input recorded to {args.record}"
+    print(note)
+    if snap.state == "error":
+        print(f"fusion tui: {snap.message}", file=sys.stderr)
+        return 1
+    if snap.state == "lost":
+        raise FusionError(snap.message)
+    return 0

@@ -1,0 +1,144 @@
+"""The serial source over pyserial's loop:// and a pty pair (no hardware), alone and feeding the live view."""
+import asyncio
+import os
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fusion.api import InputError
+from fusion.commands.run import replay
+from fusion.config import load_system
+from fusion.registry import default_registry
+from fusion.sources.serial import PortLost, SerialSource
+from fusion.tui.app import make_app
+from fusion.tui.event_log import EventLog
+from fusion.tui.state_table import StateTable
+from fusion.tui.status_line import StatusLine
+
+ROOT = Path(__file__).resolve().parents[2]
+CONFIG = ROOT / "configs" / "example_2d.yaml"
+RECORDING = ROOT / "recordings" / "example_2d.log"
+
+pty_only = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pty pair (POSIX)")
+
+
+def test_serial_source_is_a_registered_plugin():
+    assert default_registry().get("source", "serial") is SerialSource
+
+
+def test_loop_lines_are_split_decoded_and_recorded_byte_for_byte(tmp_path):
+    rec = tmp_path / "raw.log"
+    src = SerialSource(port="loop://", record=str(rec)).open()
+    sent = [b"# fields uwb beacon range\r\n", b"1.0,uwb,B1,3.0\r\n2.0,uwb,B\xff", b"2,4.5\n3.0,uwb,B3,", b"5.0\n"]
+    lines = src.lines()
+    got = []
+    for chunk in sent:
+        src.port.write(chunk)
+        while len(got) < sum(c.count(b"\n") for c in sent[: sent.index(chunk) + 1]):
+            got.append(next(lines))
+    assert got == ["# fields uwb beacon range\r\n", "1.0,uwb,B1,3.0\r\n", "2.0,uwb,B\ufffd2,4.5\n", "3.0,uwb,B3,5.0\n"]
+    rest = []
+    reader = threading.Thread(target=lambda: rest.extend(lines))
+    reader.start()
+    src.port.write(b"4.0,uwb,B4")  # a partial line when the reader is closed
+    time.sleep(0.3)
+    src.close()
+    reader.join(2.0)
+    assert rest == ["4.0,uwb,B4"]
+    assert src.port is None
+    assert rec.read_bytes() == b"".join(sent) + b"4.0,uwb,B4"  # the bad byte too: nothing is lost
+
+
+def test_close_wakes_a_reader_waiting_on_a_silent_port():
+    src = SerialSource(port="loop://", timeout=0.05).open()
+    out = []
+    reader = threading.Thread(target=lambda: out.extend(src.lines()))
+    reader.start()
+    time.sleep(0.1)
+    t0 = time.monotonic()
+    src.close()
+    reader.join(2.0)
+    assert not reader.is_alive() and time.monotonic() - t0 < 1.0
+    assert out == []
+
+
+def test_missing_port_is_one_clear_input_error():
+    with pytest.raises(InputError, match=r"^cannot open /dev/fusion-no-such-port: No such file or directory"):
+        SerialSource(port="/dev/fusion-no-such-port").open()
+    with pytest.raises(InputError, match="cannot open nosuch://x"):
+        SerialSource(port="nosuch://x").open()
+
+
+@pty_only
+def test_pty_delivers_lines_and_a_closed_master_is_a_lost_port():
+    master, slave = os.openpty()
+    try:
+        src = SerialSource(port=os.ttyname(slave), baud=9600).open()
+        os.write(master, b"1.0,uwb,B1,3.0\r\n2.0,uwb,B2,4.0\n2.5,uwb")
+        lines = src.lines()
+        assert [next(lines), next(lines)] == ["1.0,uwb,B1,3.0\r\n", "2.0,uwb,B2,4.0\n"]
+        time.sleep(0.05)
+        os.close(master)
+        assert next(lines) == "2.5,uwb"  # what was received before the loss is still delivered
+        with pytest.raises(PortLost, match=r"^lost /dev/"):
+            next(lines)
+        assert src.port is None
+    finally:
+        os.close(slave)
+
+
+def _write_slowly(fd, data: bytes, chunk: int = 1024):
+    for i in range(0, len(data), chunk):
+        os.write(fd, data[i:i + chunk])
+        time.sleep(0.002)
+
+
+@pty_only
+def test_live_view_over_a_pty_keeps_the_last_state_when_the_port_is_lost(tmp_path):
+    text = "".join(RECORDING.read_text().splitlines(True)[:600])
+    n_lines = text.count("\n")
+    n_uwb = sum(",uwb," in line for line in text.splitlines())
+    ref = replay(load_system(CONFIG), _write(tmp_path / "part.log", text))["estimates"][-1]
+    master, slave = os.openpty()
+    rec = tmp_path / "rec.log"
+    src = SerialSource(port=os.ttyname(slave), record=str(rec))
+    app = make_app(CONFIG, src)
+
+    async def drive():
+        async with app.run_test(size=(130, 40)) as pilot:
+            writer = threading.Thread(target=_write_slowly, args=(master, text.encode()))
+            writer.start()
+            deadline = time.monotonic() + 15
+            while app.latest is None or app.latest.lines < n_lines:
+                assert time.monotonic() < deadline, "lines did not arrive"
+                await pilot.pause(0.02)
+            writer.join()
+            assert app.latest.live and app.latest.state == "running"
+            os.close(master)
+            while app.latest.state != "lost":
+                assert time.monotonic() < deadline, "the lost port was not reported"
+                await pilot.pause(0.02)
+            await pilot.pause(0.05)
+            snap = app.latest
+            assert snap.counters["uwb"]["received"] == n_uwb
+            # The buffered messages were released at the loss: the last state is the whole stream's.
+            np.testing.assert_allclose(snap.estimate.belief.x, ref.belief.x, rtol=0, atol=1e-12)
+            status = app.query_one(StatusLine).text
+            assert "LOST" in status and "lost /dev/" in status and "live" in status
+            assert "lost /dev/" in "\n".join(app.query_one(EventLog).lines_text)
+            assert app.query_one(StateTable).cells["px"][0] == f"{ref.belief.x[0]:.4f}"
+            await pilot.press("q")
+
+    try:
+        asyncio.run(drive())
+    finally:
+        os.close(slave)
+    assert rec.read_text() == text
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
