@@ -1,7 +1,7 @@
 """The live view: ``make_app(config, source)`` builds the Textual app used by ``fusion tui`` and the tests.
 
-Layout: state table and per-sensor counters on the left; the track (top view) and the event log on the
-right; a status line at the bottom. Keys: q quit, p pause (a replay stops; a live port keeps being read
+Layout: state table and per-sensor counters on the left, the track (top view) on the right, the event
+log below them, a status line at the bottom. Keys: q quit, p pause (a replay stops; a live port keeps being read
 and recorded, only the view freezes), r reset view (forget the trail and the event log shown so far).
 """
 from __future__ import annotations
@@ -34,10 +34,9 @@ class FusionApp(App):
     TITLE = "fusion"
     CSS = """
     #main { height: 1fr; }
-    #left { width: 60; }
-    #right { width: 1fr; }
+    #left { width: 64; }
     StateTable, SensorCounters, EventLog { border: round $primary-darken-2; }
-    EventLog { height: 12; }
+    EventLog { height: 10; }
     """
     BINDINGS = [
         Binding("q", "quit", "quit"),
@@ -64,9 +63,8 @@ class FusionApp(App):
             with Vertical(id="left"):
                 yield StateTable(self.system.layout)
                 yield SensorCounters()
-            with Vertical(id="right"):
-                yield TrackPlot(self.system.beacons, has_position=self._pos is not None)
-                yield EventLog()
+            yield TrackPlot(self.system.beacons, has_position=self._pos is not None)
+        yield EventLog()
         yield StatusLine(self.system.filter.name)
         yield Footer()
 

@@ -23,7 +23,7 @@ class TrackPlot(Widget):
     """Horizontal track of a snapshot: (north, east) points in m."""
 
     DEFAULT_CSS = """
-    TrackPlot { height: 1fr; min-height: 8; border: round $primary-darken-2; }
+    TrackPlot { width: 1fr; height: 1fr; min-height: 8; border: round $primary-darken-2; }
     """
 
     def __init__(self, beacons: Mapping[str, np.ndarray] | None = None, has_position: bool = True, **kwargs) -> None:
