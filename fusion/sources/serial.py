@@ -7,6 +7,11 @@ U+FFFD and then counted as malformed); ``record`` tees the raw bytes, exactly as
 ``port`` is a device (``/dev/ttyUSB0``, ``COM3``) or any pyserial URL (``loop://``,
 ``socket://host:port``, ``rfc2217://host:port``), opened with ``serial.serial_for_url``.
 
+Opening a port while the device is sending cuts the first line: when bytes are waiting at the first read
+(no silent read timeout before them), the first line, unless a comment, is passed on as a comment (counted
+as a line, never fused), since a fragment can still parse with a wrong time. A device that starts
+sending after the port is open loses nothing.
+
 Errors: a port that cannot be opened is an ``InputError`` ("cannot open PORT: reason"); a port that fails
 while reading (unplugged device, closed pty) is a ``PortLost`` (an ``InputError``) raised from ``lines()``
 after the last partial line is yielded, so nothing received is lost.
@@ -131,6 +136,7 @@ class SerialSource(Source):
         import serial
 
         buf = bytearray()
+        first = True  # the first line is cut when the port is opened while the device is sending
         try:
             port = self.open().port
             while not self._closed.is_set():
@@ -144,6 +150,8 @@ class SerialSource(Source):
                         buf.clear()
                     raise PortLost(f"lost {self.params.port}: {_reason(exc)}") from None
                 if not chunk:
+                    if first and not buf:
+                        first = False  # a read timed out before any byte: the device starts on a line
                     if self.on_idle is not None:
                         self.on_idle()
                     continue
@@ -157,7 +165,14 @@ class SerialSource(Source):
                 *done, rest = buf.split(b"\n")
                 buf = bytearray(rest)
                 for raw in done:
-                    yield raw.decode("utf-8", "replace") + "\n"
+                    text = raw.decode("utf-8", "replace")
+                    if first and not text.startswith("#"):
+                        # A fragment may still parse ("560000,imu,..." from "1234.560000,imu,...") with a
+                        # wrong time that would make every later message late: keep it as a comment (same
+                        # line number as in the record file, never fused).
+                        first = False
+                        text = "# fusion: first line cut by opening the port mid-stream: " + text
+                    yield text + "\n"
             if buf:  # closed mid-line: the partial line too
                 yield buf.decode("utf-8", "replace")
         finally:

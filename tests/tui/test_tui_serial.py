@@ -31,15 +31,17 @@ def test_serial_source_is_a_registered_plugin():
 
 def test_loop_lines_are_split_decoded_and_recorded_byte_for_byte(tmp_path):
     rec = tmp_path / "raw.log"
-    src = SerialSource(port="loop://", record=str(rec)).open()
-    sent = [b"# fields uwb beacon range\r\n", b"1.0,uwb,B1,3.0\r\n2.0,uwb,B\xff", b"2,4.5\n3.0,uwb,B3,", b"5.0\n"]
+    src = SerialSource(port="loop://", record=str(rec), timeout=0.05).open()
+    sent = [b"1.0,uwb,B1,3.0\r\n", b"# fields uwb beacon range\r\n2.0,uwb,B\xff", b"2,4.5\n3.0,uwb,B3,", b"5.0\n"]
     lines = src.lines()
+    src.on_idle = lambda: src.port.write(sent[0]) if not src.bytes_received else None  # a device that starts late
     got = []
     for chunk in sent:
-        src.port.write(chunk)
+        if chunk is not sent[0]:
+            src.port.write(chunk)
         while len(got) < sum(c.count(b"\n") for c in sent[: sent.index(chunk) + 1]):
             got.append(next(lines))
-    assert got == ["# fields uwb beacon range\r\n", "1.0,uwb,B1,3.0\r\n", "2.0,uwb,B\ufffd2,4.5\n", "3.0,uwb,B3,5.0\n"]
+    assert got == ["1.0,uwb,B1,3.0\r\n", "# fields uwb beacon range\r\n", "2.0,uwb,B\ufffd2,4.5\n", "3.0,uwb,B3,5.0\n"]
     rest = []
     reader = threading.Thread(target=lambda: rest.extend(lines))
     reader.start()
@@ -50,6 +52,16 @@ def test_loop_lines_are_split_decoded_and_recorded_byte_for_byte(tmp_path):
     assert rest == ["4.0,uwb,B4"]
     assert src.port is None
     assert rec.read_bytes() == b"".join(sent) + b"4.0,uwb,B4"  # the bad byte too: nothing is lost
+
+
+def test_first_line_of_a_port_opened_mid_stream_is_not_fused():
+    src = SerialSource(port="loop://").open()
+    src.port.write(b"560000,uwb,B1,3.0\n1.0,uwb,B2,4.0\n")  # "1234.560000,uwb,..." cut by the open
+    lines = src.lines()
+    first, second = next(lines), next(lines)
+    assert first == "# fusion: first line cut by opening the port mid-stream: 560000,uwb,B1,3.0\n"
+    assert second == "1.0,uwb,B2,4.0\n"
+    src.close()
 
 
 def test_close_wakes_a_reader_waiting_on_a_silent_port():
@@ -76,9 +88,9 @@ def test_missing_port_is_one_clear_input_error():
 def test_pty_delivers_lines_and_a_closed_master_is_a_lost_port():
     master, slave = os.openpty()
     try:
-        src = SerialSource(port=os.ttyname(slave), baud=9600).open()
-        os.write(master, b"1.0,uwb,B1,3.0\r\n2.0,uwb,B2,4.0\n2.5,uwb")
+        src = SerialSource(port=os.ttyname(slave), baud=9600, timeout=0.05).open()
         lines = src.lines()
+        src.on_idle = lambda: os.write(master, b"1.0,uwb,B1,3.0\r\n2.0,uwb,B2,4.0\n2.5,uwb") and setattr(src, "on_idle", None)
         assert [next(lines), next(lines)] == ["1.0,uwb,B1,3.0\r\n", "2.0,uwb,B2,4.0\n"]
         time.sleep(0.05)
         os.close(master)
@@ -109,6 +121,7 @@ def test_live_view_over_a_pty_keeps_the_last_state_when_the_port_is_lost(tmp_pat
 
     async def drive():
         async with app.run_test(size=(130, 40)) as pilot:
+            await until_silent_read(src)  # the device starts sending after the port is open
             writer = threading.Thread(target=_write_slowly, args=(master, text.encode()))
             writer.start()
             deadline = time.monotonic() + 15
@@ -137,6 +150,15 @@ def test_live_view_over_a_pty_keeps_the_last_state_when_the_port_is_lost(tmp_pat
     finally:
         os.close(slave)
     assert rec.read_text() == text
+
+
+async def until_silent_read(src):
+    waited, idle = [], src.on_idle
+    src.on_idle = lambda: (waited.append(1), idle())
+    deadline = time.monotonic() + 5
+    while not waited:
+        assert time.monotonic() < deadline
+        await asyncio.sleep(0.02)
 
 
 def _write(path: Path, text: str) -> Path:
