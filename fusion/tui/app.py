@@ -34,7 +34,7 @@ class FusionApp(App):
     TITLE = "fusion"
     CSS = """
     #main { height: 1fr; }
-    #left { width: 64; }
+    #left { width: 62; }
     StateTable, SensorCounters, EventLog { border: round $primary-darken-2; }
     EventLog { height: 10; }
     """
