@@ -157,8 +157,11 @@ class SerialSource(Source):
                     continue
                 self.bytes_received += len(chunk)
                 if self._record is not None:
-                    self._record.write(chunk)
-                    self._record.flush()
+                    try:
+                        self._record.write(chunk)
+                        self._record.flush()
+                    except OSError as exc:  # stop rather than go on without the record asked for
+                        raise InputError(f"cannot write the record file {self.params.record}: {_reason(exc)}") from None
                 buf += chunk
                 if b"\n" not in chunk:
                     continue
