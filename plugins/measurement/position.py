@@ -11,6 +11,9 @@ from fusion import quaternion as quat
 from fusion.api import BuildContext, ConfigError, MalformedMessage, MeasurementModel, Message, Observation, Params
 
 
+_SYM3 = np.array([[3, 4, 5], [4, 6, 7], [5, 7, 8]])   # indices into a 9-value fix of its symmetric covariance
+
+
 def static_R(fixes: np.ndarray, full: bool = False) -> np.ndarray:
     """R from fixes (N, m) taken at one fixed point (paper 000 sec. V-B): ``diag(sd_x^2, sd_y^2, ...)``
     (m^2), or the full sample covariance with ``full=True``."""
@@ -123,9 +126,7 @@ class Position(MeasurementModel):
                 model = AgedPosition(self, float(z[9]))
             z = z[:9]
         if z.size == 9:
-            cov = np.zeros((3, 3))
-            cov[np.triu_indices(3)] = z[3:]
-            cov = cov + np.triu(cov, 1).T
+            cov = z[_SYM3]                      # the upper triangle x y z cxx cxy cxz cyy cyz czz, mirrored
             if self.params.use_fix_covariance:  # type: ignore[attr-defined]
                 R = cov[:self.dim, :self.dim]
             z = z[:3]
