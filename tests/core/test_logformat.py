@@ -78,7 +78,7 @@ labels = st.from_regex(r"[A-Za-z][A-Za-z0-9_]{0,6}", fullmatch=True).filter(
     lambda s: s.lower() not in {"nan", "inf", "infinity"})
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=120, deadline=None)
 @given(st.lists(st.tuples(finite, st.sampled_from(["imu", "uwb", "gps_1"]),
                           st.lists(st.one_of(finite, labels), min_size=1, max_size=6), st.booleans()),
                 max_size=15),
