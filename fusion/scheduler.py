@@ -167,8 +167,7 @@ class Scheduler:
         try:
             decoded = sensor.decoder.decode(msg)
         except MalformedMessage as exc:
-            sensor.counters["malformed"] += 1
-            yield Event(msg.t, "malformed", msg.sensor, f"line {msg.line}: {exc}")
+            yield self._bad(sensor, msg, exc)
             return
         if decoded is None:
             return
@@ -177,6 +176,13 @@ class Scheduler:
         for out in outs:
             yield from self._measure(sensor, out)
         self._snapshot()
+
+    @staticmethod
+    def _bad(sensor: SensorRuntime, msg: Message, exc: MalformedMessage) -> Event:
+        """Count a message a plugin refused (rejected: outside the sensor's limits; else malformed)."""
+        kind = "rejected" if isinstance(exc, RejectedMessage) else "malformed"
+        sensor.counters[kind] += 1
+        return Event(msg.t, kind, sensor.name, f"line {msg.line}: {exc}")
 
     def _drain_solver_events(self, sensor: SensorRuntime) -> Iterator[Event]:
         events = getattr(sensor.preprocessor, "events", None)
@@ -224,13 +230,8 @@ class Scheduler:
                 if decoded is None:
                     continue
                 u = self.process.input_from(decoded)
-            except RejectedMessage as exc:
-                sensor.counters["rejected"] += 1
-                yield Event(msg.t, "rejected", msg.sensor, f"line {msg.line}: {exc}")
-                continue
             except MalformedMessage as exc:
-                sensor.counters["malformed"] += 1
-                yield Event(msg.t, "malformed", msg.sensor, f"line {msg.line}: {exc}")
+                yield self._bad(sensor, msg, exc)
                 continue
             if sensor.max_gap is not None and self._last_input_t is not None and msg.t - self._last_input_t > sensor.max_gap:
                 yield Event(msg.t, "gap", msg.sensor, f"no {msg.sensor} sample for {msg.t - self._last_input_t:.3f} s "
@@ -288,8 +289,7 @@ class Scheduler:
         try:
             obs = sensor.model.observe(msg)  # type: ignore[union-attr]
         except MalformedMessage as exc:
-            sensor.counters["malformed"] += 1
-            yield Event(msg.t, "malformed", sensor.name, f"line {msg.line}: {exc}")
+            yield self._bad(sensor, msg, exc)
             return
         if obs is None:
             return
