@@ -14,7 +14,6 @@ turns these into ``warning`` Events (thresholds ``gdop_warn`` and ``mirror_warn_
 """
 from __future__ import annotations
 
-import math
 from functools import lru_cache
 
 import numpy as np
@@ -87,53 +86,68 @@ class RangeModel(MeasurementModel):
         return H
 
     # ------------------------------------------------------------------ geometry check
-    def geometry(self, x: np.ndarray, P: np.ndarray | None = None) -> dict[str, float]:
-        """Geometry of the sensor's beacons at the position of the state ``x`` (n,).
+    def geometry(self, x: np.ndarray, P: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Geometry of the sensor's beacons at the position of states ``x`` (..., n); ``P`` (..., n, n).
 
-        ``gdop``: sqrt(trace((H^T H)^-1)) with H the unit line-of-sight rows of every beacon (inf when
+        ``gdop`` (...): sqrt(trace((H^T H)^-1)) with H the unit line-of-sight rows of every beacon (inf when
         singular): a single fix from one range to each beacon has position sd ~ GDOP x range sd.
         ``offset_m`` (degenerate layouts only): distance of the estimate from the beacons' line (2-D) or
-        plane (3-D), m; ``offset_sigma``: that distance over the belief's sd in that direction (needs P):
+        plane (3-D), m; ``offset_sigma`` (needs P): that distance over the belief's sd in that direction;
         the mirror image of the estimate across the line is 2 x offset_sigma standard deviations away.
+        Values are arrays of the leading shape of ``x`` (0-d for one state).
         """
-        p = np.asarray(x, float)[self._p]
+        p = np.asarray(x, float)[..., self._p]
         if self._all.shape[1] != self._dp:
-            return {"gdop": math.nan}
-        d = p - self._all
-        r = np.sqrt(np.einsum("kd,kd->k", d, d) + self._all_dz2)
-        H = d / np.maximum(r, 1e-12)[:, None]
-        A = H.T @ H
-        w = np.linalg.eigvalsh(A)
-        gdop = math.sqrt(float(np.sum(1.0 / w))) if w.min() > 1e-12 * max(w.max(), 1e-300) else math.inf
+            return {"gdop": np.full(p.shape[:-1], np.nan)}
+        d = p[..., None, :] - self._all                                   # (..., k, dp)
+        r = np.sqrt(np.einsum("...kd,...kd->...k", d, d) + self._all_dz2)
+        H = d / np.maximum(r, 1e-12)[..., None]
+        w = np.linalg.eigvalsh(np.einsum("...kd,...ke->...de", H, H))    # ascending
+        ok = w[..., 0] > 1e-12 * np.maximum(w[..., -1], 1e-300)
+        gdop = np.where(ok, np.sqrt(np.sum(1.0 / np.where(ok[..., None], w, 1.0), axis=-1)), np.inf)
         out = {"gdop": gdop}
         if self.degenerate is not None:
             a, basis = self.degenerate
             rel = p - a
-            perp = rel - basis @ (basis.T @ rel)
-            off = float(np.linalg.norm(perp))
+            perp = rel - (rel @ basis) @ basis.T
+            off = np.linalg.norm(perp, axis=-1)
             out["offset_m"] = off
             if P is not None:
-                n = perp / off if off > 1e-9 else _any_normal(basis, self._dp)
-                Pp = np.asarray(P, float)[self._p, self._p]
-                out["offset_sigma"] = off / math.sqrt(max(float(n @ Pp @ n), 1e-300))
+                n = np.where((off > 1e-9)[..., None], perp / np.maximum(off, 1e-9)[..., None],
+                             _any_normal(basis, self._dp))
+                Pp = np.asarray(P, float)[..., self._p, self._p]
+                var = np.einsum("...i,...ij,...j->...", n, Pp, n)
+                out["offset_sigma"] = off / np.sqrt(np.maximum(var, 1e-300))
         return out
+
+    def warnings(self, geometry: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """Boolean arrays (gdop_warning, mirror_warning) of a ``geometry`` result, by the thresholds."""
+        pw = self.params
+        g = np.asarray(geometry["gdop"])
+        gw = g > pw.gdop_warn if pw.gdop_warn is not None else np.zeros(g.shape, bool)
+        off = geometry.get("offset_sigma")
+        mw = (np.asarray(off) < pw.mirror_warn_sigma if (off is not None and pw.mirror_warn_sigma is not None)
+              else np.zeros(g.shape, bool))
+        return gw, mw
 
     def check(self, belief: Belief, sensor: str | None = None) -> list[Event]:
         """``warning`` Events for a degenerate geometry at the belief's mean: GDOP above ``gdop_warn``,
         or (beacons on one line/plane) the estimate within ``mirror_warn_sigma`` sd of that line/plane, where
         the filter can cross to the mirror image and stay there (no gate can tell: it fits the ranges)."""
         g = self.geometry(belief.x, belief.cov)
+        gw, mw = self.warnings(g)
         ev: list[Event] = []
         pw = self.params
         where = ", ".join(f"{v:.2f}" for v in np.asarray(belief.x)[self._p])
-        if pw.gdop_warn is not None and g["gdop"] > pw.gdop_warn:
-            ev.append(Event(belief.t, "warning", sensor, f"range: GDOP {g['gdop']:.3g} at ({where}) exceeds "
+        if gw:
+            ev.append(Event(belief.t, "warning", sensor, f"range: GDOP {float(g['gdop']):.3g} at ({where}) exceeds "
                             f"{pw.gdop_warn:g}: the beacons constrain the position poorly here"))
-        if pw.mirror_warn_sigma is not None and g.get("offset_sigma", math.inf) < pw.mirror_warn_sigma:
+        if mw:
             kind = ("point", "line", "plane")[self.degenerate[1].shape[1]]  # type: ignore[index]
-            ev.append(Event(belief.t, "warning", sensor, f"range: estimate ({where}) is {g['offset_sigma']:.2g} sd "
-                            f"({g['offset_m']:.2f} m) from the {kind} of the beacons {', '.join(sorted(self._known))}: "
-                            "its mirror image fits the ranges as well; the filter may cross to it"))
+            ev.append(Event(belief.t, "warning", sensor, f"range: estimate ({where}) is "
+                            f"{float(g['offset_sigma']):.2g} sd ({float(g['offset_m']):.2f} m) from the {kind} of the "
+                            f"beacons {', '.join(sorted(self._known))}: its mirror image fits the ranges as well; "
+                            "the filter may cross to it"))
         return ev
 
     def observe(self, message: Message) -> Observation | None:
