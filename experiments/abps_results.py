@@ -309,7 +309,9 @@ def page(results: list[tuple[str, dict, dict]], bench: dict, ukf_diff: tuple[flo
     st, rp = bench["steps"], bench["replay"]
     dur = rp["data_s"]
     add(f"Measured by `python benchmarks/bench_abps.py` on {platform.machine()} ({os.cpu_count()} cores shared with other")
-    add(f"jobs), Python {platform.python_version()}, numpy {np.__version__}; thread CPU time, best of several rounds.")
+    add(f"jobs: load average {bench['load']:.1f} while measuring), Python {platform.python_version()}, numpy {np.__version__};")
+    add("thread CPU time, best of several rounds. On this machine the figures move by up to ~1.5x with the load of")
+    add("the other jobs (the replay measured 100-155x real time over the session that wrote this page).")
     add("")
     add("| step | us |")
     add("|---|---:|")
@@ -386,9 +388,10 @@ def main(argv=None) -> None:
 
     steps = bench_abps.step_costs(rounds=5 if args.quick else 20)
     replay_ = bench_abps.replay_speed(repeats=2 if args.quick else 5)
+    load = os.getloadavg()[0]
     replay_["data_s"] = replay_["duration_s"]
     replay_["lines"] = sum(1 for _ in open(results[0][1]["system"].recording))
-    OUT.write_text(page(results, {"steps": steps, "replay": replay_}, ukf_diff, time.perf_counter() - t0))
+    OUT.write_text(page(results, {"steps": steps, "replay": replay_, "load": load}, ukf_diff, time.perf_counter() - t0))
     print(f"wrote {OUT.relative_to(ROOT)} and {FIG.relative_to(ROOT)}/*.png")
 
 
