@@ -40,7 +40,7 @@ def belief_and_inputs(k):
 
 
 @pytest.mark.parametrize("integration", ["trapezoidal", "euler"])
-@pytest.mark.parametrize("k", [2, 7, 40])
+@pytest.mark.parametrize("k", [2, 7, 17, 40])
 def test_f_inputs_equals_k_calls_of_f(integration, k):
     rng = np.random.default_rng(k)
     proc = ins(integration=integration)
