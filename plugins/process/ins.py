@@ -1,6 +1,7 @@
 """Process ``ins``: IMU-driven 16-state strapdown INS (paper 000, sec. V-A, eqs. 33-52)."""
 from __future__ import annotations
 
+import math
 from typing import ClassVar, Literal
 
 import numpy as np
@@ -248,7 +249,10 @@ class Ins(ProcessModel):
         """Renormalise the quaternion block of states x (..., 16) to unit norm (a new array)."""
         x = np.array(x, dtype=float, copy=True)
         q = x[..., 6:10]
-        q /= np.sqrt((q * q).sum(axis=-1, keepdims=True))
+        if x.ndim == 1:
+            q /= math.sqrt(float(q @ q))
+        else:
+            q /= np.sqrt((q * q).sum(axis=-1, keepdims=True))
         return x
 
     # ------------------------------------------------------------------ linearisation

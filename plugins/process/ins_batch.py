@@ -95,7 +95,8 @@ def integrate_inputs(x: np.ndarray, us: np.ndarray, dts: np.ndarray, g_col: np.n
     D[1:, 0] = np.cos(s)
     np.multiply((np.sin(s_) / s_)[:, None], half, out=D[1:, 1:])
     _prefix_products(D, N)
-    RP = (K10T[:9] @ (D[:, :, None] * D[:, None, :]).transpose(1, 2, 0, 3).reshape(16, (k + 1) * N))
+    Dt = D.transpose(1, 0, 2)                                # (4, k + 1, N) view: the outer product comes out
+    RP = K10T[:9] @ (Dt[:, None] * Dt[None, :]).reshape(16, (k + 1) * N)   # in gemm order, no copy
     RP = RP.reshape(3, 3, k + 1, N)                          # C(P_j) (unit P_j: R = C)
     a = us[:, :3].T[:, :, None] - X[10:13, None, :]          # (3, k, N): a_j = u_j - b_a, eq. 37
     T = float(dts.sum())
