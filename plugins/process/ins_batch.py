@@ -32,10 +32,8 @@ _G16[0:6, 0:6] = np.eye(6)
 _G16[10:16, 9:15] = np.eye(6)
 
 
-def _GL_POWERS(T: float) -> np.ndarray:
-    """(4, 3): [s, s^2 / 2, s^3 / 6] at the Gauss-Legendre nodes s of [0, T]."""
-    s = _GL_NODES * T
-    return np.stack((s, 0.5 * s * s, s * s * s / 6.0), axis=1)
+# (4, 3): [s, s^2 / 2, s^3 / 6] at the Gauss-Legendre nodes s of [0, 1] (times [T, T^2, T^3] for [0, T])
+_GL_POWERS = np.stack((_GL_NODES, 0.5 * _GL_NODES ** 2, _GL_NODES ** 3 / 6.0), axis=1)
 
 
 def _qmul_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -153,13 +151,16 @@ def interval_noise(x0: np.ndarray, x1: np.ndarray, dts: np.ndarray, g_n: np.ndar
     qm = x0[6:10] + x1[6:10]
     Rn = K10T @ (qm[:, None] * qm).reshape(16)
     C = (Rn[:9] / Rn[9]).reshape(3, 3)                       # C_b^n at mid-interval
-    F = np.zeros((15, 15))
+    FF = np.zeros((3, 15, 15))                               # F, F^2, F^3
+    F = FF[0]
     F[0:3, 3:6] = _EYE3
     F[3:6, 6:9] = ((0.0, fn[2], -fn[1]), (-fn[2], 0.0, fn[0]), (fn[1], -fn[0], 0.0))   # -[f_n x]
     F[3:6, 9:12] = F[6:9, 12:15] = -C
-    F2 = F @ F
+    np.matmul(F, F, out=FF[1])
+    np.matmul(FF[1], F, out=FF[2])
     # Phi(s_m) = e^{F s_m} = I + F s + F^2 s^2 / 2 + F^3 s^3 / 6 at the 4 Gauss-Legendre nodes s_m
-    Phi = (_GL_POWERS(T) @ np.stack((F, F2, F2 @ F)).reshape(3, 225)).reshape(4, 15, 15) + _EYE15
+    Phi = ((_GL_POWERS * (T, T * T, T * T * T)) @ FF.reshape(3, 225)).reshape(4, 15, 15)
+    Phi += _EYE15
     q = x1[6:10]
     q0, q1, q2, q3 = q
     G = _G16.copy()
