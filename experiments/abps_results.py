@@ -416,7 +416,7 @@ def main(argv=None) -> None:
     import bench_abps
 
     steps = bench_abps.step_costs(rounds=5 if args.quick else 20)
-    replay_ = bench_abps.replay_speed(repeats=2 if args.quick else 5)
+    replay_ = bench_abps.replay_speed(repeats=2 if args.quick else 10)
     load = os.getloadavg()[0]
     replay_["data_s"] = replay_["duration_s"]
     replay_["lines"] = sum(1 for _ in open(results[0][1]["system"].recording))
