@@ -119,7 +119,11 @@ class Ins(ProcessModel):
     gyro N_w enters q through ``dq/dw = Xi(q) dt/2`` (first order): Q_qq = (dt/4) Xi(q) N_w^2 Xi(q)^T
     (rank 3: nothing along q itself, plus ``quat_norm_variance`` q q^T/|q|^2 if set); biases
     Q_ba = N_ba^2 dt, Q_bw = N_bw^2 dt (eqs. 51-52 with W of variance N^2/dt). Cross terms between the
-    bias random walks and v, q are second order in dt and neglected.
+    bias random walks and v, q are second order in dt and neglected. A sample held past ``hold_after``
+    (an IMU gap) adds hold noise (:meth:`_add_hold_noise`).
+
+    A run of samples in one step (the filters' ``predict_inputs``): :meth:`f_inputs` (exact, vectorised
+    over the samples) and :meth:`Q_inputs` (the noise of the interval through the error dynamics).
     """
 
     name: ClassVar[str] = "ins"
