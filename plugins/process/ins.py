@@ -10,9 +10,7 @@ from pydantic import Field, model_validator
 from fusion import quaternion as quat
 from fusion.api import BuildContext, MalformedMessage, Message, Params, ProcessModel, RejectedMessage, StateLayout
 
-from .ins_batch import K10T as _K10T, T16T as _T16T, integrate_inputs, interval_noise
-
-_EYE3 = np.eye(3)
+from .ins_batch import K10T as _K10T, T16T as _T16T, add_hold_noise, integrate_inputs, interval_noise
 
 STANDARD_GRAVITY = 9.80665          # m/s^2
 EARTH_RATE = 7.292115e-5            # rad/s (WGS84)
@@ -120,7 +118,7 @@ class Ins(ProcessModel):
     (rank 3: nothing along q itself, plus ``quat_norm_variance`` q q^T/|q|^2 if set); biases
     Q_ba = N_ba^2 dt, Q_bw = N_bw^2 dt (eqs. 51-52 with W of variance N^2/dt). Cross terms between the
     bias random walks and v, q are second order in dt and neglected. A sample held past ``hold_after``
-    (an IMU gap) adds hold noise (:meth:`_add_hold_noise`).
+    (an IMU gap) adds hold noise (``ins_batch.add_hold_noise``).
 
     A run of samples in one step (the filters' ``predict_inputs``): :meth:`f_inputs` (exact, vectorised
     over the samples) and :meth:`Q_inputs` (the noise of the interval through the error dynamics).
@@ -349,21 +347,8 @@ class Ins(ProcessModel):
             Qqq += qq * (qnv / (q @ q))
         Qm[6:10, 6:10] = Qqq
         if self._hold is not None and dt > self._hold:
-            self._add_hold_noise(Qm, q, dt - self._hold)
+            add_hold_noise(Qm, q, dt - self._hold, self.params.hold_accel_rw, self.params.hold_rate_rw)  # type: ignore[attr-defined]
         return Qm
-
-    def _add_hold_noise(self, Qm: np.ndarray, q: np.ndarray, e: float) -> None:
-        """A sample held ``e`` s longer than ``hold_after`` (a gap): the true input walks away from it
-        (random walks of densities ``hold_accel_rw``, ``hold_rate_rw`` started at the hold), so the
-        velocity and attitude errors grow as e^1.5 and the position error as e^2.5: negligible for a
-        dropped sample, wide enough after a long gap that the fixes are not gated out."""
-        p: InsParams = self.params  # type: ignore[assignment]
-        na, e2 = p.hold_accel_rw ** 2, e * e
-        Qm[3:6, 3:6] += _EYE3 * (na * e2 * e / 3.0)
-        Qm[0:3, 3:6] += _EYE3 * (na * e2 * e2 / 8.0)
-        Qm[3:6, 0:3] += _EYE3 * (na * e2 * e2 / 8.0)
-        Qm[0:3, 0:3] += _EYE3 * (na * e2 * e2 * e / 20.0)
-        Qm[6:10, 6:10] += (np.diag(np.full(4, q @ q)) - q[:, None] * q) * (p.hold_rate_rw ** 2 * e2 * e / 12.0)
 
     def Q_inputs(self, x0: np.ndarray, x1: np.ndarray, us: np.ndarray, dts: np.ndarray) -> np.ndarray:
         """Process noise (16, 16) of a run of samples integrated in one step (:meth:`f_inputs`), from the
@@ -377,7 +362,8 @@ class Ins(ProcessModel):
         if self._hold is not None:
             e = float(np.maximum(np.asarray(dts) - self._hold, 0.0).sum())
             if e > 0.0:
-                self._add_hold_noise(Qm, np.asarray(x1, dtype=float)[6:10], e)
+                add_hold_noise(Qm, np.asarray(x1, dtype=float)[6:10], e, self.params.hold_accel_rw,  # type: ignore[attr-defined]
+                               self.params.hold_rate_rw)  # type: ignore[attr-defined]
         return Qm
 
     # ------------------------------------------------------------------ input

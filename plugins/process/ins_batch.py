@@ -1,7 +1,8 @@
 """Vectorised kernels of the ``ins`` process for a run of IMU samples integrated in one step (the filters'
 ``predict_inputs``): :func:`integrate_inputs` (the mean propagation, exact against sample-by-sample
 :meth:`Ins.f <fusion_plugins.process.ins.Ins.f>`) and :func:`interval_noise` (the process noise of the
-interval). Kept apart from ins.py so that each module stays small; the maths is paper 000 eqs. 33-52.
+interval), and :func:`add_hold_noise` (the noise of a sample held over an IMU gap). Kept apart from ins.py
+so that each module stays small; the maths is paper 000 eqs. 33-52.
 
 States are handled component-first, ``(16, N)`` (one row per element, one column per sigma point), so
 every product is one BLAS call on whole rows instead of N tiny ones.
@@ -14,7 +15,7 @@ import numpy as np
 
 from fusion import quaternion as quat
 
-__all__ = ["integrate_inputs", "interval_noise", "K10T", "T16T"]
+__all__ = ["integrate_inputs", "interval_noise", "add_hold_noise", "K10T", "T16T"]
 
 # [R(q).ravel(), |q|^2] = outer(q, q).ravel() @ K10 (one product gives the rotation matrix and its normaliser)
 K10 = np.concatenate([quat._K, np.eye(16)[:, quat._DIAG16].sum(axis=1, keepdims=True)], axis=1)
@@ -184,3 +185,17 @@ def interval_noise(x0: np.ndarray, x1: np.ndarray, dts: np.ndarray, g_n: np.ndar
     if qnv:
         Qm[6:10, 6:10] += np.outer(q, q) * (qnv * len(dts) / (q @ q))
     return Qm
+
+
+def add_hold_noise(Qm: np.ndarray, q: np.ndarray, e: float, accel_rw: float, rate_rw: float) -> None:
+    """Add to Qm (16, 16), in place, the noise of a sample held ``e`` s longer than ``hold_after`` (an IMU
+    gap): the true input walks away from the held one (random walks of densities ``accel_rw`` m/s^3/sqrt(Hz)
+    and ``rate_rw`` rad/s^2/sqrt(Hz) started at the hold), so velocity and attitude errors grow as e^1.5 and
+    the position error as e^2.5: negligible for one dropped sample, wide enough after a long gap that the
+    fixes are not gated out. q (4,) is the attitude the quaternion block is expressed at."""
+    na, e2 = accel_rw ** 2, e * e
+    Qm[3:6, 3:6] += _EYE3 * (na * e2 * e / 3.0)
+    Qm[0:3, 3:6] += _EYE3 * (na * e2 * e2 / 8.0)
+    Qm[3:6, 0:3] += _EYE3 * (na * e2 * e2 / 8.0)
+    Qm[0:3, 0:3] += _EYE3 * (na * e2 * e2 * e / 20.0)
+    Qm[6:10, 6:10] += (np.diag(np.full(4, q @ q)) - q[:, None] * q) * (rate_rw ** 2 * e2 * e / 12.0)
