@@ -69,7 +69,7 @@ def test_ins_hold_noise_grows_only_past_hold_after():
     np.testing.assert_array_equal(held.Q(x, u, 0.01), base.Q(x, u, 0.01))
     d = held.Q(x, u, 0.02) - base.Q(x, u, 0.02)                  # one dropped sample: negligible
     assert 0 < d[3, 3] < 1e-7
-    d = held.Q(x, u, 1.015) - base.Q(x, u, 1.015)                # a 1 s gap: v sd 0.4 m/s, tilt ~0.3 rad
+    d = held.Q(x, u, 1.015) - base.Q(x, u, 1.015)                # a 1 s gap: v sd 0.4 m/s, attitude 0.6 rad
     assert d[3, 3] == pytest.approx(0.49 / 3) and d[0, 0] == pytest.approx(0.49 / 20)
     assert np.linalg.eigvalsh(held.Q(x, u, 1.015)).min() > -1e-15
     dts = np.r_[np.full(5, 0.01), 1.015, np.full(5, 0.01)]
