@@ -9,7 +9,7 @@ axes, so a sigma-point filter calls them once per step with all ``2n+1`` points.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any, ClassVar, Literal, Mapping, Sequence
+from typing import Any, ClassVar, Literal, Mapping, NamedTuple, Sequence
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict
@@ -179,12 +179,12 @@ class Belief:
         return replace(self, **changes)
 
 
-@dataclass(frozen=True, slots=True)
-class Message:
-    """One timestamped sensor message.
+class Message(NamedTuple):
+    """One timestamped sensor message (immutable).
 
     ``values`` holds the fields after ``t,sensor``: floats, or strings for labels (a beacon name) and raw
     payloads (an NMEA sentence). ``line`` is the 1-based line number in the source, for error messages.
+    A NamedTuple rather than a frozen dataclass: one is built per line, and this builds in half the time.
     """
 
     t: float

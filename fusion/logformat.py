@@ -71,7 +71,10 @@ _GOOD_SENSORS: set[str] = set()  # names already checked against _SENSOR (the re
 
 def parse_line(text: str, lineno: int | None = None) -> Message:
     """Parse one message line (not a comment, not blank). Raises MalformedMessage with the reason."""
-    line = text.strip()
+    return _parse_stripped(text.strip(), lineno)
+
+
+def _parse_stripped(line: str, lineno: int | None) -> Message:
     parts = line.split(",")
     if len(parts) < 3:
         raise MalformedMessage("expected 't,sensor,value,...'")
@@ -104,7 +107,8 @@ def parse_line(text: str, lineno: int | None = None) -> Message:
         values = tuple(map(float, parts[2:]))
     except ValueError:
         return Message(t, sensor, tuple([_field(tok) for tok in parts[2:]]), lineno)
-    if sum(values) - sum(values) != 0.0:  # a nan or inf among them
+    total = sum(values)
+    if total - total != 0.0:  # a nan or inf among them (or an overflowing sum: checked one by one)
         return Message(t, sensor, tuple([_field(tok) for tok in parts[2:]]), lineno)
     return Message(t, sensor, values, lineno)
 
@@ -162,7 +166,7 @@ def iter_messages(lines: Iterable[str], state: ParsedStream | None = None,
                 parse_comment(text, st.header)
                 continue
         try:
-            msg = parse_line(text, lineno)
+            msg = _parse_stripped(text, lineno)
             if known_sensors is not None and msg.sensor not in known_sensors and msg.sensor != "truth":
                 raise MalformedMessage(f"unknown sensor {msg.sensor!r}")
             names = fields.get(msg.sensor)

@@ -89,8 +89,28 @@ class Scheduler:
             yield from self.push(item)
         yield from self.finish()
 
-    def push(self, item: Message | MalformedMessage) -> Iterator[Estimate | Event]:
-        """Accept one message; yields whatever it releases."""
+    def push(self, item: Message | MalformedMessage) -> Iterable[Estimate | Event]:
+        """Accept one message; returns (an iterable of) whatever it releases. Iterate it to drive the filter.
+
+        The common cases (a truth line; an input sample that only joins the pending batch) return an empty
+        tuple without building a generator: at 100-200 Hz that is a measurable share of a replay."""
+        if item.__class__ is Message:
+            sensor = self.sensors.get(item.sensor)
+            if sensor is not None:
+                t = item.t
+                if (sensor.role == "input" and self._batch and not sensor.time_offset and not self._buffer
+                        and self.max_latency == 0.0 and t >= self._horizon and t < self._next_output
+                        and len(self._pending) < _BATCH_MAX - 1):
+                    sensor.counters["received"] += 1
+                    self._horizon = self._newest = t
+                    self._pending.append(item)
+                    return ()
+            elif item.sensor == "truth":
+                self.truth.append(item)
+                return ()
+        return self._push(item)
+
+    def _push(self, item: Message | MalformedMessage) -> Iterator[Estimate | Event]:
         if isinstance(item, MalformedMessage):
             sensor = getattr(item, "sensor", None)
             if sensor in self.sensors:
@@ -98,9 +118,6 @@ class Scheduler:
             yield Event(math.nan, "malformed", sensor, f"line {getattr(item, 'lineno', '?')}: {item}")
             return
         msg = item
-        if msg.sensor == "truth":
-            self.truth.append(msg)
-            return
         sensor = self.sensors.get(msg.sensor)
         if sensor is None:
             n = self.unused.get(msg.sensor, 0)
