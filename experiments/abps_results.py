@@ -338,8 +338,8 @@ def page(results: list[tuple[str, dict, dict]], bench: dict, ukf_diff: tuple[flo
     dur = rp["data_s"]
     add(f"Measured by `python benchmarks/bench_abps.py` on {platform.machine()} ({os.cpu_count()} cores shared with other")
     add(f"jobs: load average {bench['load']:.1f} while measuring), Python {platform.python_version()}, numpy {np.__version__};")
-    add("thread CPU time, best of several rounds. On this machine the figures move by up to ~1.5x with the load of")
-    add("the other jobs (the replay measured 100-155x real time over the session that wrote this page).")
+    add("thread CPU time, best of several rounds. On this machine the figures move by up to ~2x with the load of")
+    add("the other jobs (the replay measured 100-200x real time over the session that wrote this page).")
     add("")
     add("| step | us |")
     add("|---|---:|")
