@@ -313,8 +313,14 @@ class ProcessModel(Component):
         """Bring states (..., n) back to their manifold (unit quaternions); identity by default."""
         return x
 
-    # Optional: ``align(x0, P0, u_mean) -> (x0, P0)`` refines the initial belief from the mean input over a
-    # static start (``initial.align_s`` in the config), e.g. roll and pitch from gravity for an INS.
+    # Optional methods, used when a model has them:
+    # - ``align(x0, P0, u_mean) -> (x0, P0)`` refines the initial belief from the mean input over a static
+    #   start (``initial.align_s`` in the config), e.g. roll and pitch from gravity for an INS.
+    # - ``f_inputs(x, us, dts) -> x``: states (..., n) after the run of inputs ``us`` (k, input_dim), sample
+    #   j held over ``dts[j]`` s; must equal k calls of ``f`` (to rounding). A fast path for the filters'
+    #   ``predict_inputs`` (the scheduler passes the input samples between two measurements in one call).
+    # - ``Q_inputs(x0, x1, us, dts) -> Q`` (n, n): process noise of such a run, from the mean before (x0)
+    #   and after (x1); without it the filters sum ``Q`` over the samples.
 
     def input_from(self, message: Message) -> np.ndarray:
         """The control input u carried by an input-sensor message (default: its values as floats)."""
@@ -375,6 +381,10 @@ class Filter(Component):
     def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                gate: Gate | None = None) -> UpdateResult:
         raise NotImplementedError
+
+    # Optional: ``predict_inputs(belief, process, us (k, m), dts (k,)) -> Belief`` integrates a run of input
+    # samples in order (sample j held over dts[j] s). The scheduler batches input samples into one call when
+    # the filter has it; the built-ins do (sigma-point filters draw their points once per run).
 
 
 class Decoder(Component):
