@@ -6,91 +6,7 @@ from typing import Any
 import numpy as np
 
 from uwb_cases import AFTER_S, INIT_S, MANOEUVRE_ACCEL, NEAR_M
-
-
-class Facts:
-    """Look-ups into the summary: ``s(study, case, metric)`` is the paired statistics dict."""
-
-    def __init__(self, summary: dict[str, Any]):
-        self.summary = summary
-
-    def s(self, study: str, case: str, metric: str) -> dict[str, Any]:
-        return self.summary[study][case]["metrics"][metric]
-
-    def mean(self, study, case, metric, flt="ukf") -> float:
-        return self.s(study, case, metric)[f"{flt}_mean"]
-
-    def rel(self, study, case, metric) -> str:
-        return _pct(self.s(study, case, metric)["rel_median"])
-
-    def lost(self, study, case, flt) -> list[int]:
-        return self.summary[study][case]["lost"][flt]
-
-    def n(self, study, case) -> int:
-        return self.summary[study][case]["n"]
-
-    def cmp(self, study, case, metric, unit="m") -> str:
-        """'UKF 0.119 m, EKF 0.121 m: median paired difference -1.2%, UKF lower in 45 of 50 seeds, p = 1e-5'."""
-        st = self.s(study, case, metric)
-        u = "" if not unit else f" {unit}"
-        return (f"UKF {_n(st['ukf_mean'])}{u}, EKF {_n(st['ekf_mean'])}{u}: median paired difference "
-                f"{_pct(st['rel_median'])}, UKF lower in {round(st['ukf_better'] * st['n'])} of {st['n']} seeds, "
-                f"p {_p(st['p'])}")
-
-    def verdict(self, study, case, metric, alpha=0.01) -> str:
-        st = self.s(study, case, metric)
-        if st["p"] >= alpha:
-            return "no significant difference"
-        return "UKF lower" if st["rel_median"] < 0 else "UKF higher"
-
-    def max_abs_rel(self, study, metric) -> float:
-        return max(abs(c["metrics"][metric]["rel_median"]) for c in self.summary[study].values()
-                   if metric in c["metrics"] and "rel_median" in c["metrics"][metric])
-
-
-def _n(v: float) -> str:
-    if v is None or not np.isfinite(v):
-        return "n/a"
-    return f"{v:.3f}" if abs(v) < 10 else f"{v:.1f}"
-
-
-def _p(p: float) -> str:
-    return f"= {p:.1g}" if p >= 1e-4 else "< 1e-4"
-
-
-def _pct(v: float) -> str:
-    return f"{100 * v:+.2f}%" if abs(v) < 1e-3 else f"{100 * v:+.1f}%"
-
-
-def _ends(F: Facts, case: str) -> str:
-    """'UKF 20 of 50 runs ended on the mirror side and 18 on the line, EKF 16 and 0'."""
-    c = F.summary["collinear"][case]["metrics"]
-    n = F.summary["collinear"][case]["n"]
-    k = {f: (round(c["mirror_end"][f"{f}_mean"] * n), round(c["line_end"][f"{f}_mean"] * n)) for f in ("ukf", "ekf")}
-    return (f"of {n} runs the UKF ended {k['ukf'][0]} on the mirror side and {k['ukf'][1]} at the line, "
-            f"the EKF {k['ekf'][0]} and {k['ekf'][1]}")
-
-
-def _lost_sentence(F: Facts, study: str) -> str:
-    cs = F.summary[study]
-    lu = {c: set(v["lost"]["ukf"]) for c, v in cs.items()}
-    le = {c: set(v["lost"]["ekf"]) for c, v in cs.items()}
-    nu, ne = sum(map(len, lu.values())), sum(map(len, le.values()))
-    if not nu and not ne:
-        return "No run went off by more than 1 m after the first 5 s."
-    same = all(lu[c] == le[c] for c in cs)
-    return (f"{nu} UKF and {ne} EKF runs of {sum(v['n'] for v in cs.values())} went off by more than 1 m after "
-            f"the first 5 s (last column){', the same runs for both filters' if same else ''}.")
-
-
-def _warned_first(F: Facts) -> str:
-    tot = first = 0
-    for case in F.summary["collinear"].values():
-        w = case.get("warned_first", {})
-        for f in ("ukf", "ekf"):
-            tot += w.get(f, (0, 0))[1]
-            first += w.get(f, (0, 0))[0]
-    return f"{first} of {tot}"
+from uwb_report import Facts, _ends, _lost_sentence, _n, _warned_first
 
 
 def page(tables: dict[str, list[str]], summary: dict[str, Any], figures: dict[str, str], env: dict[str, Any],
@@ -112,7 +28,6 @@ def page(tables: dict[str, list[str]], summary: dict[str, Any], figures: dict[st
             add(f"*{caption}*")
             add("")
 
-    cases4 = ("route1_optimal", "route1_line", "route2_optimal", "route2_line")
     worst_man = F.max_abs_rel("cases", "rmse_man")
     worst_after = F.max_abs_rel("cases", "rmse_after")
     add("# UWB personal navigation (paper 001): UKF against EKF, reproduced")
@@ -121,8 +36,8 @@ def page(tables: dict[str, list[str]], summary: dict[str, Any], figures: dict[st
         f"`python experiments/uwb_ukf_vs_ekf.py` ({N} seeds a case, {env['runs']} runs of both filters, "
         f"{env['wall_s'] / 60:.0f} min on {env['jobs']} worker processes; Python {env['python']}, numpy {env['numpy']}). "
         "Every number below comes from that command, with the conditions it holds under written beside it. "
-        "Paper: Pasek and Kaniewski, *Unscented Kalman Filter application in personal navigation*, SPIE 11442 "
-        "(2019), ../../../shared/papers/001_1979660cfdb39ab2.txt (issue 6).")
+        "Paper: Pasek and Kaniewski, *Unscented Kalman Filter application in personal navigation*, Proc. SPIE "
+        "11442, 114421C (2019), doi:10.1117/12.2564984 (the project's paper 001; issue 6).")
     add("")
     add("## In short")
     add("")
@@ -139,8 +54,8 @@ def page(tables: dict[str, list[str]], summary: dict[str, Any], figures: dict[st
         f"the EKF often rejects the ranges that would have corrected it and never recovers "
         f"({F.cmp('initial', 'init10', 'rmse_init')}). At 2 ranges/s with S = 1 the UKF is better through the "
         f"sharp corner ({F.cmp('rate', 'rate0.5_S1', 'rmse_man')}). When the truth is drawn from the filters' own "
-        f"model, the UKF's covariance stays honest where the EKF's does not (mean NEES, 4 if consistent: "
-        f"{F.cmp('matched', 'matched_30 x 20 m_rate0.25', 'nees_mean', unit='')}).")
+        f"model (S = 1, 1 range/s, beacons around 30 m x 20 m), the UKF's covariance stays honest where the EKF's "
+        f"does not (mean NEES, 4 if consistent: {F.cmp('matched', 'matched_30 x 20 m_rate0.25', 'nees_mean', unit='')}).")
     add(f"* **It vanishes or reverses** at 20 ranges/s whatever the manoeuvre, process noise or beacon distance "
         f"(close passes down to 0.25 m: {F.cmp('close', 'close0.25', 'rmse_near')} within {NEAR_M:g} m of a beacon), "
         f"and it reverses when the covariance is larger than the error: on the straight legs at 1 range/s "
@@ -148,7 +63,7 @@ def page(tables: dict[str, list[str]], summary: dict[str, Any], figures: dict[st
         "walker does not have.")
     add("* **Collinear beacons** (the paper's non-optimal layout) leave the side of their line undetermined. On "
         "the paper's routes, which stay 3 m off the line and start from a belief on the right side, neither filter "
-        "ever crosses. From a wide initial belief, or on a walk along or across the line, both can end on the "
+        "ends on the mirror side. From a wide initial belief, or on a walk along or across the line, both can end on the "
         "mirror image, which fits every range, so no gate notices; the UKF can also stall *on* the line (the "
         "mean of the two mirror images). The range model now computes the GDOP and the distance to the line in "
         "sd of the current belief and warns before this happens (section 3).")
@@ -164,12 +79,13 @@ def page(tables: dict[str, list[str]], summary: dict[str, Any], figures: dict[st
         "the four cases, table in section 2.6) |")
     add("| ranges to 4 beacons, eq. 6 | `range` model, one range a message as the PulsON 440 ranges one beacon at a "
         "time; the paper's 4-range vector is evaluated too (section 1.2) |")
-    add("| R | 0.1 m sd: the PulsON 440 data sheet quotes about 2 cm precision in line of sight; 0.1 m allows for "
-        "body shadowing and multipath indoors (the paper gives no figure: 'typical for the developed system') |")
+    add("| R | 0.1 m sd, the noise of the shipped recordings. The PulsON 440 data sheet (paper ref. 6) is cited by "
+        "the scenarios for about 2 cm precision in line of sight (not rechecked here); 0.1 m allows for body "
+        "shadowing and multipath indoors. The paper gives no figure ('typical for the developed system') |")
     add("| prediction eqs. 9-10, UKF correction eqs. 11-20 | `ukf` with `linear_prediction: auto` (the KF "
         "prediction for the linear PV model), alpha = 0.5, beta = 2, kappa = 0 |")
     add("| EKF for comparison | `ekf` (`--filter ekf`); the same model, noise and gate |")
-    add("| x(0|0), P(0) (eqs. 7-8) | the entrance (3, 3) m, sd 1 m and 0.5 m/s; in the study the mean is drawn per "
+    add("| x(0\\|0), P(0) (eqs. 7-8) | the entrance (3, 3) m, sd 1 m and 0.5 m/s; in the study the mean is drawn per "
         "seed from N(true start, P0) |")
     add("| not in the paper | a chi-square gate at probability 0.9999 on the NIS |")
     add("")
@@ -230,9 +146,9 @@ def page(tables: dict[str, list[str]], summary: dict[str, Any], figures: dict[st
     figure("corner_line", "Paper fig. 5: the same with the four beacons on one line.")
     add("The paper's figs. 4-5 were made with parameters 'prepared to make the differences between the filters "
         "more visible'. The bottom rows show such a setting: few ranges a second and a process noise that "
-        "lets the belief spread between them. Only then does the UKF's track stay visibly closer through the "
-        f"corner ({F.cmp('rate', 'rate0.5_S1', 'rmse_man')} during manoeuvres, first 30 s of route 1, optimal "
-        "layout).")
+        "lets the belief spread between them. Only then is the UKF closer through the corner, over 50 seeds "
+        f"({F.cmp('rate', 'rate0.5_S1', 'rmse_man')} during manoeuvres, first 30 s of route 1, optimal layout); "
+        "in a single track the difference is a few centimetres.")
     add("")
     add("### 1.2 The paper's vector update (eq. 6)")
     add("")
@@ -253,11 +169,11 @@ def page(tables: dict[str, list[str]], summary: dict[str, Any], figures: dict[st
         f"of {nv} runs the UKF went off by more than 1 m (after the first 5 s) in {lu} and the EKF in {le}, "
         f"{both} of them the same runs. Those shared ones go off just after the sharp manoeuvres (route 1's corner "
         "at 23 s, route 2's reversal at 36 s), where the constant-velocity prediction lags until whole vectors "
-        "fail the gate (S = 0.2 was chosen for the scalar updates). The EKF's other failures are at start-up: "
-        "for a 1-2 m initial error its linearised innovation covariance is too small, the first vector fails "
-        "the gate and so do the next, and it never recovers; the EKF means of the table are dominated by those "
-        "runs. So the paper's own formulation is where the filter matters most, and it matters through "
-        "robustness at start-up, not accuracy during manoeuvres.")
+        f"fail the gate (S = 0.2 was chosen for the scalar updates). The EKF's {le - both} other failure(s) are at "
+        "start-up: for a 2-3 m initial error its linearised innovation covariance is too small, the first vector "
+        "fails the gate and so do the next, and it never recovers; the means of the table are dominated by the "
+        "runs that went off. The paper's vector formulation thus adds a start-up risk for the EKF (section 2.1), "
+        "not an accuracy difference during manoeuvres.")
     add("")
 
     add("## 2. Where the UKF's advantage appears, and where it vanishes")
@@ -267,10 +183,10 @@ def page(tables: dict[str, list[str]], summary: dict[str, Any], figures: dict[st
     add("The UKF approximates the mean and covariance of the predicted range to second order by evaluating the "
         "range at sigma points one standard deviation from the mean; the EKF linearises at the mean. The two "
         "differ by terms of order sd^2 / r (sd: the belief's spread across the line of sight, r: the distance to "
-        "the beacon). At 20 ranges/s the belief's sd is 5-7 cm and r is metres, so the terms are under a "
-        "millimetre. Each factor below changes sd / r, or whether the belief's spread describes the real error.")
+        "the beacon). At 20 ranges/s the belief's sd is 6-9 cm per axis and r is metres, so the terms are about a "
+        "millimetre or less. Each factor below changes sd / r, or whether the belief's spread describes the real error.")
     add("")
-    add(f"### 2.1 Initial uncertainty (route 1, optimal, first 15 s)")
+    add("### 2.1 Initial uncertainty (route 1, optimal, first 15 s)")
     add("")
     table("initial")
     add(f"With an initial sd of 1 m the two converge alike ({F.cmp('initial', 'init1', 'rmse_init')}). At 3 m and "
@@ -318,7 +234,8 @@ def page(tables: dict[str, list[str]], summary: dict[str, Any], figures: dict[st
         "(the walker leaves the square: ranges of 5-20 m, sd / r large).")
     add("")
     table("matched")
-    add("With an honest prior the UKF is never worse. Its RMSE advantage is small and within the spread except "
+    add("With an honest prior the UKF is never significantly worse in RMSE (p < 0.01). Its advantage is small "
+        "and within the spread except "
         "where the EKF loses the track, but its covariance stays consistent (NEES near 4) where the EKF's "
         "collapses (NEES in the tens to thousands): the EKF becomes overconfident, which is what makes it reject "
         "good ranges behind a gate.")
@@ -398,13 +315,14 @@ def page(tables: dict[str, list[str]], summary: dict[str, Any], figures: dict[st
     add("| paper 001 | what the data show, and under which conditions |")
     add("|---|---|")
     add("| The UKF tracks better than the EKF during manoeuvres, in both layouts (figs. 4-5) | Not at the "
-        "system's own rates and noise: identical to < 0.1% in all four cases, during and after manoeuvres, "
-        f"{N} seeds (section 1). True at low range rates with a wide belief (2 ranges/s, S = 1: "
+        f"system's own rates and noise: the same within {100 * max(worst_man, worst_after):.1f}% (median paired "
+        f"difference) in all four cases, during and after manoeuvres, {N} seeds (section 1). True at low range "
+        "rates with a wide belief (2 ranges/s, S = 1: "
         f"{F.rel('rate', 'rate0.5_S1', 'rmse_man')} during manoeuvres). |")
     add("| The UKF is corrected faster after the manoeuvre | Only at low range rates "
         f"({F.rel('rate', 'rate0.5_S1', 'rmse_after')} in the {AFTER_S:g} s after, 2 ranges/s, S = 1); no difference "
         "at 20 ranges/s. |")
-    add("| Accurate tracking even with the non-optimal layout | Yes, ~10% worse RMSE than around the area, "
+    add(f"| Accurate tracking even with the non-optimal layout | Yes, {100 * line_cost:.0f}% worse RMSE than around the area, "
         "provided the belief starts and stays on the right side of the line (section 3). |")
     add("| The UKF brings 'additional benefits' because linearisation loses accuracy | The benefit is "
         "robustness, not accuracy: from a wide initial belief and with an honest covariance (sections 2.1, "
