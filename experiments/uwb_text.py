@@ -52,8 +52,8 @@ def page(tables: dict[str, list[str]], summary: dict[str, Any], figures: dict[st
         f"honest about it.** From an initial position known to 10 m (sd) it converges better "
         f"({F.cmp('initial', 'init10_nogate', 'rmse_init')}, no gate); with the chi-square gate of the config "
         f"the EKF often rejects the ranges that would have corrected it and never recovers "
-        f"({F.cmp('initial', 'init10', 'rmse_init')}). At 2 ranges/s with S = 1 the UKF is better through the "
-        f"sharp corner ({F.cmp('rate', 'rate0.5_S1', 'rmse_man')}). When the truth is drawn from the filters' own "
+        f"({F.cmp('initial', 'init10', 'rmse_init')}). At 2 ranges/s with S = 1 and the beacons around the area "
+        f"the UKF is better through the sharp corner ({F.cmp('rate', 'rate0.5_S1', 'rmse_man')}). When the truth is drawn from the filters' own "
         f"model (S = 1, 1 range/s, beacons around 30 m x 20 m), the UKF's covariance stays honest where the EKF's "
         f"does not (mean NEES, 4 if consistent: {F.cmp('matched', 'matched_30 x 20 m_rate0.25', 'nees_mean', unit='')}).")
     add(f"* **It vanishes or reverses** at 20 ranges/s whatever the manoeuvre, process noise or beacon distance "
@@ -65,8 +65,10 @@ def page(tables: dict[str, list[str]], summary: dict[str, Any], figures: dict[st
         "the paper's routes, which stay 3 m off the line and start from a belief on the right side, neither filter "
         "ends on the mirror side. From a wide initial belief, or on a walk along or across the line, both can end on the "
         "mirror image, which fits every range, so no gate notices; the UKF can also stall *on* the line (the "
-        "mean of the two mirror images). The range model now computes the GDOP and the distance to the line in "
-        "sd of the current belief and warns before this happens (section 3).")
+        "mean of the two mirror images). That is also where the paper's 'both layouts' fails most clearly: at 2 "
+        f"ranges/s with S = 1, the setting where the UKF wins with beacons around the area, {_ends(F, 'line_rate0.5')} "
+        "(first 30 s of route 1). The range model now computes the GDOP and the distance to the line in sd of "
+        "the current belief and warns before this happens (section 3).")
     add("")
 
     add("## The system and how it is simulated")
@@ -143,7 +145,9 @@ def page(tables: dict[str, list[str]], summary: dict[str, Any], figures: dict[st
                              "UKF (blue) and EKF (red) tracks lie on each other. Bottom: 2 ranges/s with S = 1, the "
                              "regime where the UKF is lower during manoeuvres over 50 seeds (section 2.2); in one "
                              "seed the difference is small.")
-    figure("corner_line", "Paper fig. 5: the same with the four beacons on one line.")
+    figure("corner_line", "Paper fig. 5: the same with the four beacons on one line, one seed. At 2 ranges/s with "
+                          "S = 1 (bottom) the UKF can fall onto the beacons' line after the corner and stay there "
+                          "(section 3), the EKF does not.")
     add("The paper's figs. 4-5 were made with parameters 'prepared to make the differences between the filters "
         "more visible'. The bottom rows show such a setting: few ranges a second and a process noise that "
         "lets the belief spread between them. Only then is the UKF closer through the corner, over 50 seeds "
@@ -288,6 +292,14 @@ def page(tables: dict[str, list[str]], summary: dict[str, Any], figures: dict[st
         "falls *onto* the line (the average of the two mirror images) and stays there while the y variance "
         "grows ('at the line'): it does not pick the wrong side, but not the right one either. Only a fifth "
         "beacon off the line, or knowledge of the walker's side, removes the ambiguity.")
+    add(f"* The same collapse happens on the paper's route when the belief is wide: at 2 ranges/s with S = 1 "
+        f"(first 30 s of route 1), {_ends(F, 'line_rate0.5')}. The mechanism is the UKF's second-order "
+        "correction: with the beacons on y = 0 the range is sqrt(dx^2 + y^2), its mean over a spread in y is "
+        "larger than its value at the mean, so every range reads as 'closer to the line than predicted' and "
+        "pulls the estimate's |y| down; as |y| shrinks, the range says less and less about y and the pull wins. "
+        "The EKF evaluates the range at the mean and has no such pull. This is the regime where the UKF wins "
+        "with the beacons around the area (section 2.2), so which filter is better at low range rates depends "
+        "on the layout.")
     add("")
     add("How it is handled:")
     add("")
@@ -317,8 +329,9 @@ def page(tables: dict[str, list[str]], summary: dict[str, Any], figures: dict[st
     add("| The UKF tracks better than the EKF during manoeuvres, in both layouts (figs. 4-5) | Not at the "
         f"system's own rates and noise: the same within {100 * max(worst_man, worst_after):.1f}% (median paired "
         f"difference) in all four cases, during and after manoeuvres, {N} seeds (section 1). True at low range "
-        "rates with a wide belief (2 ranges/s, S = 1: "
-        f"{F.rel('rate', 'rate0.5_S1', 'rmse_man')} during manoeuvres). |")
+        "rates with a wide belief and the beacons around the area (2 ranges/s, S = 1: "
+        f"{F.rel('rate', 'rate0.5_S1', 'rmse_man')} during manoeuvres); with the beacons on one line the same "
+        f"setting makes the UKF fall onto the line ({_ends(F, 'line_rate0.5')}). |")
     add("| The UKF is corrected faster after the manoeuvre | Only at low range rates "
         f"({F.rel('rate', 'rate0.5_S1', 'rmse_after')} in the {AFTER_S:g} s after, 2 ranges/s, S = 1); no difference "
         "at 20 ranges/s. |")

@@ -120,6 +120,8 @@ def studies(n_tune: int) -> list[Study]:
              config={"initial": {"sd": {"p": sd, "v": 0.5}}, **({} if g else {"sensors": {"uwb": {"gate": None}}})},
              label=f"route 1 (30 s), initial sd {sd:g} m{'' if g else ', no gate'}")
         for sd, g in ((1.0, True), (3.0, True), (10.0, True), (10.0, False))] + [
+        Case("line_rate0.5", layout="line", initial=drawn, scenario={**rate(0.5), "duration": 30.0},
+             config={"process": {"spectral_density": 1.0}}, label="route 1 (30 s), 2 ranges/s, S = 1"),
         Case("line_graze", layout="line", initial=drawn, scenario=line_w, label="walk 0.5 m from the line"),
         Case("line_cross", layout="line", initial=drawn, scenario=cross_w, label="walk across the line")],
         ["rmse_all", "max_all"]))
