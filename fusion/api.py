@@ -349,6 +349,10 @@ class MeasurementModel(Component):
         """z - z_hat, broadcast over leading axes (override to wrap angles)."""
         return z - z_hat
 
+    # Optional: ``check(belief, sensor) -> list[Event]`` after each accepted update, e.g. a warning that the
+    # geometry is degenerate at the current estimate (the range model's GDOP / mirror check). The scheduler
+    # reports the events when a warning starts, and a ``cleared`` event when it stops.
+
     def observe(self, message: Message) -> Observation | None:
         """Observation for a decoded message (default: all values are z, this model predicts it)."""
         z = message.floats()

@@ -72,6 +72,7 @@ class Scheduler:
         # Batched input integration (filter.predict_inputs) needs no per-sample replay log.
         self._batch = hasattr(self.filter, "predict_inputs") and self.late_policy != "replay"
         self._pending: list[Message] = []
+        self._warned: set[str] = set()  # sensors whose model's check() currently warns
         # Initialisation: x0/P0 refined by a fix of initial.from_sensor and/or alignment over a static start.
         self._x0 = system.x0.copy()
         self._P0 = system.P0.copy()
@@ -193,6 +194,21 @@ class Scheduler:
         for out in outs:
             yield from self._measure(sensor, out)
         self._snapshot()
+
+    def _check(self, sensor: SensorRuntime, model) -> Iterator[Event]:
+        """A model's optional ``check(belief, sensor) -> [Event]`` (e.g. the range model's geometry warning),
+        reported when a warning starts and when it clears, not at every update."""
+        check = getattr(model, "check", None)
+        if check is None:
+            return
+        events = check(self.belief, sensor.name)
+        active = sensor.name in self._warned
+        if events and not active:
+            self._warned.add(sensor.name)
+            yield from events
+        elif not events and active:
+            self._warned.discard(sensor.name)
+            yield Event(self.belief.t, "cleared", sensor.name, "the geometry warning no longer applies")  # type: ignore[union-attr]
 
     @staticmethod
     def _bad(sensor: SensorRuntime, msg: Message, exc: MalformedMessage) -> Event:
@@ -344,6 +360,8 @@ class Scheduler:
         if result.accepted:
             sensor.counters["used"] += 1
             self.belief = result.belief
+            if not self._replaying:
+                yield from self._check(sensor, obs.model)
         else:
             sensor.counters["rejected"] += 1
             if not self._replaying:

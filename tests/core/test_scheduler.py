@@ -132,3 +132,25 @@ def test_message_with_several_ranges_uses_block_diagonal_R():
     K = P @ H.T @ np.linalg.inv(S)
     np.testing.assert_allclose(a.update.S, S, atol=1e-12)
     np.testing.assert_allclose(a.belief.x, x + K @ (np.array([9.0, 12.0]) - r), atol=1e-12)
+
+
+def test_geometry_warning_reported_when_it_starts_and_clears():
+    """Collinear beacons: walking up to the beacons' line starts a warning (once), walking away clears it."""
+    spec = SystemSpec.model_validate({
+        "name": "line", "beacons": {"A": [0.0, 0.0], "B": [10.0, 0.0], "C": [20.0, 0.0]},
+        "process": {"type": "pv", "dims": 2, "spectral_density": 0.1}, "filter": "ukf",
+        "initial": {"mean": {"p": [5.0, 8.0], "v": [0.0, -1.0]}, "sd": {"p": 0.5, "v": 0.2}},
+        "sensors": {"uwb": {"model": "range", "noise": 0.05}}})
+    msgs = []
+    for k in range(120):  # 12 s: y goes 8 -> 0.05 (onto the line) and back out to ~8
+        t = 0.1 * k
+        y = max(8.0 - 1.6 * t, 0.05) if t < 7.0 else 0.05 + (t - 7.0) * 1.6
+        p = np.array([5.0, y])
+        b = "ABC"[k % 3]
+        msgs.append(Message(t, "uwb", (b, float(np.linalg.norm(p - np.array(spec.beacons[b]))))))
+    out = list(Scheduler(wire(spec)).run(msgs))
+    kinds = [e.kind for e in out if isinstance(e, Event) and e.sensor == "uwb"]
+    assert "warning" in kinds and "cleared" in kinds
+    first_warn = next(i for i, k in enumerate(kinds) if k == "warning")
+    assert kinds.index("cleared") > first_warn
+    assert kinds.count("cleared") <= kinds.count("warning") <= 3
