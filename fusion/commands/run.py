@@ -141,6 +141,31 @@ def summarize(system: System, source: str | Path, result: dict[str, Any], settle
     return summary
 
 
+class EventNotes:
+    """Prints events a user should see while a replay runs (warnings, gaps, malformed lines, late
+    messages, rejections), the first few of each kind with sensor, time and line, then a count."""
+
+    SHOWN = {"warning": 10, "cleared": 10, "gap": 5, "malformed": 3, "late": 3, "rejected": 3, "no_fix": 3}
+
+    def __init__(self, stream, enabled: bool = True):
+        self.stream = stream
+        self.enabled = enabled
+        self.counts: dict[str, int] = {}
+
+    def __call__(self, event: Event) -> None:
+        n = self.counts.get(event.kind, 0) + 1
+        self.counts[event.kind] = n
+        limit = self.SHOWN.get(event.kind, 0)
+        if self.enabled and n <= limit:
+            at = f"t={event.t:.3f} s " if math.isfinite(event.t) else ""
+            who = f"{event.sensor}: " if event.sensor else ""
+            more = f" (further {event.kind} events are counted in the summary)" if n == limit else ""
+            print(f"{event.kind}: {at}{who}{event.detail}{more}", file=self.stream)
+
+    def close(self) -> None:
+        self.stream.flush()
+
+
 def run(args: argparse.Namespace) -> int:
     from fusion import report
     from fusion.sinks.estimates import EstimateWriter
@@ -158,7 +183,10 @@ def run(args: argparse.Namespace) -> int:
     show_progress = not args.no_progress and not args.quiet and sys.stdout.isatty()
     with report.progress(_duration_hint(source), enabled=show_progress) as tick:
         try:
-            result = replay(system, source, on_estimate=writer.on_estimate if writer else None, progress=tick)
+            notes = EventNotes(sys.stderr, enabled=not args.quiet)
+            result = replay(system, source, on_estimate=writer.on_estimate if writer else None,
+                            on_event=notes, progress=tick)
+            notes.close()
         finally:
             if writer:
                 writer.close()
