@@ -22,6 +22,16 @@ def _plt():
     return plt
 
 
+def _save(fig, fig_dir: Path, name: str) -> str:
+    """Lay out, write fig_dir/name at 110 dpi, close; returns the file name for the page."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    fig.savefig(fig_dir / name, dpi=110)
+    plt.close(fig)
+    return name
+
+
 def _beacons(ax, case: Case) -> None:
     B = np.array(list(config_of(case)["beacons"].values()), float)
     ax.plot(B[:, 0], B[:, 1], "^", color="tab:green", ms=9, label="beacons", zorder=5)
@@ -53,11 +63,7 @@ def tracks(fig_dir: Path) -> str:
     axs[0, 0].legend(loc="center", fontsize=8)
     fig.suptitle("Paper 001 figs. 2-3 reproduced: UKF track against truth (shipped recordings, "
                  "fusion run configs/uwb_pv_ukf*.yaml)", fontsize=11)
-    fig.tight_layout()
-    path = fig_dir / "tracks.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path.name
+    return _save(fig, fig_dir, "tracks.png")
 
 
 def corner(fig_dir: Path, layout: str) -> str:
@@ -137,11 +143,7 @@ def errors_over_time(fig_dir: Path, rows_by_case: dict) -> str:
     axs[0, 0].legend(fontsize=7)
     axs[1, 0].legend(fontsize=7)
     fig.suptitle(f"Position error over time, {len(rows_by_case[names[0]])} seeds a case (as shipped)", fontsize=11)
-    fig.tight_layout()
-    path = fig_dir / "errors_over_time.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path.name
+    return _save(fig, fig_dir, "errors_over_time.png")
 
 
 SHORT = {"rmse_all": "RMSE", "rmse_man": "RMSE during manoeuvres", "rmse_after": "RMSE after manoeuvres",
@@ -170,11 +172,7 @@ def regimes(fig_dir: Path, results: dict, picks: list[tuple[str, str, str]], lab
     ax.set_xticks(xt, [f"{v:+d}" if v else "0" for v in xt])
     ax.set_xlabel("UKF / EKF - 1 (%), median and quartiles over seeds; blue: UKF lower, red: higher (p < 0.01)")
     ax.grid(alpha=0.3, axis="x")
-    fig.tight_layout()
-    path = fig_dir / "regimes.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path.name
+    return _save(fig, fig_dir, "regimes.png")
 
 
 def collinear(fig_dir: Path, results: dict) -> str:
@@ -208,11 +206,7 @@ def collinear(fig_dir: Path, results: dict) -> str:
     axs[2].legend(fontsize=8)
     for ax in axs:
         ax.grid(alpha=0.3)
-    fig.tight_layout()
-    path = fig_dir / "collinear.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path.name
+    return _save(fig, fig_dir, "collinear.png")
 
 
 def make_figures(fig_dir: Path, results: dict, labels: dict | None = None) -> dict[str, str]:
