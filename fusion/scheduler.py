@@ -36,6 +36,7 @@ class _Snapshot:
     index: int  # position in the processed-message log after which this snapshot was taken
 
 
+_CHECK_EVERY_S = 0.5  # a model's check() (geometry) runs at most this often per sensor, s of sensor time
 _BATCH_MAX = 64  # input samples integrated per predict_inputs call at most (bounds the live latency)
 
 
@@ -73,6 +74,7 @@ class Scheduler:
         self._batch = hasattr(self.filter, "predict_inputs") and self.late_policy != "replay"
         self._pending: list[Message] = []
         self._warned: set[str] = set()  # sensors whose model's check() currently warns
+        self._checked: dict[str, float] = {}  # sensor time of each sensor's last check()
         # Initialisation: x0/P0 refined by a fix of initial.from_sensor and/or alignment over a static start.
         self._x0 = system.x0.copy()
         self._P0 = system.P0.copy()
@@ -201,6 +203,10 @@ class Scheduler:
         check = getattr(model, "check", None)
         if check is None:
             return
+        t = self.belief.t  # type: ignore[union-attr]
+        if t - self._checked.get(sensor.name, -math.inf) < _CHECK_EVERY_S:
+            return
+        self._checked[sensor.name] = t
         events = check(self.belief, sensor.name)
         active = sensor.name in self._warned
         if events and not active:
