@@ -23,11 +23,50 @@ from fusion.api import Belief, Event, Filter, Gate, MeasurementModel, ProcessMod
 from .jacobian import measurement_jacobian
 from .linalg import cholesky_lower, recover_factor, solve_lower, symmetrise
 
-__all__ = ["KalmanBase", "linear_predict", "linearised_update", "as_covariance", "covariance_of"]
+__all__ = ["KalmanBase", "linear_predict", "linearised_update", "as_covariance", "covariance_of",
+           "new_belief", "new_result", "as_vector"]
+
+_ndarray = np.ndarray
+_float64 = np.dtype(float)
+_new = object.__new__
+
+
+def as_vector(z) -> np.ndarray:
+    """z as a flat float64 array (the array itself when it already is one: ~0.1 us against ~0.7 us for
+    ``np.asarray(z, dtype=float).reshape(-1)``)."""
+    if type(z) is _ndarray and z.ndim == 1 and z.dtype == _float64:
+        return z
+    return np.asarray(z, dtype=float).reshape(-1)
+
+
+def new_belief(t: float, x: np.ndarray, P: np.ndarray | None = None, S: np.ndarray | None = None) -> Belief:
+    """``Belief(t, x, P=P, S=S)`` without the frozen dataclass's ``__init__`` (four
+    ``object.__setattr__`` and ``__post_init__``: ~2 us, against ~0.3 us here; filters build one or two a
+    step). The caller guarantees P or S is given."""
+    b = _new(Belief)
+    b.__dict__.update(t=t, x=x, P=P, S=S)
+    return b
+
+
+def new_result(belief: Belief, y: np.ndarray, S: np.ndarray, nis: float, accepted: bool) -> UpdateResult:
+    """``UpdateResult(belief, y, S, nis, accepted)`` without the frozen dataclass's ``__init__``."""
+    r = _new(UpdateResult)
+    r.__dict__.update(belief=belief, innovation=y, S=S, nis=nis, accepted=accepted)
+    return r
+
+
+if hasattr(Belief, "__slots__") or hasattr(UpdateResult, "__slots__"):  # pragma: no cover - no __dict__
+    def new_belief(t, x, P=None, S=None):  # noqa: F811
+        return Belief(t, x, P=P, S=S)
+
+    def new_result(belief, y, S, nis, accepted):  # noqa: F811
+        return UpdateResult(belief, y, S, nis, accepted)
 
 
 def as_covariance(R, m: int) -> np.ndarray:
     """R as an (m, m) array: a matrix as is, a vector of m variances, or a scalar variance."""
+    if type(R) is _ndarray and R.dtype == _float64 and R.shape == (m, m):
+        return R
     R = np.asarray(R, dtype=float)
     if R.ndim == 2:
         if R.shape != (m, m):

@@ -9,7 +9,7 @@ from pydantic import Field
 
 from fusion.api import Belief, Gate, MeasurementModel, ProcessModel, UpdateResult
 
-from .base import as_covariance
+from .base import as_covariance, as_vector, new_belief, new_result
 from .jacobian import process_jacobian
 from .linalg import cholupdate, psd_sqrt_rows, qr_lower, recover_factor, solve_lower
 from .sigma_points import SigmaPoints, UnscentedParams
@@ -93,6 +93,8 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
     def __init__(self, params=None, context=None):
         super().__init__(params, context)
         self._sqrt_cache: dict[str, tuple[object, np.ndarray]] = {}
+        self._recentred = self.params.zeroth_point == "recentred"
+        self._cov_update = self.params.covariance_update
 
     # ------------------------------------------------------------------ helpers
     def initial_belief(self, t: float, x: np.ndarray, P: np.ndarray) -> Belief:
@@ -127,7 +129,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         transform: ``(mean, D1, v0, w0)`` with covariance ``W sum D1_i D1_i^T + w0 v0 v0^T``: D1 (2n, m)
         the deviations of points 1..2n (from the mean, or from Y_0 when recentred), v0 and w0 the
         zeroth-point term and its weight (eqs. 5, 9)."""
-        if self.params.zeroth_point == "cholupdate":
+        if not self._recentred:
             mean = sp.Wm @ Y
             D = diff(Y, mean)
             return mean, D[1:], D[0], sp.Wc[0]
@@ -160,7 +162,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
             BQ = self.noise_rows("Q", Q)
             F = process_jacobian(process, x, u, dt)
             S1 = qr_lower(np.concatenate((F @ S, BQ.T), axis=1).T, overwrite=True)   # sqrt(F P F^T + Q)
-            return Belief(belief.t + dt, process.normalize(process.f(x, u, dt)), S=S1)
+            return new_belief(belief.t + dt, process.normalize(process.f(x, u, dt)), S=S1)
         return self.sigma_predict(belief, process, lambda X: process.f(X, u, dt), lambda x0, x1: Q, dt)
 
     def sigma_predict(self, belief: Belief, process: ProcessModel, propagate, noise, dt: float) -> Belief:
@@ -172,14 +174,14 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         xm = process.normalize(xm)
         BQ = self.noise_rows("Q", noise(x, xm))
         S1 = self.sqrt_transform(sp, D1, BQ, v0, w0, belief.t, "srukf predict")  # eqs. 6-7
-        return Belief(belief.t + dt, xm, S=S1)
+        return new_belief(belief.t + dt, xm, S=S1)
 
     # ------------------------------------------------------------------ update
     def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                gate: Gate | None = None) -> UpdateResult:
         x = belief.x
         S = self.sqrt_of(belief)
-        z = np.asarray(z, dtype=float).reshape(-1)
+        z = as_vector(z)
         m = z.shape[0]
         n = x.shape[0]
         BR = self.noise_rows("R", R if getattr(R, "shape", None) == (m, m) else as_covariance(R, m))
@@ -189,7 +191,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         zm, D1, v0, w0 = self.deviations(sp, Z, model.residual)      # eq. 9
         dX1 = dX[1:]
         y = model.residual(z, zm)
-        mode = self.params.covariance_update
+        mode = self._cov_update
         if mode == "joint":
             k = 2 * n
             A = np.zeros((k + m + (w0 > 0.0), m + n), order="F")
@@ -230,4 +232,4 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
                 for j in range(m):                                   # eq. 16: m downdates (columns, not points)
                     S1 = self.rank1(S1, U[:, j], -1.0, belief.t, "srukf update")
         self.counters["updates"] += 1
-        return UpdateResult(Belief(belief.t, self.normalize(x1), S=S1), y, Syy, nis, True)
+        return new_result(new_belief(belief.t, self.normalize(x1), S=S1), y, Syy, nis, True)

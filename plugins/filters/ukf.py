@@ -6,9 +6,13 @@ from pydantic import Field
 
 from fusion.api import Belief, Gate, MeasurementModel, ProcessModel, UpdateResult
 
-from .base import KalmanBase, as_covariance, covariance_of, linear_predict
+from scipy.linalg import blas
+
+from .base import KalmanBase, as_covariance, as_vector, covariance_of, linear_predict, new_belief, new_result
 from .jacobian import process_jacobian
-from .linalg import psd_sqrt_rows, solve_lower, symmetrise
+from .linalg import psd_sqrt_rows, symmetrise
+
+_dtrsm = blas.dtrsm
 from .sigma_points import SigmaPoints, UnscentedParams
 
 
@@ -140,8 +144,8 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         self.counters["predicts"] += 1
         if self.use_linear_prediction(process):
             F = process_jacobian(process, x, u, dt)
-            return Belief(belief.t + dt, process.normalize(process.f(x, u, dt)), P=linear_predict(x, P, F, Q))
-        if self.params.augmented:
+            return new_belief(belief.t + dt, process.normalize(process.f(x, u, dt)), P=linear_predict(x, P, F, Q))
+        if self._augmented:
             return self._predict_augmented(belief, process, u, dt, P, Q)
         return self.sigma_predict(belief, process, lambda X: process.f(X, u, dt), lambda x0, x1: Q, dt)
 
@@ -154,7 +158,7 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         D = Y - xm
         xm = process.normalize(xm)
         P1 = (D.T * sp.Wc) @ D + noise(x, xm)
-        return Belief(belief.t + dt, xm, P=symmetrise(P1))
+        return new_belief(belief.t + dt, xm, P=symmetrise(P1))
 
     def _predict_augmented(self, belief, process, u, dt, P, Q) -> Belief:
         n = belief.x.shape[0]
@@ -175,15 +179,15 @@ class UnscentedKalmanFilter(SigmaPointFilter):
     def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                gate: Gate | None = None) -> UpdateResult:
         x = belief.x
-        P = covariance_of(belief)
-        z = np.asarray(z, dtype=float).reshape(-1)
+        P = belief.P if belief.P is not None else belief.cov
+        z = as_vector(z)
         m = z.shape[0]
         R = as_covariance(R, m)
         n = x.shape[0]
         S = self.factor(P, belief.t, "ukf update")
         if self.repaired is not None:
             P = self.repaired
-        if self.params.augmented:
+        if self._augmented:
             sp = self.sigma_points(n + m)
             Sa = np.zeros((n + m, n + m))
             Sa[:n, :n] = S
@@ -203,21 +207,24 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         Pzz = dZ.T @ A                                         # 001 eq. 16
         if R is not None:
             Pzz += R                                           # 001 eq. 17
-        Pzx = A.T @ dX                                         # 001 eq. 15 (transposed)
         Ly = self.factor(Pzz, belief.t, "ukf innovation covariance")
         if self.repaired is not None:
             Pzz = self.repaired
-        y = model.residual(z, zm)
-        w = solve_lower(Ly, y)
+        # [P_xz; y^T] (n + 1, m) in one buffer, so that one triangular solve gives both
+        # W = L_y^-1 P_xz^T and w = L_y^-1 y (its transpose is Fortran-ordered: no copy for BLAS)
+        B = np.empty((n + 1, m))
+        np.matmul(dX.T, A, out=B[:n])                          # 001 eq. 15
+        y = B[n] = model.residual(z, zm)
+        V = _dtrsm(1.0, Ly, B.T, 0, 1, 0, 0, 1)               # (m, n + 1) = L_y^-1 [P_xz^T, y] (left, lower, overwrite_b)
+        W = V[:, :n]
+        w = V[:, n]
         nis = float(w @ w)
         out = self.rejected(belief, y, Pzz, nis, gate, m)
         if out is not None:
             return out
-        W = solve_lower(Ly, Pzx)                               # L_y^-1 P_xz^T
         x1 = x + w @ W                                         # 001 eqs. 18-19
         P1 = P - W.T @ W                                       # 001 eq. 20
         # W.T @ W is computed by BLAS syrk (numpy detects a.T @ a), exactly symmetric, so P1 is exactly
         # symmetric when P is (tests/filters/test_filters_exactness.py checks it bit for bit)
         self.counters["updates"] += 1
-        return UpdateResult(Belief(belief.t, self.normalize(x1), P=P1), y, Pzz, nis, True)
-
+        return new_result(new_belief(belief.t, self.normalize(x1), P=P1), y, Pzz, nis, True)
