@@ -11,7 +11,7 @@ from fusion.api import Belief, Gate, MeasurementModel, ProcessModel, UpdateResul
 
 from .base import as_covariance, as_vector, new_belief, new_result
 from .jacobian import process_jacobian
-from .linalg import cholupdate, psd_sqrt_rows, qr_lower, recover_factor, solve_lower
+from .linalg import cholupdate, psd_sqrt_rows, qr_lower, qr_lower_scaled, recover_factor, solve_lower
 from .sigma_points import SigmaPoints, UnscentedParams
 from .ukf import SigmaPointFilter
 
@@ -93,6 +93,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
     def __init__(self, params=None, context=None):
         super().__init__(params, context)
         self._sqrt_cache: dict[str, tuple[object, np.ndarray]] = {}
+        self._scaled: tuple[np.ndarray, float, np.ndarray] | None = None
         self._recentred = self.params.zeroth_point == "recentred"
         self._cov_update = self.params.covariance_update
 
@@ -115,6 +116,16 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         B = psd_sqrt_rows(C)
         self._sqrt_cache[key] = (C, B)  # holds C, so its id cannot be reused while cached
         return B
+
+    def scaled_rows(self, B: np.ndarray, c: float) -> np.ndarray:
+        """``B / c`` (a noise row square root over the sigma-point weight's square root), cached for the
+        last (B, c)."""
+        hit = self._scaled
+        if hit is not None and hit[0] is B and hit[1] == c:
+            return hit[2]
+        Bc = B / c
+        self._scaled = (B, c, Bc)
+        return Bc
 
     def rank1(self, L: np.ndarray, v: np.ndarray, weight: float, t: float, where: str) -> np.ndarray:
         """cholupdate{L, v, weight} with recovery of a failed downdate."""
@@ -188,24 +199,33 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         sp = self.sigma_points(n)
         dX = sp.E @ S.T
         Z = model.h(x + dX)                                          # eq. 8, one call
-        zm, D1, v0, w0 = self.deviations(sp, Z, model.residual)      # eq. 9
+        if self._recentred:                                          # eq. 9 (deviations(), inline)
+            Z0 = Z[0]
+            D1 = model.residual(Z[1:], Z0)
+            v0 = sp.W1 @ D1
+            zm, w0 = Z0 + v0, sp.gamma
+        else:
+            zm, D1, v0, w0 = self.deviations(sp, Z, model.residual)
         dX1 = dX[1:]
         y = model.residual(z, zm)
         mode = self._cov_update
         if mode == "joint":
             k = 2 * n
+            c = sp.sqrt_w
+            # the rows [c D1, c dX1; B_R, 0; sqrt(w0) v0] divided by c (plain copies into the Fortran-ordered
+            # A, no strided products); c goes onto the triangle in qr_lower_scaled
             A = np.zeros((k + m + (w0 > 0.0), m + n), order="F")
-            np.multiply(D1, sp.sqrt_w, out=A[:k, :m])
-            np.multiply(dX1, sp.sqrt_w, out=A[:k, m:])
-            A[k:k + m, :m] = BR
+            A[:k, :m] = D1
+            A[:k, m:] = dX1
+            A[k:k + m, :m] = self.scaled_rows(BR, c)
             if w0 > 0.0:
-                np.multiply(v0, math.sqrt(w0), out=A[-1, :m])
-            L = qr_lower(A, overwrite=True)                          # eqs. 10, 12-13, 15-16 at once
+                A[-1, :m] = v0 * (math.sqrt(w0) / c)
+            L = qr_lower_scaled(A, c)                                # eqs. 10, 12-13, 15-16 at once
             if w0 < 0.0:
                 L = self.rank1(L, np.concatenate((v0, np.zeros(n))), w0, belief.t, "srukf update")  # eq. 11
             Sy = L[:m, :m]
             w = solve_lower(Sy, y)
-            nis = float(w @ w)
+            nis = float(w.dot(w))
             Syy = Sy @ Sy.T
             out = self.rejected(belief, y, Syy, nis, gate, m)
             if out is not None:
@@ -216,7 +236,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
             Sy = self.sqrt_transform(sp, D1, BR, v0, w0, belief.t, "srukf innovation")  # eqs. 10-11
             Pxz = (sp.w * dX1.T) @ D1                                # eq. 12 (chi_0 - x^- = 0)
             w = solve_lower(Sy, y)
-            nis = float(w @ w)
+            nis = float(w.dot(w))
             Syy = Sy @ Sy.T
             out = self.rejected(belief, y, Syy, nis, gate, m)
             if out is not None:

@@ -218,7 +218,7 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         V = _dtrsm(1.0, Ly, B.T, 0, 1, 0, 0, 1)               # (m, n + 1) = L_y^-1 [P_xz^T, y] (left, lower, overwrite_b)
         W = V[:, :n]
         w = V[:, n]
-        nis = float(w @ w)
+        nis = float(w.dot(w))
         out = self.rejected(belief, y, Pzz, nis, gate, m)
         if out is not None:
             return out
