@@ -24,7 +24,7 @@ from .jacobian import measurement_jacobian
 from .linalg import cholesky_lower, recover_factor, solve_lower, symmetrise
 
 __all__ = ["KalmanBase", "linear_predict", "linearised_update", "as_covariance", "covariance_of",
-           "new_belief", "new_result", "as_vector"]
+           "new_belief", "new_result", "as_vector", "residual_of"]
 
 _ndarray = np.ndarray
 _float64 = np.dtype(float)
@@ -37,6 +37,15 @@ def as_vector(z) -> np.ndarray:
     if type(z) is _ndarray and z.ndim == 1 and z.dtype == _float64:
         return z
     return np.asarray(z, dtype=float).reshape(-1)
+
+
+_default_residual = MeasurementModel.residual
+
+
+def residual_of(model: MeasurementModel):
+    """``model.residual``, or ``np.subtract`` (the same z - z_hat, without a Python call) when the model
+    keeps MeasurementModel's default."""
+    return np.subtract if getattr(type(model), "residual", None) is _default_residual else model.residual
 
 
 def new_belief(t: float, x: np.ndarray, P: np.ndarray | None = None, S: np.ndarray | None = None) -> Belief:

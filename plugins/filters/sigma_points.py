@@ -67,6 +67,11 @@ class SigmaPoints:
         self.W1 = self.Wm[1:].copy()             # the weights of points 1..2n
         self.gamma = beta - alpha * alpha
         self.sqrt_w = math.sqrt(self.w)
+        # rows [W^i; W^i sqrt(gamma) / sqrt(w)] (i >= 1): one product with the recentred deviations gives
+        # their mean and the zeroth-point row of the srukf's joint QR (scaled by 1 / sqrt(w)); one row
+        # when gamma <= 0 (no such QR row)
+        self.W1_rows = (np.vstack([self.W1, self.W1 * (math.sqrt(self.gamma) / self.sqrt_w)])
+                        if self.gamma > 0.0 else self.W1[None, :])
         eye = np.eye(n)
         self.E = self.eta * np.vstack([np.zeros((1, n)), eye, -eye])
 

@@ -9,7 +9,7 @@ from pydantic import Field
 
 from fusion.api import Belief, Gate, MeasurementModel, ProcessModel, UpdateResult
 
-from .base import as_covariance, as_vector, new_belief, new_result
+from .base import as_covariance, as_vector, new_belief, new_result, residual_of
 from .jacobian import process_jacobian
 from .linalg import cholupdate, psd_sqrt_rows, qr_lower, qr_lower_scaled, recover_factor, solve_lower
 from .sigma_points import SigmaPoints, UnscentedParams
@@ -191,7 +191,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
     def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                gate: Gate | None = None) -> UpdateResult:
         x = belief.x
-        S = self.sqrt_of(belief)
+        S = belief.S if belief.S is not None else self.sqrt_of(belief)
         z = as_vector(z)
         m = z.shape[0]
         n = x.shape[0]
@@ -199,15 +199,18 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         sp = self.sigma_points(n)
         dX = sp.E @ S.T
         Z = model.h(x + dX)                                          # eq. 8, one call
+        diff = residual_of(model)
         if self._recentred:                                          # eq. 9 (deviations(), inline)
             Z0 = Z[0]
-            D1 = model.residual(Z[1:], Z0)
-            v0 = sp.W1 @ D1
+            D1 = diff(Z[1:], Z0)
+            V = sp.W1_rows @ D1
+            v0 = V[0]
             zm, w0 = Z0 + v0, sp.gamma
         else:
-            zm, D1, v0, w0 = self.deviations(sp, Z, model.residual)
+            zm, D1, v0, w0 = self.deviations(sp, Z, diff)
+            V = None
         dX1 = dX[1:]
-        y = model.residual(z, zm)
+        y = diff(z, zm)
         mode = self._cov_update
         if mode == "joint":
             k = 2 * n
@@ -219,7 +222,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
             A[:k, m:] = dX1
             A[k:k + m, :m] = self.scaled_rows(BR, c)
             if w0 > 0.0:
-                A[-1, :m] = v0 * (math.sqrt(w0) / c)
+                A[-1, :m] = V[1] if V is not None else v0 * (math.sqrt(w0) / c)
             L = qr_lower_scaled(A, c)                                # eqs. 10, 12-13, 15-16 at once
             if w0 < 0.0:
                 L = self.rank1(L, np.concatenate((v0, np.zeros(n))), w0, belief.t, "srukf update")  # eq. 11

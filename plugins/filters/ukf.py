@@ -8,7 +8,8 @@ from fusion.api import Belief, Gate, MeasurementModel, ProcessModel, UpdateResul
 
 from scipy.linalg import blas
 
-from .base import KalmanBase, as_covariance, as_vector, covariance_of, linear_predict, new_belief, new_result
+from .base import (KalmanBase, as_covariance, as_vector, covariance_of, linear_predict, new_belief, new_result,
+                   residual_of)
 from .jacobian import process_jacobian
 from .linalg import psd_sqrt_rows, symmetrise
 
@@ -202,7 +203,8 @@ class UnscentedKalmanFilter(SigmaPointFilter):
             dX = sp.E @ S.T
             Z = model.h(x + dX)                                # 001 eq. 14, one call
         zm = sp.Wm @ Z
-        dZ = model.residual(Z, zm)
+        diff = residual_of(model)
+        dZ = diff(Z, zm)
         A = dZ * sp.Wc_col
         Pzz = dZ.T @ A                                         # 001 eq. 16
         if R is not None:
@@ -214,7 +216,7 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         # W = L_y^-1 P_xz^T and w = L_y^-1 y (its transpose is Fortran-ordered: no copy for BLAS)
         B = np.empty((n + 1, m))
         np.matmul(dX.T, A, out=B[:n])                          # 001 eq. 15
-        y = B[n] = model.residual(z, zm)
+        y = B[n] = diff(z, zm)
         V = _dtrsm(1.0, Ly, B.T, 0, 1, 0, 0, 1)               # (m, n + 1) = L_y^-1 [P_xz^T, y] (left, lower, overwrite_b)
         W = V[:, :n]
         w = V[:, n]
