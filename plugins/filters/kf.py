@@ -3,13 +3,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from fusion.api import Belief, ConfigError, Gate, MeasurementModel, Params, ProcessModel, UpdateResult
+from fusion.api import Belief, ConfigError, Params, ProcessModel
 
-from .base import KalmanBase, covariance_of, linear_predict, linearised_update
-from .jacobian import process_jacobian
+from .ekf import ExtendedKalmanFilter
 
 
-class KalmanFilter(KalmanBase):
+class KalmanFilter(ExtendedKalmanFilter):
+    # The same predict and update as the EKF (exact for affine models); only the check of the process differs.
+
     r"""Linear Kalman filter, for affine models ``x_k = F x_{k-1} + b(u) + w``, ``z = H x + c + v``.
 
     Prediction (paper 001 eqs. 9-10)::
@@ -36,15 +37,4 @@ class KalmanFilter(KalmanBase):
         if not process.linear:
             raise ConfigError(f"filter 'kf' needs a linear process model; process {process.name!r} is not "
                               "linear (linear = False): use ekf, iekf, ukf or srukf")
-        self.process = process
-        if dt == 0.0:
-            return belief
-        x = belief.x
-        F = process_jacobian(process, x, u, dt)
-        P1 = linear_predict(x, covariance_of(belief), F, process.Q(x, u, dt))
-        self.counters["predicts"] += 1
-        return Belief(belief.t + dt, process.normalize(process.f(x, u, dt)), P=P1)
-
-    def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
-               gate: Gate | None = None) -> UpdateResult:
-        return linearised_update(self, belief, model, z, R, gate, max_iterations=1)
+        return super().predict(belief, process, u, dt)
