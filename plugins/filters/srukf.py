@@ -188,6 +188,13 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         return new_belief(belief.t + dt, xm, S=S1)
 
     # ------------------------------------------------------------------ update
+    def _whiten(self, belief, Sy: np.ndarray, y: np.ndarray, gate, m: int):
+        """w = S_y^-1 y, the NIS w.w, S = S_y S_y^T and the gate's verdict (None to go on, else the
+        rejected result)."""
+        w = solve_lower(Sy, y)
+        nis, Syy = float(w.dot(w)), Sy @ Sy.T
+        return w, nis, Syy, self.rejected(belief, y, Syy, nis, gate, m)
+
     def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                gate: Gate | None = None) -> UpdateResult:
         x = belief.x
@@ -227,10 +234,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
             if w0 < 0.0:
                 L = self.rank1(L, np.concatenate((v0, np.zeros(n))), w0, belief.t, "srukf update")  # eq. 11
             Sy = L[:m, :m]
-            w = solve_lower(Sy, y)
-            nis = float(w.dot(w))
-            Syy = Sy @ Sy.T
-            out = self.rejected(belief, y, Syy, nis, gate, m)
+            w, nis, Syy, out = self._whiten(belief, Sy, y, gate, m)
             if out is not None:
                 return out
             x1 = x + L[m:, :m] @ w                                   # eq. 14: K y = (P_xz S_y^-T) S_y^-1 y
@@ -238,10 +242,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         else:
             Sy = self.sqrt_transform(sp, D1, BR, v0, w0, belief.t, "srukf innovation")  # eqs. 10-11
             Pxz = (sp.w * dX1.T) @ D1                                # eq. 12 (chi_0 - x^- = 0)
-            w = solve_lower(Sy, y)
-            nis = float(w.dot(w))
-            Syy = Sy @ Sy.T
-            out = self.rejected(belief, y, Syy, nis, gate, m)
+            w, nis, Syy, out = self._whiten(belief, Sy, y, gate, m)
             if out is not None:
                 return out
             W = solve_lower(Sy, Pxz.T)                               # S_y^-1 P_xz^T
