@@ -146,15 +146,19 @@ class Scheduler:
 
     def finish(self) -> Iterator[Estimate | Event]:
         """Release everything still buffered (end of input)."""
-        yield from self._release(math.inf)
+        yield from self._release(math.inf, flush=False)
+        # What the preprocessors still gather comes before the last input samples are integrated, so a
+        # final fix is not older than the belief.
         for sensor in self.sensors.values():
             if sensor.preprocessor is not None:
                 for out in sensor.preprocessor.flush():
                     yield from self._measure(sensor, out)
                 yield from self._drain_solver_events(sensor)
+        if self._pending:
+            yield from self._flush_inputs()
 
     # ------------------------------------------------------------------ internals
-    def _release(self, until: float) -> Iterator[Estimate | Event]:
+    def _release(self, until: float, flush: bool = True) -> Iterator[Estimate | Event]:
         pending = self._pending
         while self._buffer and self._buffer[0][0] <= until:
             _, _, msg = heapq.heappop(self._buffer)
@@ -170,7 +174,7 @@ class Scheduler:
             # Pending inputs stay pending through measurements that produce no observation (ranges a
             # solver gathers); _measure flushes them, up to its own time, when it needs the belief.
             yield from self._process(msg)
-        if until == math.inf and pending:
+        if until == math.inf and pending and flush:
             yield from self._flush_inputs()
 
     def _flush_inputs(self, until: float | None = None) -> Iterator[Estimate | Event]:
