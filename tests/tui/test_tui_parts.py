@@ -95,23 +95,42 @@ def _lines(n, dt=0.05):
     return head + [f"{i * dt:.3f},uwb,B{i % 4 + 1},{10.0 + 0.01 * i}\n" for i in range(n)]
 
 
-def test_replay_is_paced_by_sensor_time_and_snapshots_are_coalesced():
+class VirtualClock:
+    """Stands in for the feed's ``time`` module: sleep() advances monotonic() instantly, so pacing is
+    checked exactly and without waiting."""
+
+    def __init__(self):
+        self.now = 1000.0
+        self.slept = 0.0
+
+    def monotonic(self):
+        return self.now
+
+    def sleep(self, dt):
+        self.now += dt
+        self.slept += dt
+
+
+def test_replay_is_paced_by_sensor_time_and_snapshots_are_coalesced(monkeypatch):
+    import fusion.tui.feed as feed_mod
+
+    clock = VirtualClock()
+    monkeypatch.setattr(feed_mod, "time", clock)
     snaps = []
     feed = LiveFeed(load_system(CONFIG), _lines(21), snaps.append, source="test", speed=4.0, refresh_hz=20)
-    t0 = time.monotonic()
     final = feed.run()
-    wall = time.monotonic() - t0
     assert final.state == "finished" and final.lines == 22
-    assert wall >= 1.0 / 4.0 - 0.01  # paced: 1 s of sensor time at 4x real time takes at least 1/4 s
+    # 1 s of sensor time at 4x real time: the feed waits 1/4 s in all (in slices), no more.
+    assert clock.slept == pytest.approx(0.25, abs=0.01)
     assert final.counters["uwb"]["received"] == 21
-    assert len(snaps) <= wall * 20 + 4  # at most refresh_hz snapshots a second (+ first, pause, last)
+    assert len(snaps) <= clock.slept * 20 + 4  # at most refresh_hz snapshots a second (+ first, pause, last)
 
     snaps.clear()
+    clock.slept = 0.0
     fast = LiveFeed(load_system(CONFIG), _lines(400), snaps.append, speed=0.0, refresh_hz=10)
-    t0 = time.monotonic()
     fast.run()
-    assert time.monotonic() - t0 < 10.0  # 20 s of sensor time, not paced
-    assert snaps[-1].state == "finished" and len(snaps) < 400 / 10
+    assert clock.slept == 0.0  # speed 0: 20 s of sensor time, never paced
+    assert snaps[-1].state == "finished" and len(snaps) < 400 / 10  # coalesced, not one per line
 
 
 def test_pausing_a_live_feed_freezes_only_the_view():
