@@ -43,7 +43,7 @@ _BATCH_MAX = 64  # input samples integrated per predict_inputs call at most (bou
 class Scheduler:
     """Runs a wired System over a stream of Messages."""
 
-    def __init__(self, system: System, t0: float | None = None):
+    def __init__(self, system: System):
         self.system = system
         self.process = system.process
         self.filter = system.filter
@@ -54,7 +54,6 @@ class Scheduler:
         self.output_dt = 1.0 / spec.output.rate_hz if spec.output.rate_hz else None
         self.on_update = spec.output.on_update
         self.belief: Belief | None = None
-        self._t0 = t0
         self.u: np.ndarray | None = None
         self._buffer: list[tuple[float, int, Message]] = []
         self._seq = itertools.count()
@@ -233,11 +232,10 @@ class Scheduler:
             yield from list(events)
             events.clear()
 
-    def _ensure_belief(self, t: float) -> None:
-        if self.belief is None:
-            t0 = self._t0 if self._t0 is not None else t
-            self.belief = self.filter.initial_belief(t0, self.system.x0, self.system.P0)
-            self._next_output = t0 + self.output_dt if self.output_dt else math.inf
+    def _start(self, t: float) -> None:
+        """The first belief, at ``t``: the configured one, aligned and with the remembered fix if any."""
+        self.belief = self.filter.initial_belief(t, *self._initial())
+        self._next_output = t + self.output_dt if self.output_dt else math.inf
 
     def _predict_to(self, t: float) -> Iterator[Estimate]:
         """Predict with the held input up to ``t``, emitting fixed-rate outputs on the way."""
@@ -317,17 +315,15 @@ class Scheduler:
                 self._align_u.append(u)
                 sensor.counters["used"] += 1
                 continue
-            x0, P0 = self._x0, self._P0
             if self._align_s and self._align_u:
-                x0, P0 = self.process.align(x0, P0, np.mean(self._align_u, axis=0))  # type: ignore[attr-defined]
-            self._x0, self._P0 = x0, P0
-            x0, P0 = self._initial()
-            self.belief = self.filter.initial_belief(t, x0, P0)
-            self._next_output = t + self.output_dt if self.output_dt else math.inf
+                self._x0, self._P0 = self.process.align(  # type: ignore[attr-defined]
+                    self._x0, self._P0, np.mean(self._align_u, axis=0))
+            self._start(t)
             self.u = u
             sensor.counters["used"] += 1
             return good[i + 1:]
         return []
+
     def _measure(self, sensor: SensorRuntime, msg: Message) -> Iterator[Estimate | Event]:
         try:
             obs = sensor.model.observe(msg)  # type: ignore[union-attr]
@@ -342,14 +338,14 @@ class Scheduler:
             self._take_fix(obs)
             sensor.counters["used"] += 1
             if not (self._align_s or self.process.input_dim):
-                self.belief = self.filter.initial_belief(obs.t, *self._initial())
-                self._next_output = obs.t + self.output_dt if self.output_dt else math.inf
+                self._start(obs.t)
             return
         if self.belief is None and (not self._have_fix or self.process.input_dim):
             sensor.counters["rejected"] += 1
             yield Event(obs.t, "rejected", sensor.name, "before the filter is initialised")
             return
-        self._ensure_belief(obs.t)
+        if self.belief is None:
+            self._start(obs.t)
         if obs.t < self.belief.t:  # type: ignore[union-attr]
             # A fix stamped before the belief (e.g. a solver's cycle time): updating at the wrong time would
             # bias the estimate, so it is late like any other message.
