@@ -13,6 +13,7 @@ import yaml
 
 from fusion.api import ConfigError, Estimate, Event, FusionError
 from fusion.config import System, load_system
+from fusion.yamlsource import load_yaml
 from fusion.logformat import ParsedStream, iter_messages
 from fusion.scheduler import Scheduler
 from fusion.sources.recording import open_lines
@@ -36,17 +37,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def filter_override(system_filter: Any, name: str | None, params: list[str]) -> Any:
-    """The filter spec after --filter/--filter-param (None when neither is given)."""
+def filter_override(config: str | Path, name: str | None, params: list[str]) -> Any:
+    """The filter spec after --filter/--filter-param (None when neither is given). Only --filter-param
+    without --filter reads the config, to start from its own filter spec."""
     if name is None and not params:
         return None
     base: dict[str, Any]
     if name is not None:
         base = {"type": name}
-    elif isinstance(system_filter, str):
-        base = {"type": system_filter}
     else:
-        base = dict(system_filter)
+        own = load_yaml(config).data.get("filter", "ekf")
+        base = {"type": own} if isinstance(own, str) else dict(own)
     for item in params:
         key, sep, value = item.partition("=")
         if not sep or not key:
@@ -85,7 +86,7 @@ def replay(system: System, source: str | Path, on_estimate=None, on_event=None, 
             "wall_s": time.perf_counter() - wall0}
 
 
-def summarize(system: System, source: str | Path, result: dict[str, Any], settle_s: float = 0.0) -> dict[str, Any]:
+def summarize(system: System, source: str | Path, result: dict[str, Any]) -> dict[str, Any]:
     """The summary dict of DESIGN.md "Outputs"."""
     from fusion.metrics import ErrorTracker, Truth
 
@@ -97,16 +98,15 @@ def summarize(system: System, source: str | Path, result: dict[str, Any], settle
     if sched.truth and names:
         truth = Truth.from_messages(sched.truth, names)
     ev = system.spec.evaluation
-    tracker = ErrorTracker(system.layout, truth, settle_s=max(settle_s, ev.settle_s), position=ev.position)
+    tracker = ErrorTracker(system.layout, truth, settle_s=ev.settle_s, position=ev.position)
     for est in estimates:
         tracker.add(est)
     for sensor, rows in sched.nis.items():
         for t, nis, dim in rows:
             tracker.add_nis(sensor, nis, dim, t=t)
     track = tracker.summary()
-    sensors = {}
-    for name, s in system.sensors.items():
-        sensors[name] = dict(s.counters)  # malformed lines of configured sensors are counted by the scheduler
+    # malformed lines of configured sensors are counted by the scheduler, the others by the parser
+    sensors = {name: dict(s.counters) for name, s in system.sensors.items()}
     for name, n in parsed.malformed.items():
         if name not in system.sensors:
             sensors.setdefault(name or "?", dict(received=0, used=0, rejected=0, malformed=0, late=0))["malformed"] += n
@@ -134,10 +134,9 @@ def summarize(system: System, source: str | Path, result: dict[str, Any], settle
         summary["ignored_sensors"] = dict(sched.unused)
     if result["events"]:
         summary["events"] = dict(result["events"])
-    for extra in ("counters",):
-        counters = getattr(system.filter, extra, None)
-        if counters:
-            summary["filter_counters"] = dict(counters)
+    counters = getattr(system.filter, "counters", None)
+    if counters:
+        summary["filter_counters"] = dict(counters)
     return summary
 
 
@@ -171,10 +170,7 @@ def run(args: argparse.Namespace) -> int:
     from fusion.sinks.estimates import EstimateWriter
     from fusion.sinks.summary import write_summary_json
 
-    from fusion.config import load_yaml
-
-    doc = load_yaml(args.config)
-    override = filter_override(doc.data.get("filter", "ekf"), args.filter, args.filter_param)
+    override = filter_override(args.config, args.filter, args.filter_param)
     system = load_system(args.config, filter_override=override)
     source = args.input or system.recording
     if source is None:

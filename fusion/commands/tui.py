@@ -58,7 +58,6 @@ def build_app(args: argparse.Namespace):
     """The app the arguments describe; every usage, config and input error is raised here, before the UI
     takes the terminal."""
     from fusion.commands.run import filter_override
-    from fusion.config import load_yaml
     from fusion.tui.app import make_app
 
     if args.record and not args.port:
@@ -77,8 +76,7 @@ def build_app(args: argparse.Namespace):
     if args.record and Path(args.record).exists():
         raise InputError(f"--record {args.record}: the file exists; choose a new name (nothing is overwritten)")
     config = _config_path(args.config)
-    doc = load_yaml(config)
-    override = filter_override(doc.data.get("filter", "ekf"), args.filter, args.filter_param)
+    override = filter_override(config, args.filter, args.filter_param)
     source = args.input
     if args.port:
         from fusion.sources.serial import SerialSource
