@@ -147,19 +147,23 @@ class StateLayout:
 
 
 # --------------------------------------------------------------------------- data
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Belief:
     """Gaussian belief at time ``t``: mean ``x`` (n,) and either covariance ``P`` (n, n) or its
-    lower Cholesky factor ``S`` (P = S S^T, used by the square-root UKF). Immutable: filters return new ones."""
+    lower Cholesky factor ``S`` (P = S S^T, used by the square-root UKF). Immutable: filters return new ones.
+
+    The constructor writes the fields directly: a frozen dataclass's own ``__init__`` (one
+    ``object.__setattr__`` a field) costs ~2 us, and filters build one or two beliefs a step."""
 
     t: float
     x: np.ndarray
     P: np.ndarray | None = None
     S: np.ndarray | None = None
 
-    def __post_init__(self) -> None:
-        if self.P is None and self.S is None:
+    def __init__(self, t: float, x: np.ndarray, P: np.ndarray | None = None, S: np.ndarray | None = None):
+        if P is None and S is None:
             raise ValueError("a Belief needs P or S")
+        self.__dict__.update(t=t, x=x, P=P, S=S)
 
     @property
     def cov(self) -> np.ndarray:
@@ -212,15 +216,19 @@ class Observation:
     R: np.ndarray | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class UpdateResult:
-    """What a filter update returns. ``belief`` is the input belief when ``accepted`` is False."""
+    """What a filter update returns. ``belief`` is the input belief when ``accepted`` is False.
+    (Fields written directly by the constructor, as for Belief: one is built per update.)"""
 
     belief: Belief
     innovation: np.ndarray
     S: np.ndarray
     nis: float
     accepted: bool
+
+    def __init__(self, belief: Belief, innovation: np.ndarray, S: np.ndarray, nis: float, accepted: bool):
+        self.__dict__.update(belief=belief, innovation=innovation, S=S, nis=nis, accepted=accepted)
 
 
 @dataclass(frozen=True)

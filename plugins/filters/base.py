@@ -24,11 +24,10 @@ from .jacobian import measurement_jacobian
 from .linalg import cholesky_lower, recover_factor, solve_lower, symmetrise
 
 __all__ = ["KalmanBase", "linear_predict", "linearised_update", "as_covariance", "covariance_of",
-           "new_belief", "new_result", "as_vector", "residual_of"]
+           "as_vector", "residual_of"]
 
 _ndarray = np.ndarray
 _float64 = np.dtype(float)
-_new = object.__new__
 
 
 def as_vector(z) -> np.ndarray:
@@ -46,30 +45,6 @@ def residual_of(model: MeasurementModel):
     """``model.residual``, or ``np.subtract`` (the same z - z_hat, without a Python call) when the model
     keeps MeasurementModel's default."""
     return np.subtract if getattr(type(model), "residual", None) is _default_residual else model.residual
-
-
-def new_belief(t: float, x: np.ndarray, P: np.ndarray | None = None, S: np.ndarray | None = None) -> Belief:
-    """``Belief(t, x, P=P, S=S)`` without the frozen dataclass's ``__init__`` (four
-    ``object.__setattr__`` and ``__post_init__``: ~2 us, against ~0.3 us here; filters build one or two a
-    step). The caller guarantees P or S is given."""
-    b = _new(Belief)
-    b.__dict__.update(t=t, x=x, P=P, S=S)
-    return b
-
-
-def new_result(belief: Belief, y: np.ndarray, S: np.ndarray, nis: float, accepted: bool) -> UpdateResult:
-    """``UpdateResult(belief, y, S, nis, accepted)`` without the frozen dataclass's ``__init__``."""
-    r = _new(UpdateResult)
-    r.__dict__.update(belief=belief, innovation=y, S=S, nis=nis, accepted=accepted)
-    return r
-
-
-if hasattr(Belief, "__slots__") or hasattr(UpdateResult, "__slots__"):  # pragma: no cover - no __dict__
-    def new_belief(t, x, P=None, S=None):  # noqa: F811
-        return Belief(t, x, P=P, S=S)
-
-    def new_result(belief, y, S, nis, accepted):  # noqa: F811
-        return UpdateResult(belief, y, S, nis, accepted)
 
 
 def as_covariance(R, m: int) -> np.ndarray:

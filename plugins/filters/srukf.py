@@ -9,7 +9,7 @@ from pydantic import Field
 
 from fusion.api import Belief, Gate, MeasurementModel, ProcessModel, UpdateResult
 
-from .base import as_covariance, as_vector, new_belief, new_result, residual_of
+from .base import as_covariance, as_vector, residual_of
 from .jacobian import process_jacobian
 from .linalg import cholupdate, psd_sqrt_rows, qr_lower, qr_lower_scaled, recover_factor, solve_lower
 from .sigma_points import SigmaPoints, UnscentedParams
@@ -173,7 +173,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
             BQ = self.noise_rows("Q", Q)
             F = process_jacobian(process, x, u, dt)
             S1 = qr_lower(np.concatenate((F @ S, BQ.T), axis=1).T, overwrite=True)   # sqrt(F P F^T + Q)
-            return new_belief(belief.t + dt, process.normalize(process.f(x, u, dt)), S=S1)
+            return Belief(belief.t + dt, process.normalize(process.f(x, u, dt)), S=S1)
         return self.sigma_predict(belief, process, lambda X: process.f(X, u, dt), lambda x0, x1: Q, dt)
 
     def sigma_predict(self, belief: Belief, process: ProcessModel, propagate, noise, dt: float) -> Belief:
@@ -185,7 +185,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         xm = process.normalize(xm)
         BQ = self.noise_rows("Q", noise(x, xm))
         S1 = self.sqrt_transform(sp, D1, BQ, v0, w0, belief.t, "srukf predict")  # eqs. 6-7
-        return new_belief(belief.t + dt, xm, S=S1)
+        return Belief(belief.t + dt, xm, S=S1)
 
     # ------------------------------------------------------------------ update
     def _whiten(self, belief, Sy: np.ndarray, y: np.ndarray, gate, m: int):
@@ -256,4 +256,4 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
                 for j in range(m):                                   # eq. 16: m downdates (columns, not points)
                     S1 = self.rank1(S1, U[:, j], -1.0, belief.t, "srukf update")
         self.counters["updates"] += 1
-        return new_result(new_belief(belief.t, self.normalize(x1), S=S1), y, Syy, nis, True)
+        return UpdateResult(Belief(belief.t, self.normalize(x1), S=S1), y, Syy, nis, True)

@@ -8,7 +8,7 @@ from fusion.api import Belief, Gate, MeasurementModel, ProcessModel, UpdateResul
 
 from scipy.linalg import blas
 
-from .base import (KalmanBase, as_covariance, as_vector, covariance_of, linear_predict, new_belief, new_result,
+from .base import (KalmanBase, as_covariance, as_vector, covariance_of, linear_predict,
                    residual_of)
 from .jacobian import process_jacobian
 from .linalg import psd_sqrt_rows, symmetrise
@@ -145,7 +145,7 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         self.counters["predicts"] += 1
         if self.use_linear_prediction(process):
             F = process_jacobian(process, x, u, dt)
-            return new_belief(belief.t + dt, process.normalize(process.f(x, u, dt)), P=linear_predict(x, P, F, Q))
+            return Belief(belief.t + dt, process.normalize(process.f(x, u, dt)), P=linear_predict(x, P, F, Q))
         if self._augmented:
             return self._predict_augmented(belief, process, u, dt, P, Q)
         return self.sigma_predict(belief, process, lambda X: process.f(X, u, dt), lambda x0, x1: Q, dt)
@@ -159,7 +159,7 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         D = Y - xm
         xm = process.normalize(xm)
         P1 = (D.T * sp.Wc) @ D + noise(x, xm)
-        return new_belief(belief.t + dt, xm, P=symmetrise(P1))
+        return Belief(belief.t + dt, xm, P=symmetrise(P1))
 
     def _predict_augmented(self, belief, process, u, dt, P, Q) -> Belief:
         n = belief.x.shape[0]
@@ -229,4 +229,4 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         # W.T @ W is computed by BLAS syrk (numpy detects a.T @ a), exactly symmetric, so P1 is exactly
         # symmetric when P is (tests/filters/test_filters_exactness.py checks it bit for bit)
         self.counters["updates"] += 1
-        return new_result(new_belief(belief.t, self.normalize(x1), P=P1), y, Pzz, nis, True)
+        return UpdateResult(Belief(belief.t, self.normalize(x1), P=P1), y, Pzz, nis, True)
