@@ -14,7 +14,7 @@ round, each keeping its best round (a busy machine slows all alike):
 * ``srukf, per sample``: ``predict`` of one sample (``batch_inputs: false``, and what FilterPy does);
 * the ABPS update: ``update`` with a position fix through the lever arm (eq. 53), m = 3.
 
-The replay runs ``fusion run`` 's own path (parse, decode, schedule, filter: fusion.commands.run.replay)
+The replay runs ``fusion run`` 's own path (parse, decode, schedule, filter: fusion.pipeline.run)
 ``--repeats`` times; the best thread CPU time and the best wall time over the recording's duration give
 the multiple of real time. Parse alone (fusion.logformat.iter_messages over the file) is timed too.
 """
@@ -38,7 +38,7 @@ CONFIG = ROOT / "configs" / "abps_ins.yaml"
 
 def replay_speed(config: Path = CONFIG, repeats: int = 5) -> dict:
     """Best-of-``repeats`` CPU and wall time of the whole replay; ``x_real_time`` = data duration / time."""
-    from fusion.commands.run import replay, summarize
+    from fusion import pipeline
     from fusion.config import load_system
     from fusion.logformat import ParsedStream, iter_messages
     from fusion.sources.recording import open_lines
@@ -49,12 +49,12 @@ def replay_speed(config: Path = CONFIG, repeats: int = 5) -> dict:
         system = load_system(config)
         gc.collect()
         c0, w0 = time.process_time(), time.perf_counter()
-        result = replay(system, system.recording)
+        result = pipeline.run(system, system.recording)
         best["cpu_s"] = min(best["cpu_s"], time.process_time() - c0)
         best["wall_s"] = min(best["wall_s"], time.perf_counter() - w0)
         if summary is None:
-            summary = summarize(system, system.recording, result)
-            meta = result["parsed"].header.meta
+            summary = result.summary
+            meta = result.parsed.header.meta
             data_s = float(meta["duration"]) if "duration" in meta else summary["duration_s"]
         c0 = time.process_time()
         for _ in iter_messages(open_lines(system.recording), ParsedStream()):
@@ -69,12 +69,13 @@ def replay_speed(config: Path = CONFIG, repeats: int = 5) -> dict:
 
 def _setup(config: Path = CONFIG, index: int = 150):
     """Belief, models, a cycle of IMU samples and a fix from the real run."""
-    from fusion.commands.run import replay
+    from fusion import pipeline
     from fusion.config import load_system
 
     system = load_system(config)
-    result = replay(system, system.recording)
-    est = [e for e in result["estimates"] if e.update is not None][index]
+    kept = pipeline.Collect()
+    pipeline.run(system, system.recording, [kept])
+    est = [e for e in kept.estimates if e.update is not None][index]
     rng = np.random.default_rng(0)
     u0 = np.array([0.05, 0.02, -9.80, 0.002, -0.003, 0.15])
     us = u0 + rng.normal(size=(40, 6)) * [0.05, 0.05, 0.05, 0.01, 0.01, 0.01]

@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from fusion import quaternion as quat  # noqa: E402
-from fusion.commands.run import replay, summarize  # noqa: E402
+from fusion import pipeline  # noqa: E402
 from fusion.config import SystemSpec, wire  # noqa: E402
 from fusion.consistency import chi2_interval  # noqa: E402
 from fusion.metrics import Truth  # noqa: E402
@@ -52,14 +52,14 @@ def run(changes: dict | None = None) -> dict:
             node = node[key]
         node[last] = value
     system = wire(SystemSpec.model_validate(data), None, CONFIG)
+    kept = pipeline.Collect()
     c0 = time.process_time()
-    result = replay(system, system.recording)
+    result = pipeline.run(system, system.recording, [kept])
     cpu = time.process_time() - c0
-    summary = summarize(system, system.recording, result)
-    sched = result["scheduler"]
-    truth = Truth.from_messages(sched.truth, result["parsed"].header.fields["truth"])
+    summary = result.summary
+    truth = Truth.from_recording(system.recording)
     rows = []
-    for est in result["estimates"]:
+    for est in kept.estimates:
         tv = truth.at(est.t)
         if tv is None:
             continue
@@ -210,7 +210,7 @@ def other_seeds(seeds=(1, 2, 3, 4, 5)) -> list[dict]:
             log = Path(tmp) / f"abps_seed{seed}.log"
             cli(["simulate", str(ROOT / "scenarios" / "abps_mine.yaml"), "--seed", str(seed), "-o", str(log)])
             system = wire(SystemSpec.model_validate(yaml.safe_load(CONFIG.read_text())), None, CONFIG)
-            s = summarize(system, log, replay(system, log))
+            s = pipeline.run(system, log).summary
             rows.append({"seed": seed, "h_rmse": s["errors"]["position_rmse_m"], "h_max": s["errors"]["position_max_m"],
                          "att": s["errors"]["attitude_rmse_deg"], "nees": s["consistency"]["nees_mean"],
                          "in95": s["consistency"]["nees_in_95_fraction"]})

@@ -7,7 +7,7 @@ changing the beacons, the process noise, the initial belief or the route needs n
 
 ``run_pair(case, seed)`` simulates the case's recording with ``seed`` (``fusion.simulate``, written to a
 temporary file) and replays it through the system twice, once with ``ukf`` and once with ``ekf``
-(``fusion.config.wire`` with ``filter_override`` and ``fusion.commands.run.replay``): the two
+(``fusion.config.wire`` with ``filter_override`` and ``fusion.pipeline.run``): the two
 filters see the same ranges, so their errors pair by seed.
 
 Errors are evaluated at every estimate (one per range, 20 a second) against the exact trajectory of the
@@ -288,7 +288,7 @@ def run_pair(case: Case, seed: int, keep_tracks: bool = False, tmpdir: str | Non
     ``offset_sigma_min``); with ``keep_errors`` also ``t`` and the error norm ``e`` at each estimate;
     with ``keep_tracks`` also ``t``, ``x``, ``sd`` (estimates), the truth ``p`` and
     the per-estimate ``gdop`` and ``offset_sigma``."""
-    from fusion.commands.run import replay
+    from fusion import pipeline
     from fusion.simulate import simulate
 
     if case.matched is not None:
@@ -307,8 +307,9 @@ def run_pair(case: Case, seed: int, keep_tracks: bool = False, tmpdir: str | Non
         mirror = "y" if case.layout == "line" and case.beacons is None else None
         for flt in FILTERS:
             system = system_of(case, flt, seed, traj)
-            res = replay(system, path)
-            est = res["estimates"]
+            kept = pipeline.Collect()
+            res = pipeline.run(system, path, [kept])
+            est = kept.estimates
             t = np.array([e.t for e in est])
             x = np.array([e.belief.x for e in est])
             P = np.array([e.belief.cov for e in est])
@@ -321,8 +322,8 @@ def run_pair(case: Case, seed: int, keep_tracks: bool = False, tmpdir: str | Non
             m["warn_t"] = float(t[np.flatnonzero(gw | mw)[0]]) if m["warned"] else math.inf
             m["gdop_max"] = float(geo["gdop"].max())
             m["offset_sigma_min"] = float(geo["offset_sigma"].min()) if "offset_sigma" in geo else math.inf
-            m["rejected"] = system.sensors["uwb"].counters["rejected"]
-            m["wall_s"] = res["wall_s"]
+            m["rejected"] = res.summary["sensors"]["uwb"]["rejected"]
+            m["wall_s"] = res.wall_s
             if keep_errors:
                 m["t"] = t
                 m["e"] = np.hypot(*(x[:, :2] - traj.sample(t).p[:, :2]).T).astype(np.float32)

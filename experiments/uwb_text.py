@@ -98,7 +98,7 @@ def page(tables: dict[str, list[str]], summary: dict[str, Any], figures: dict[st
         "4.8 m/s^2) and a side-step, route 2 a serpentine with hairpins and a sudden reversal. The mobile unit "
         "ranges the four beacons in turn, 5 cycles a second. Each run of the study simulates the scenario with "
         "its own seed (`fusion.simulate`), then replays the same recording through both filters "
-        "(`fusion.config.wire` with a filter override, `fusion.commands.run.replay`), so the comparison pairs "
+        "(`fusion.config.wire` with a filter override, `fusion.pipeline.run`), so the comparison pairs "
         "by seed; the initial mean is drawn per seed too.")
     add("")
     add(f"Errors are the norm of the position error at every estimate (one per range), against the exact "

@@ -426,18 +426,51 @@ class Solver(Component):
 
 
 class Source(Component):
-    """Yields raw text lines of the log format (a recording, stdin, a serial port)."""
+    """Yields raw text lines of the log format (a recording, stdin, a serial port, a network stream).
+
+    ``fusion run --input TEXT`` and ``fusion tui --input TEXT`` choose a source through the registry
+    (fusion.sources.select): by URL scheme (``TEXT`` = ``scheme://...``, matched against ``schemes``),
+    by a device path for sources with ``devices = True`` (a character device such as ``/dev/ttyUSB0``), by
+    file suffix (``suffixes``), else the built-in ``recording``. ``live`` sources (a device, a socket)
+    are never paced by the live view. ``open()``/``close()`` are optional: ``close`` may be called from
+    another thread to end a blocked ``lines()``."""
 
     kind: ClassVar[str] = "source"
+    schemes: ClassVar[tuple[str, ...]] = ()   # URL schemes read, e.g. ("udp",) for udp://host:port
+    suffixes: ClassVar[tuple[str, ...]] = ()  # file suffixes read, lower case with the dot, e.g. (".log",)
+    devices: ClassVar[bool] = False           # reads character devices (serial ports)
+    live: ClassVar[bool] = False
+
+    @classmethod
+    def from_url(cls, url: str, **options: Any) -> "Source":
+        """The source for the text given to ``--input``. Default: ``url`` goes to the first field of
+        ``Params``, ``options`` (e.g. ``baud``) to the fields of the same names."""
+        first = next(iter(cls.Params.model_fields))
+        return cls(cls.Params(**{first: url, **options}))
+
+    @property
+    def label(self) -> str:
+        """Where the lines come from, for summaries and the live view."""
+        first = next(iter(type(self.params).model_fields), None)
+        return str(getattr(self.params, first, self.name)) if first else self.name
 
     def lines(self):  # -> Iterator[str]
         raise NotImplementedError
 
 
 class Sink(Component):
-    """Consumes estimates and events (files, plots)."""
+    """Consumes estimates and events (files, plots). ``fusion run --output PATH`` chooses a sink through
+    the registry by the suffix of PATH (``suffixes``; fusion.sources.select.open_sink). A sink is closed
+    once, at the end of the run."""
 
     kind: ClassVar[str] = "sink"
+    suffixes: ClassVar[tuple[str, ...]] = ()  # file suffixes written, lower case with the dot, e.g. (".csv",)
+
+    @classmethod
+    def for_path(cls, path: str, layout: StateLayout) -> "Sink":
+        """The sink writing to ``path`` for estimates of ``layout``. Default: ``Params(path=path)`` and a
+        BuildContext with the layout."""
+        return cls(cls.Params(path=path), BuildContext(layout=layout))
 
     def on_estimate(self, estimate: Estimate) -> None: ...
 

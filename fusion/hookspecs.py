@@ -10,6 +10,8 @@ from typing import TYPE_CHECKING
 import pluggy
 
 if TYPE_CHECKING:
+    from fusion.api import Estimate, Event
+    from fusion.config import System
     from fusion.registry import Registry
 
 hookspec = pluggy.HookspecMarker("fusion")
@@ -24,5 +26,44 @@ def fusion_register_components(registry: "Registry") -> None:
 
     :param registry: call ``registry.add(ComponentClass)`` for each component; the class declares its
         ``kind`` (process, measurement, filter, gate, decoder, solver, source, sink, simulator), ``name``,
-        pydantic ``Params`` and docstring.
+        pydantic ``Params`` and docstring. A ``source`` declares the URL ``schemes`` and/or file
+        ``suffixes`` it reads (``fusion run --input udp://...``), a ``sink`` the ``suffixes`` it writes
+        (``fusion run --output run.tsv``).
+    """
+
+
+# --------------------------------------------------------------------------- observation hooks
+# Called by fusion.pipeline during a run, through the kept PluginManager (``registry.pm.hook``), for every
+# registered plugin that implements them. They observe: the return value is ignored, and an exception
+# raised by an implementation ends the run as an internal error naming the hook. Each is called only
+# when some plugin implements it, so a run without observers pays nothing.
+
+
+@hookspec
+def fusion_on_estimate(estimate: "Estimate", system: "System") -> None:
+    """Called for every estimate a run emits, in time order, after the run's own sinks got it.
+
+    :param estimate: the ``fusion.api.Estimate`` (``t`` s, ``belief`` with ``x`` and ``cov``, ``reason``
+        ``update`` or ``output``, ``sensor``, and ``update`` with the innovation and NIS). Immutable: keep
+        what you need, do not modify it.
+    :param system: the wired system being run (read its ``layout`` to name the state elements).
+    """
+
+
+@hookspec
+def fusion_on_event(event: "Event", system: "System") -> None:
+    """Called for every event of a run (``malformed``, ``late``, ``rejected``, ``gap``, ``warning``,
+    ``no_fix``, ...), as it happens.
+
+    :param event: the ``fusion.api.Event`` (``t`` s or NaN, ``kind``, ``sensor`` or None, ``detail``).
+    :param system: the wired system being run.
+    """
+
+
+@hookspec
+def fusion_on_run_end(summary: dict, system: "System") -> None:
+    """Called once when a run ends (end of input, a lost source, or Ctrl-C), with its summary.
+
+    :param summary: the summary dict, the same that ``--summary-json`` writes (DESIGN.md "Outputs").
+    :param system: the wired system that was run.
     """

@@ -137,6 +137,22 @@ class Truth:
 
     skipped: int = 0
 
+    @classmethod
+    def from_recording(cls, path, stream: str = "truth") -> "Truth":
+        """The ``truth`` (or ``reference``) lines of a recording file, whole (for studies and plots of
+        short recordings; a run itself streams them through fusion.truth_stream)."""
+        from fusion.logformat import ParsedStream, iter_messages
+        from fusion.sources.recording import open_lines
+
+        parsed = ParsedStream()
+        msgs = [m for m in iter_messages(open_lines(path), parsed)
+                if isinstance(m, Message) and m.sensor == stream]
+        names = parsed.header.fields.get(stream)
+        if not names:
+            raise ValueError(f"{path}: no '# fields {stream} ...' header")
+        return cls.from_messages(msgs, names) if stream == "truth" else cls.from_messages(
+            [m._replace(sensor="truth") for m in msgs], names)
+
     def with_angles(self, names: Collection[str]) -> "Truth":
         """A copy whose columns ``names`` (rad) are angles: unwrapped for interpolation, wrapped on output."""
         return Truth(self.t, self.values, self.names, set(self.angles) | set(names))
@@ -244,18 +260,25 @@ class ErrorTracker:
 
     def __init__(self, layout: StateLayout, truth: Truth | None, settle_s: float = 0.0,
                  reasons: Collection[str] | None = None, nees_attitude: bool = True,
-                 position: Sequence[str] | None = None):
+                 position: Sequence[str] | None = None, keep_nis_series: bool = True):
         self.layout = layout
+        self._nees_attitude_wanted = nees_attitude
         self.position_elements = tuple(position) if position else None
         self.settle_s = float(settle_s)
         self.reasons = None if reasons is None else frozenset(reasons)
-        self.nis = NisTracker()
+        self.nis = NisTracker(keep_series=keep_nis_series)
         self.nees_stat = ChiSquareStat()
         self._t_first: float | None = None
         self.truth = None
         self.compared = 0
-        if truth is None or len(truth) == 0:
-            return
+        if truth is not None and len(truth):
+            self.set_truth(truth)
+
+    def set_truth(self, truth) -> None:
+        """Compare against ``truth`` from now on: a ``Truth``, or a ``fusion.truth_stream.TruthWindow``
+        filled as the run goes (anything with ``names``, ``index``, ``angles``, ``with_angles``, ``row``)."""
+        layout = self.layout
+        nees_attitude = self._nees_attitude_wanted
         angle_elems = [n for b in layout.blocks if b.kind == "angle" for n in b.element_names()]
         angles = [n for n in angle_elems if n in truth.index]
         self.truth = truth.with_angles(angles) if angles and not set(angles) <= truth.angles else truth
@@ -294,6 +317,12 @@ class ErrorTracker:
         self._T[np.arange(self._nees_vec.size), self._nees_vec] = 1.0
 
     # ------------------------------------------------------------------ per estimate
+    def start(self, t: float) -> None:
+        """Start the ``settle_s`` clock at ``t`` (s) unless it has started (a streaming run calls it with
+        the first estimate's time, which may be compared against truth only later)."""
+        if self._t_first is None:
+            self._t_first = float(t)
+
     def _settled(self, t: float) -> bool:
         if self._t_first is None:
             self._t_first = t

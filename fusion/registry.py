@@ -9,6 +9,7 @@ blocks plugins by name (entry-point name or built-in module name).
 from __future__ import annotations
 
 import difflib
+import functools
 import importlib
 import importlib.metadata as md
 import os
@@ -51,7 +52,13 @@ class Registry:
 
     def __init__(self) -> None:
         self._entries: dict[str, dict[str, Entry]] = {k: {} for k in KINDS}
-        self._provider = "builtin"
+        self.providers: dict[str, str] = {}  # top-level package -> "distribution version"
+        self.pm: pluggy.PluginManager | None = None  # set by make_plugin_manager
+
+    def provider_of(self, cls: type) -> str:
+        """Who provides ``cls``: its distribution and version, or the built-in label."""
+        top = cls.__module__.split(".")[0]
+        return self.providers.get(top) or _builtin_provider()
 
     def add(self, cls: type[Component], name: str | None = None) -> None:
         """Register a component class under its ``kind`` and ``name`` (or the given name)."""
@@ -61,9 +68,10 @@ class Registry:
         if not nm:
             raise ValueError(f"{cls.__qualname__}: component has no name")
         prev = self._entries[kind].get(nm)
+        provider = self.provider_of(cls)
         if prev is not None and prev.cls is not cls:
-            raise ValueError(f"{kind} {nm!r} registered twice: by {prev.provider} and {self._provider}")
-        self._entries[kind][nm] = Entry(kind, nm, cls, self._provider)
+            raise ValueError(f"{kind} {nm!r} registered twice: by {prev.provider} and {provider}")
+        self._entries[kind][nm] = Entry(kind, nm, cls, provider)
 
     def names(self, kind: str) -> list[str]:
         return sorted(self._entries[kind])
@@ -89,7 +97,10 @@ def _blocked() -> set[str]:
 
 
 def make_plugin_manager(extra_plugins: Iterable[object] = ()) -> tuple[pluggy.PluginManager, Registry]:
-    """Set up the plugin manager and fill a Registry from every plugin (built-in, entry points, extra)."""
+    """Set up the plugin manager and fill a Registry from every plugin (built-in, entry points, extra).
+
+    The PluginManager is kept (``registry.pm``) so the observation hooks (``fusion_on_estimate``, ...) can
+    be called through ``pm.hook`` during a run."""
     pm = pluggy.PluginManager("fusion")
     pm.add_hookspecs(hookspecs)
     registry = Registry()
@@ -111,17 +122,19 @@ def make_plugin_manager(extra_plugins: Iterable[object] = ()) -> tuple[pluggy.Pl
     for plugin in extra_plugins:
         pm.register(plugin)
     pm.check_pending()
-
-    # Call each implementation ourselves so every component is attributed to its distribution.
-    dist_of = {id(p): dist for p, dist in pm.list_plugin_distinfo()}
-    for impl in pm.hook.fusion_register_components.get_hookimpls():
-        dist = dist_of.get(id(impl.plugin))
-        registry._provider = f"{dist.metadata['name']} {dist.version}" if dist is not None else _builtin_provider()
-        impl.function(registry=registry)
-    registry._provider = "builtin"
+    # Each component is attributed to the distribution of the plugin module whose top-level package
+    # defines its class (a plugin's classes live in its own package).
+    registry.providers = {}
+    for plugin, dist in pm.list_plugin_distinfo():
+        top = getattr(plugin, "__name__", "").split(".")[0]
+        if top and top not in ("fusion", "fusion_plugins"):
+            registry.providers[top] = f"{dist.metadata['name']} {dist.version}"
+    registry.pm = pm
+    pm.hook.fusion_register_components(registry=registry)
     return pm, registry
 
 
+@functools.lru_cache(maxsize=1)
 def _builtin_provider() -> str:
     try:
         return f"fusion-estimator {md.version('fusion-estimator')} (built-in)"

@@ -9,17 +9,23 @@ A message older than the released horizon is late: ``drop`` counts it, ``replay`
 stored belief before it and re-runs the processed messages after it (bounded history).
 
 ``Scheduler.run(messages)`` is a generator of ``Estimate`` and ``Event`` objects, so a live UI can
-consume it as it goes.
+consume it as it goes. The one loop that drives a scheduler over a source is ``fusion.pipeline``.
+
+A scheduler works on its own deep copies of the system's stateful parts (process model, filter, sensors
+with their solvers, gates and counters), so the wired ``System`` is never modified and two runs of it
+give identical results. It keeps nothing that grows with the length of a run: the NIS of each update
+goes to ``on_nis`` (the pipeline's statistics), truth and reference lines are the pipeline's, not fed here.
 """
 from __future__ import annotations
 
+import copy
 import heapq
 import itertools
 import math
 import time
 from collections import deque
 from dataclasses import dataclass
-from typing import Iterable, Iterator
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
@@ -36,6 +42,7 @@ class _Snapshot:
     index: int  # position in the processed-message log after which this snapshot was taken
 
 
+_NOT_FED = frozenset(("truth", "reference"))  # streams that are compared against, never fused
 _CHECK_EVERY_S = 0.5  # a model's check() (geometry) runs at most this often per sensor, s of sensor time
 _BATCH_MAX = 64  # input samples integrated per predict_inputs call at most (bounds the live latency)
 
@@ -43,11 +50,14 @@ _BATCH_MAX = 64  # input samples integrated per predict_inputs call at most (bou
 class Scheduler:
     """Runs a wired System over a stream of Messages."""
 
-    def __init__(self, system: System):
+    MAX_UNUSED = 100  # distinct unknown sensor names counted by name; more are counted under "(other)"
+
+    def __init__(self, system: System, on_nis: Callable[[str, float, float, int], None] | None = None):
         self.system = system
-        self.process = system.process
-        self.filter = system.filter
-        self.sensors = system.sensors
+        # Private copies: components keep diagnostics (counters, a solver's open cycle); the System stays
+        # as wired (one deepcopy call, so objects shared between components stay shared).
+        self.process, self.filter, self.sensors = copy.deepcopy((system.process, system.filter, system.sensors))
+        self.on_nis = on_nis  # called (sensor, t, nis, dim) after every update tried, accepted or not
         spec = system.spec
         self.max_latency = spec.scheduler.max_latency
         self.late_policy = spec.scheduler.late_policy
@@ -67,8 +77,6 @@ class Scheduler:
         self.steps = {"predict": 0, "update": 0}
         self.time_s = {"predict": 0.0, "update": 0.0}
         self.unused: dict[str, int] = {}
-        self.nis: dict[str, list[tuple[float, float, int]]] = {}
-        self.truth: list[Message] = []
         # Batched input integration (filter.predict_inputs) needs no per-sample replay log.
         self._batch = hasattr(self.filter, "predict_inputs") and self.late_policy != "replay"
         self._pending: list[Message] = []
@@ -107,8 +115,7 @@ class Scheduler:
                     self._horizon = self._newest = t
                     self._pending.append(item)
                     return ()
-            elif item.sensor == "truth":
-                self.truth.append(item)
+            elif item.sensor in _NOT_FED:
                 return ()
         return self._push(item)
 
@@ -122,8 +129,11 @@ class Scheduler:
         msg = item
         sensor = self.sensors.get(msg.sensor)
         if sensor is None:
-            n = self.unused.get(msg.sensor, 0)
-            self.unused[msg.sensor] = n + 1
+            if msg.sensor in _NOT_FED:
+                return
+            name = msg.sensor if msg.sensor in self.unused or len(self.unused) < self.MAX_UNUSED else "(other)"
+            n = self.unused.get(name, 0)
+            self.unused[name] = n + 1
             if n == 0:
                 yield Event(msg.t, "warning", msg.sensor, f"sensor {msg.sensor!r} is not in the config; its messages are ignored")
             return
@@ -373,7 +383,8 @@ class Scheduler:
             if not self._replaying:
                 yield Event(obs.t, "rejected", sensor.name, f"NIS {result.nis:.1f} outside the gate")
         if not self._replaying:
-            self.nis.setdefault(sensor.name, []).append((obs.t, result.nis, len(obs.z)))
+            if self.on_nis is not None:
+                self.on_nis(sensor.name, obs.t, result.nis, len(obs.z))
             if self.on_update:
                 yield Estimate(obs.t, self.belief, "update", sensor.name, result)
 

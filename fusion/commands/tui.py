@@ -79,9 +79,9 @@ def build_app(args: argparse.Namespace):
     override = filter_override(config, args.filter, args.filter_param)
     source = args.input
     if args.port:
-        from fusion.sources.serial import SerialSource
+        from fusion.sources.select import open_source
 
-        source = SerialSource(port=args.port, baud=args.baud, record=args.record)
+        source = open_source(args.port, device=True, baud=args.baud, record=args.record)
     speed = 1.0 if args.speed is None else args.speed
     return make_app(config, source, speed=speed, refresh_hz=args.refresh, filter_override=override)
 

@@ -51,6 +51,11 @@ class EstimateWriter(Sink):
 
     name = "estimates"
     kind = "sink"
+    suffixes = (".csv", ".jsonl", ".ndjson")
+
+    @classmethod
+    def for_path(cls, path: str, layout: StateLayout) -> "EstimateWriter":
+        return cls(path, layout)
 
     class Params(Params):
         path: str = Field(description="output file: .csv or .jsonl (- for stdout)")

@@ -79,15 +79,19 @@ def _quat_names(layout: StateLayout) -> list[str] | None:
 
 def plot_run(path, layout: StateLayout, estimates_t: np.ndarray, estimates_x: np.ndarray,
              estimates_sd: np.ndarray, truth: Truth | None, beacons: Mapping[str, np.ndarray] | None,
-             nis: Mapping[str, tuple[np.ndarray, np.ndarray, int]] | None, title: str = "",
-             max_points: int = 5000) -> None:
+             nis: Mapping[str, tuple] | None, title: str = "",
+             max_points: int = 5000, truth_rows: np.ndarray | None = None) -> None:
     """Write the run plot as a PNG to ``path``.
 
     :param estimates_t: times (N,) in s; ``estimates_x``, ``estimates_sd``: states and standard
         deviations (N, n) in ``layout`` order (SI units).
     :param truth: the recording's truth or None; ``beacons``: name -> position (m, NED, 2 or 3 values).
-    :param nis: ``{sensor: (times (k,), values (k,), dim)}`` (e.g. ``ErrorTracker.nis_series()``).
+    :param nis: ``{sensor: (times (k,), values (k,), dim)}`` (e.g. ``ErrorTracker.nis_series()``), or
+        ``(times, values, dim, fraction)`` with the fraction inside the 95% interval over every update
+        (when the values are a decimated subset, as from ``fusion.sinks.plot_recorder.PlotRecorder``).
     :param max_points: decimation per curve.
+    :param truth_rows: the truth at each estimate time (N, m) in ``truth.names`` order (NaN rows where
+        undefined), instead of interpolating ``truth`` (a streaming run keeps these, not the whole truth).
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -97,11 +101,16 @@ def plot_run(path, layout: StateLayout, estimates_t: np.ndarray, estimates_x: np
     SD = np.asarray(estimates_sd, dtype=float).reshape(t.size, -1) if t.size else np.zeros((0, layout.n))
     idx = decimate_index(t.size, max_points)
     t, X, SD = t[idx], X[idx], SD[idx]
+    if truth_rows is not None:
+        truth_rows = np.asarray(truth_rows, dtype=float).reshape(-1, len(truth.names) if truth is not None else 0)[idx]
     if truth is not None and len(truth) == 0:
         truth = None
     pos = _position_names(layout)
     pi = [layout.element_index(n) for n in pos]
-    T = truth.sample(t) if truth is not None and t.size else None   # truth at the (decimated) estimate times
+    if truth_rows is not None and truth is not None and t.size:
+        T = truth_rows
+    else:
+        T = truth.sample(t) if truth is not None and t.size else None   # truth at the (decimated) estimate times
     qn = _quat_names(layout)
     show_att = qn is not None and truth is not None and all(n in truth.index for n in qn)
     nis = {s: v for s, v in (nis or {}).items() if len(v[0])}
@@ -187,12 +196,15 @@ def plot_run(path, layout: StateLayout, estimates_t: np.ndarray, estimates_x: np
     # --- NIS per sensor
     if nis:
         grid = outer[1].subgridspec(n_nis_rows, n_nis_cols)
-        for k, (sensor, (nt, nv, dim)) in enumerate(sorted(nis.items())):
+        for k, (sensor, series) in enumerate(sorted(nis.items())):
+            nt, nv, dim = series[:3]
             ax = fig.add_subplot(grid[k // n_nis_cols, k % n_nis_cols])
             nt, nv = np.asarray(nt, dtype=float), np.asarray(nv, dtype=float)
             lo, hi = chi2_interval(max(1, int(dim)))
             finite = np.isfinite(nv)
             inside = float(np.mean((nv[finite] >= lo) & (nv[finite] <= hi))) if finite.any() else float("nan")
+            if len(series) > 3 and series[3] is not None:
+                inside = float(series[3])
             j = decimate_index(nt.size, max_points)
             ax.plot(nt[j], np.clip(nv[j], 1e-6, None), ".", ms=2, color="tab:green")
             ax.axhline(hi, color="k", ls="--", lw=0.8)

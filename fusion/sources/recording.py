@@ -39,12 +39,19 @@ def open_lines(path: str | Path) -> Iterator[str]:
 
 
 class RecordingSource(Source):
-    """Replays a recorded log file (``-`` for standard input) line by line."""
+    """Replays a recorded log file (``-`` for standard input, ``file://PATH`` too) line by line: the
+    source of any ``--input`` that no other source claims."""
 
     name = "recording"
+    schemes = ("file",)
+    suffixes = (".log", ".txt")
 
     class Params(Params):
         path: str
+
+    @classmethod
+    def from_url(cls, url: str, **options) -> "RecordingSource":
+        return cls(cls.Params(path=url[len("file://"):] if url.startswith("file://") else url, **options))
 
     def lines(self) -> Iterator[str]:
         return open_lines(self.params.path)

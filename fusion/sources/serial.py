@@ -66,6 +66,8 @@ class SerialSource(Source):
 
     name = "serial"
     live = True  # a live stream: paced by the device, not replayed
+    devices = True  # character devices: /dev/ttyUSB0, /dev/pts/3, COM3
+    schemes = ("loop", "socket", "rfc2217", "spy", "alt", "hwgrep", "cp2110")  # pyserial URL handlers
 
     class Params(Params):
         port: str

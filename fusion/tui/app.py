@@ -18,7 +18,8 @@ from textual.widgets import Footer, Header
 
 from fusion.api import ConfigError
 from fusion.config import System, load_system
-from fusion.sources.recording import open_lines
+from fusion.api import Source
+from fusion.sources.select import open_source
 from fusion.tui.counters import SensorCounters
 from fusion.tui.event_log import EventLog
 from fusion.tui.feed import FeedSnapshot, LiveFeed
@@ -136,11 +137,11 @@ def make_app(config_path_or_system: str | Path | System, source: Any = None, *, 
     """The live view of a system over a source.
 
     ``config_path_or_system``: a system YAML (loaded with ``load_system``) or a wired ``System`` (fresh:
-    its counters are the run's). ``source``: None for the config's own recording, a recording path
-    (replayed at ``speed`` x real time by sensor time; 0 = as fast as possible), or a Source object
-    with ``lines()`` (e.g. ``fusion.sources.serial.SerialSource``; a source with ``live = True`` is
-    never paced). Opening errors (missing recording, dead port) raise ``InputError`` here, before the UI
-    takes the terminal."""
+    every run works on its own copy). ``source``: None for the config's own recording, a recording path
+    or any text ``--input`` takes (chosen through the registry: fusion.sources.select), or a Source
+    object (e.g. ``fusion.sources.serial.SerialSource``). A recording is replayed at ``speed`` x real time
+    by sensor time (0 = as fast as possible); a source with ``live = True`` is never paced. Opening
+    errors (missing recording, dead port) raise ``InputError`` here, before the UI takes the terminal."""
     if isinstance(config_path_or_system, System):
         system = config_path_or_system
     else:
@@ -150,14 +151,18 @@ def make_app(config_path_or_system: str | Path | System, source: Any = None, *, 
         if source is None:
             raise ConfigError(f"{system.path or system.spec.name}: no 'recording:' in the config; "
                               "give a recording (--input LOG) or a serial port (--port PORT)")
+    label = None
     if isinstance(source, (str, Path)):
-        path = Path(source)
-        options: dict[str, Any] = dict(lines=_primed(open_lines(path)), source=_label(path), live=False)
-    else:
-        if hasattr(source, "open"):
-            source.open()
-        options = dict(lines=source.lines(), source=getattr(source, "label", source.name),
-                       live=bool(getattr(source, "live", False)), close=getattr(source, "close", None))
+        label = _label(Path(source)) if "://" not in str(source) else str(source)
+        source = open_source(str(source), system.registry)
+    if not isinstance(source, Source):
+        raise ConfigError(f"source {source!r}: expected a path, a source URL or a fusion.api.Source")
+    if hasattr(source, "open"):
+        source.open()
+    live = bool(source.live)
+    lines = source.lines() if live else _primed(iter(source.lines()))
+    options: dict[str, Any] = dict(lines=lines, source=label or source.label, live=live,
+                                   close=getattr(source, "close", None))
     options.update(speed=speed, refresh_hz=refresh_hz)
     app = FusionApp(system, options)
     if hasattr(source, "on_idle"):

@@ -1,4 +1,4 @@
-"""The data side of the live view: lines -> iter_messages -> Scheduler.push, run in a worker thread.
+"""The data side of the live view: lines -> iter_messages -> fusion.pipeline.Run, in a worker thread.
 
 ``LiveFeed.run()`` reads a source's lines (a recording paced by sensor time, or a live port), pushes the
 messages through the scheduler and, at most ``refresh_hz`` times a second, hands an immutable
@@ -19,10 +19,10 @@ from typing import Callable, Iterable, Iterator
 
 from fusion.api import Estimate, Event, InputError, Message
 from fusion.config import System
-from fusion.logformat import ParsedStream, iter_messages
-from fusion.scheduler import Scheduler
+from fusion.logformat import iter_messages
+from fusion.pipeline import COUNTERS, Run
 
-COUNTERS = ("received", "used", "rejected", "malformed", "late")
+__all__ = ["LiveFeed", "FeedSnapshot", "LoggedEvent", "COUNTERS"]
 _SLICE = 0.05  # s: longest sleep between checks of pause/stop while pacing
 
 
@@ -77,8 +77,10 @@ class LiveFeed:
                  close: Callable[[], object] | None = None, max_events: int = 500,
                  max_track: int = 4000, track_dt: float = 0.1):
         self.system = system
-        self.scheduler = Scheduler(system)
-        self.parsed = ParsedStream()
+        # The run keeps its statistics in bounded memory; the view's own histories are the deques below.
+        self.run_ = Run(system, on_truth=self._take_truth, label=source)
+        self.parsed = self.run_.parsed
+        self.result = None  # the RunResult once the input has ended
         self._lines = lines
         self._post = post
         self.source = source
@@ -145,7 +147,7 @@ class LiveFeed:
     # ------------------------------------------------------------------ the worker
     def run(self) -> FeedSnapshot:
         """Read until the end of the input, a lost port, or stop(); returns the final snapshot."""
-        sched = self.scheduler
+        run = self.run_
         self._emit(time.monotonic())
         ended = False
         try:
@@ -155,13 +157,10 @@ class LiveFeed:
                     if self.sensor_t != self.sensor_t:
                         self._t_start = item.t
                     self.sensor_t = item.t
-                for out in sched.push(item):
+                for out in run.push(item):
                     self._take(out)
-                if sched.truth:
-                    self._take_truth()
                 now = time.monotonic()
                 if now >= self._next_post:
-                    self._trim()
                     self._emit(now)
             ended = not self._stop.is_set()
             self.state = "finished" if ended else "stopped"
@@ -176,9 +175,9 @@ class LiveFeed:
             self._log(Event(self.sensor_t, "error", None, self.message))
         if ended:
             try:
-                for out in sched.finish():
+                for out in run.scheduler_finish():
                     self._take(out)
-                self._take_truth()
+                self.result = run.finish()
             except Exception as exc:
                 self.state = "error"
                 self.message = f"internal error: {type(exc).__name__}: {exc}"
@@ -247,44 +246,29 @@ class LiveFeed:
         else:
             self._log(out)
 
-    def _take_truth(self) -> None:
-        """Truth lines go to the plot; the scheduler's own list is emptied so a live run stays bounded."""
-        truth = self.scheduler.truth
+    def _take_truth(self, msg: Message) -> None:
+        """A truth line: its (north, east) point goes to the view's true track (decimated by time)."""
         if self._truth_idx is None and self._pos is not None:
             names = self.parsed.header.fields.get("truth")
             ok = names is not None and all(n in names for n in self._pos_names)
             self._truth_idx = (names.index(self._pos_names[0]), names.index(self._pos_names[1])) if ok else False
         if self._truth_idx:
             i, j = self._truth_idx  # type: ignore[misc]
-            for msg in truth:
-                if msg.t - self._truth_t >= self.track_dt and len(msg.values) > max(i, j):
-                    try:
-                        self.truth.append((float(msg.values[i]), float(msg.values[j])))
-                    except (TypeError, ValueError):
-                        continue
-                    self.truth_total += 1
-                    self._truth_t = msg.t
-        truth.clear()
-
-    def _trim(self) -> None:
-        """Keep the scheduler's per-update NIS lists bounded on a long live run (the view does not use them)."""
-        for rows in self.scheduler.nis.values():
-            if len(rows) > 10_000:
-                del rows[:-1000]
+            if msg.t - self._truth_t >= self.track_dt and len(msg.values) > max(i, j):
+                try:
+                    self.truth.append((float(msg.values[i]), float(msg.values[j])))
+                except (TypeError, ValueError):
+                    return
+                self.truth_total += 1
+                self._truth_t = msg.t
 
     def _log(self, ev: Event) -> None:
         self._seq += 1
         self.events.append(LoggedEvent(self._seq, ev.t, ev.kind, ev.sensor, ev.detail))
 
     def counters(self) -> dict[str, dict[str, int]]:
-        """Counters by sensor as ``fusion run`` reports them (malformed lines of unknown sensors under their
-        name, or '?' when no sensor could be read from the line)."""
-        out = {name: dict(s.counters) for name, s in self.system.sensors.items()}
-        for name, n in list(self.parsed.malformed.items()):
-            if name not in self.system.sensors:
-                row = out.setdefault(name or "?", dict.fromkeys(COUNTERS, 0))
-                row["malformed"] += n
-        return out
+        """Counters by sensor as ``fusion run`` reports them (the run's own statistics)."""
+        return self.run_.stats.counters()
 
     def _maybe_emit(self, now: float) -> None:
         """Emit when due and something new was read since the last snapshot."""
@@ -313,7 +297,7 @@ class LiveFeed:
             rates = {k: (n - r0.get(k, 0)) / (t - t0) for k, n in received.items()}
         snap = FeedSnapshot(
             source=self.source, live=self.live, state=self.state, estimate=self.estimate, counters=counters,
-            ignored=dict(self.scheduler.unused), rates=rates, events=tuple(self.events), track=tuple(self.track),
+            ignored=self.run_.stats.ignored(), rates=rates, events=tuple(self.events), track=tuple(self.track),
             track_total=self.track_total, truth=tuple(self.truth), truth_total=self.truth_total,
             lines=self.lines_read, data_wall=self._data_wall, sensor_t=t, speed_ratio=ratio, wall=now, message=self.message)
         self._next_post = now + self.refresh_dt

@@ -17,7 +17,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "experiments"))
 
 from fusion.api import Belief  # noqa: E402
-from fusion.commands.run import replay, summarize  # noqa: E402
+from fusion import pipeline  # noqa: E402
 from fusion.config import load_system  # noqa: E402
 
 import uwb_cases as uc  # noqa: E402
@@ -52,7 +52,7 @@ def test_shipped_recordings_run(route, layout):
     for flt in ("ukf", "ekf"):
         system = load_system(CONFIGS[layout], filter_override=flt)
         rec = ROOT / "recordings" / RECORDINGS[route, layout]
-        summary = summarize(system, rec, replay(system, rec))
+        summary = pipeline.run(system, rec).summary
         err = summary["errors"]
         assert summary["sensors"]["uwb"]["rejected"] <= 2
         assert summary["sensors"]["uwb"]["used"] >= 1300
@@ -80,7 +80,7 @@ def test_experiment_metrics_match_the_run_summary():
     for flt in ("ukf", "ekf"):
         system = load_system(CONFIGS["optimal"], filter_override=flt)
         rec = ROOT / "recordings" / "uwb_route1.log"
-        err = summarize(system, rec, replay(system, rec))["errors"]
+        err = pipeline.run(system, rec).summary["errors"]
         assert pair[flt]["rmse_all"] == pytest.approx(err["position_rmse_m"], rel=1e-6)
         assert pair[flt]["max_all"] == pytest.approx(err["position_max_m"], rel=1e-6)
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fusion.commands.run import replay, summarize
+from fusion import pipeline
 from fusion.config import load_system
 from fusion.tui.app import make_app
 from fusion.tui.counters import SensorCounters
@@ -36,8 +36,9 @@ def finished(app):
 def reference(source=None):
     system = load_system(CONFIG)
     src = source or system.recording
-    result = replay(system, src)
-    return result, summarize(system, src, result)
+    kept = pipeline.Collect()
+    result = pipeline.run(system, src, [kept])
+    return {"estimates": kept.estimates}, result.summary
 
 
 def test_replay_at_speed_0_shows_the_final_estimate_of_fusion_run():

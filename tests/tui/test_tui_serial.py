@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from fusion.api import InputError
-from fusion.commands.run import replay
+from fusion import pipeline
 from fusion.config import load_system
 from fusion.registry import default_registry
 from fusion.sources.serial import PortLost, SerialSource
@@ -113,7 +113,7 @@ def test_live_view_over_a_pty_keeps_the_last_state_when_the_port_is_lost(tmp_pat
     text = "".join(RECORDING.read_text().splitlines(True)[:600])
     n_lines = text.count("\n")
     n_uwb = sum(",uwb," in line for line in text.splitlines())
-    ref = replay(load_system(CONFIG), _write(tmp_path / "part.log", text))["estimates"][-1]
+    ref = pipeline.run(load_system(CONFIG), _write(tmp_path / "part.log", text)).last
     master, slave = os.openpty()
     rec = tmp_path / "rec.log"
     src = SerialSource(port=os.ttyname(slave), record=str(rec))

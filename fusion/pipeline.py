@@ -1,0 +1,427 @@
+"""The one run loop: a source's lines -> messages -> the scheduler -> sinks, hooks and statistics.
+
+    from fusion.config import load_system
+    from fusion import pipeline
+
+    system = load_system("configs/abps_ins.yaml")
+    result = pipeline.run(system, system.recording)          # or a Source, or any iterable of lines
+    result.summary["errors"]["position_rmse_m"]
+
+``fusion run``, ``fusion tui``, the experiments and the tests all run a system through this module;
+nothing else drives a ``Scheduler``. A run is a stream in bounded memory: estimates go to the sinks (and
+to the ``fusion_on_estimate`` hook) and are not kept; errors against truth, NEES and NIS are accumulated
+online (``RunStats``); truth is kept as a short window for interpolation (``fusion.truth_stream``); a plot
+keeps a decimated trajectory of bounded size. The wired ``System`` is not modified: running it twice gives
+identical results.
+
+``Run`` is the same loop one message at a time, for callers that pace or interleave it (the live view):
+``run = Run(system); for item in iter_messages(lines, run.parsed): run.push(item); result = run.finish()``.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterable, Sequence
+
+import numpy as np
+
+from fusion.api import Estimate, Event, FusionError, MalformedMessage, Message, Sink, Source
+from fusion.config import System
+from fusion.logformat import ParsedStream, iter_messages
+from fusion.metrics import ErrorTracker
+from fusion.scheduler import Scheduler
+from fusion.truth_stream import TruthComparison
+
+__all__ = ["run", "Run", "RunResult", "RunStats", "Collect", "COUNTERS"]
+
+COUNTERS = ("received", "used", "rejected", "malformed", "late")
+_NIS_WAIT_MAX = 4096  # NIS records held until the first estimate starts the settle clock
+
+
+class RunStats:
+    """Everything a run counts, accumulated online in constant memory (owned by one run).
+
+    Counters per sensor (the scheduler's, plus malformed lines of sensors the config does not have),
+    events by kind, step counts and times, errors against ``truth`` lines and agreement with
+    ``reference`` lines (``fusion.metrics.ErrorTracker`` fed through ``fusion.truth_stream``), NEES, NIS,
+    and the span and health of the estimates."""
+
+    def __init__(self, system: System, scheduler: Scheduler, parsed: ParsedStream):
+        self.system = system
+        self.scheduler = scheduler
+        self.parsed = parsed
+        ev = system.spec.evaluation
+        self._settle_s, self._position = ev.settle_s, ev.position
+        self.tracker = ErrorTracker(system.layout, None, settle_s=ev.settle_s, position=ev.position,
+                                    keep_nis_series=False)
+        self.truth: TruthComparison | None = None
+        self.reference: TruthComparison | None = None
+        self.events: dict[str, int] = {}
+        self.estimates = 0
+        self.t_first = math.inf
+        self.t_last = -math.inf
+        self.nonfinite = 0        # estimates with a non-finite mean or sd
+        self.largest_sd = 0.0     # over the run, any element
+        self._nis_wait: list[tuple[str, float, float, int]] | None = []
+        self.on_result: Callable | None = None  # (estimate, errors, truth_row) for a plot
+
+    # ------------------------------------------------------------------ feeding
+    def comparison(self, stream: str) -> TruthComparison | None:
+        """The comparison against ``truth`` or ``reference``, created once the log header names its
+        fields (None until then)."""
+        current = self.truth if stream == "truth" else self.reference
+        if current is not None:
+            return current
+        names = self.parsed.header.fields.get(stream)
+        if not names:
+            return None
+        if stream == "truth":
+            self.truth = TruthComparison(self.tracker, names, on_result=self.on_result)
+            return self.truth
+        tracker = ErrorTracker(self.system.layout, None, settle_s=self._settle_s, position=self._position,
+                               keep_nis_series=False)
+        if self.t_first < math.inf:
+            tracker.start(self.t_first)
+        self.reference = TruthComparison(tracker, names)
+        return self.reference
+
+    def add_estimate(self, est: Estimate) -> None:
+        t = est.t
+        if self.estimates == 0:
+            self.tracker.start(t)
+            self._release_nis()
+            self.comparison("truth")
+            if self.reference is not None:
+                self.reference.tracker.start(t)
+        self.estimates += 1
+        if t < self.t_first:
+            self.t_first = t
+        if t > self.t_last:
+            self.t_last = t
+        sd = est.belief.sd
+        top = float(sd.max()) if sd.size else 0.0
+        if top != top or top == math.inf or not np.isfinite(est.belief.x).all():
+            self.nonfinite += 1
+        elif top > self.largest_sd:
+            self.largest_sd = top
+        if self.truth is not None:
+            self.truth.add_estimate(est)
+        elif self.on_result is not None:
+            self.on_result(est, None, None)
+        if self.reference is not None:
+            self.reference.add_estimate(est)
+
+    def add_nis(self, sensor: str, t: float, nis: float, dim: int) -> None:
+        wait = self._nis_wait
+        if wait is not None:
+            wait.append((sensor, t, nis, dim))
+            if len(wait) > _NIS_WAIT_MAX:  # no estimate is coming (outputs off): start the clock here
+                self.tracker.start(wait[0][1])
+                self._release_nis()
+            return
+        self.tracker.add_nis(sensor, nis, dim, t=t)
+
+    def _release_nis(self) -> None:
+        wait, self._nis_wait = self._nis_wait, None
+        for sensor, t, nis, dim in wait or ():
+            self.tracker.add_nis(sensor, nis, dim, t=t)
+
+    def add_event(self, event: Event) -> None:
+        self.events[event.kind] = self.events.get(event.kind, 0) + 1
+
+    def finish(self) -> None:
+        self._release_nis()
+        for comp in (self.truth, self.reference):
+            if comp is not None:
+                comp.finish()
+
+    # ------------------------------------------------------------------ reading
+    def counters(self) -> dict[str, dict[str, int]]:
+        """Per sensor: received, used, rejected, malformed, late. Malformed lines of configured sensors are
+        counted by the scheduler, the others (unknown or unreadable sensor: '?') by the parser."""
+        out = {name: dict(s.counters) for name, s in self.scheduler.sensors.items()}
+        for name, n in list(self.parsed.malformed.items()):
+            if name not in self.scheduler.sensors:
+                out.setdefault(name or "?", dict.fromkeys(COUNTERS, 0))["malformed"] += n
+        return out
+
+    def ignored(self) -> dict[str, int]:
+        """Messages of sensors the config does not have, by sensor name."""
+        return dict(self.scheduler.unused)
+
+    @property
+    def filter_counters(self) -> dict[str, int]:
+        """The filter's own diagnostics for this run (``predicts``, ``not_positive_definite``, ...)."""
+        return dict(getattr(self.scheduler.filter, "counters", None) or {})
+
+    def summary(self, source: str, wall_s: float) -> dict[str, Any]:
+        """The summary dict of DESIGN.md "Outputs"."""
+        system, sched = self.system, self.scheduler
+        track = self.tracker.summary()
+        steps = dict(sched.steps)
+        duration = (self.t_last - self.t_first) if self.estimates else 0.0
+        summary: dict[str, Any] = {
+            "config": str(system.path) if system.path else system.spec.name,
+            "filter": system.filter.name,
+            "input": str(source),
+            "duration_s": duration,
+            "wall_s": wall_s,
+            "steps": steps,
+            "us_per_predict": 1e6 * sched.time_s["predict"] / steps["predict"] if steps["predict"] else None,
+            "us_per_update": 1e6 * sched.time_s["update"] / steps["update"] if steps["update"] else None,
+            "sensors": self.counters(),
+        }
+        if track.get("errors"):
+            summary["errors"] = track["errors"]
+            if system.spec.evaluation.position:
+                summary["errors"]["position_elements"] = list(system.spec.evaluation.position)
+        if track.get("consistency"):
+            summary["consistency"] = track["consistency"]
+        if self.reference is not None:
+            agreement = self.reference.tracker.summary()["errors"]
+            if agreement:
+                agreement.pop("element_rmse", None)
+                summary["agreement"] = {"with": "reference (the onboard estimator's output in the log); "
+                                                "an agreement, not an error", **agreement}
+        if sched.unused:
+            summary["ignored_sensors"] = dict(sched.unused)
+        if self.events:
+            summary["events"] = dict(self.events)
+        counters = self.filter_counters
+        if counters:
+            summary["filter_counters"] = counters
+        return summary
+
+
+class Collect:
+    """A sink that keeps every estimate (``estimates``) and event (``events``) in memory: for tests,
+    experiments and short runs that want arrays afterwards. It is the one place a run's memory grows
+    with its length, and only when asked for."""
+
+    def __init__(self) -> None:
+        self.estimates: list[Estimate] = []
+        self.events: list[Event] = []
+
+    def on_estimate(self, estimate: Estimate) -> None:
+        self.estimates.append(estimate)
+
+    def on_event(self, event: Event) -> None:
+        self.events.append(event)
+
+    def close(self) -> None:
+        pass
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(t (k,), x (k, n), sd (k, n))`` of the collected estimates."""
+        est = self.estimates
+        n = est[0].belief.x.size if est else 0
+        return (np.array([e.t for e in est]), np.array([e.belief.x for e in est]).reshape(-1, n),
+                np.array([e.belief.sd for e in est]).reshape(-1, n))
+
+
+@dataclass
+class RunResult:
+    """What a run leaves: its ``summary`` (the ``--summary-json`` dict), its ``stats``, the ``last``
+    estimate (None when there was none), the parse state (``parsed``: header and malformed lines),
+    ``interrupted`` (Ctrl-C) and the wall time."""
+
+    summary: dict[str, Any]
+    stats: RunStats
+    last: Estimate | None
+    parsed: ParsedStream
+    interrupted: bool
+    wall_s: float
+
+
+class Run:
+    """One run of a system, fed one message at a time (``run()`` is the loop over a whole source).
+
+    :param sinks: objects with ``on_estimate(estimate)`` (and optionally ``on_event(event)``), e.g. the
+        registered ``estimates`` sink; each gets every estimate. Closed by ``finish()``.
+    :param on_event: called with every event (e.g. ``fusion run``'s notes on stderr).
+    :param progress: called with the sensor time of every estimate (a progress bar).
+    :param plot: a ``fusion.sinks.plot.PlotRecorder`` that keeps a decimated trajectory for ``--plot``.
+    :param on_truth: called with every truth message (the live view draws the true track).
+    :param hooks: call the plugins' observation hooks (``fusion_on_estimate``, ...).
+    """
+
+    def __init__(self, system: System, sinks: Sequence[Any] = (), *, on_event: Callable[[Event], Any] | None = None,
+                 progress: Callable[[float], Any] | None = None, plot: Any = None,
+                 on_truth: Callable[[Message], Any] | None = None, hooks: bool = True, label: str = ""):
+        self.system = system
+        self.label = label
+        self.parsed = ParsedStream()
+        self.stats: RunStats
+        self.scheduler = Scheduler(system)
+        self.stats = RunStats(system, self.scheduler, self.parsed)
+        self.scheduler.on_nis = self._on_nis
+        self.sinks = list(sinks)
+        self._event_sinks = [s.on_event for s in self.sinks if callable(getattr(s, "on_event", None))]
+        self.on_event = on_event
+        self.progress = progress
+        self.plot = plot
+        if plot is not None:
+            self.stats.on_result = plot.on_result
+        self.on_truth = on_truth
+        pm = getattr(system.registry, "pm", None) if hooks else None
+        self._hook_estimate = self._hook_event = self._hook_end = None
+        if pm is not None:
+            h = pm.hook
+            self._hook_estimate = h.fusion_on_estimate if h.fusion_on_estimate.get_hookimpls() else None
+            self._hook_event = h.fusion_on_event if h.fusion_on_event.get_hookimpls() else None
+            self._hook_end = h.fusion_on_run_end if h.fusion_on_run_end.get_hookimpls() else None
+        self.last: Estimate | None = None
+        self.wall0 = time.perf_counter()
+        self.finished: RunResult | None = None
+        self._flushed = False
+
+    # ------------------------------------------------------------------ feeding
+    def push(self, item: Message | MalformedMessage) -> list[Estimate | Event]:
+        """Feed one message (or a malformed-line marker from ``iter_messages``); returns what it released,
+        after the sinks, hooks and statistics have seen it."""
+        if item.__class__ is Message and (item.sensor == "truth" or item.sensor == "reference"):
+            self._compare(item)
+            return []
+        outs = self.scheduler.push(item)
+        if not outs:
+            return []
+        outs = list(outs)
+        for out in outs:
+            self._dispatch(out)
+        return outs
+
+    def consume(self, items: Iterable[Message | MalformedMessage]) -> None:
+        """Feed every message of ``items`` (the fast loop of ``run()``)."""
+        push = self.scheduler.push
+        dispatch = self._dispatch
+        for item in items:
+            if item.__class__ is Message and (item.sensor == "truth" or item.sensor == "reference"):
+                self._compare(item)
+                continue
+            for out in push(item):
+                dispatch(out)
+
+    def _compare(self, msg: Message) -> None:
+        comp = self.stats.comparison(msg.sensor)
+        if comp is not None:
+            comp.add_truth(msg)
+        if self.on_truth is not None and msg.sensor == "truth":
+            self.on_truth(msg)
+
+    def _on_nis(self, sensor: str, t: float, nis: float, dim: int) -> None:
+        self.stats.add_nis(sensor, t, nis, dim)
+        if self.plot is not None:
+            self.plot.on_nis(sensor, t, nis, dim)
+
+    def _dispatch(self, out: Estimate | Event) -> None:
+        if out.__class__ is Estimate:
+            self.last = out
+            self.stats.add_estimate(out)
+            for sink in self.sinks:
+                sink.on_estimate(out)
+            if self._hook_estimate is not None:
+                self._hook_estimate(estimate=out, system=self.system)
+            if self.progress is not None:
+                self.progress(out.t)
+        else:
+            self.stats.add_event(out)
+            if self.on_event is not None:
+                self.on_event(out)
+            for on_event in self._event_sinks:
+                on_event(out)
+            if self._hook_event is not None:
+                self._hook_event(event=out, system=self.system)
+
+    def scheduler_finish(self) -> list[Estimate | Event]:
+        """End of input: release what the scheduler still buffers (dispatched, and returned); ``finish()``
+        then builds the result without flushing again."""
+        outs = [] if self._flushed else list(self.scheduler.finish())
+        self._flushed = True
+        for out in outs:
+            self._dispatch(out)
+        return outs
+
+    def finish(self, *, flush: bool = True, interrupted: bool = False) -> RunResult:
+        """End the run: release what the scheduler still buffers (``flush``), close the sinks, build the
+        summary and call ``fusion_on_run_end``. Idempotent."""
+        if self.finished is not None:
+            return self.finished
+        try:
+            if flush and not self._flushed:
+                self._flushed = True
+                for out in self.scheduler.finish():
+                    self._dispatch(out)
+        finally:
+            self.close_sinks()
+        self.stats.finish()
+        wall = time.perf_counter() - self.wall0
+        summary = self.stats.summary(self.label, wall)
+        if interrupted:
+            summary["interrupted"] = True
+        if self._hook_end is not None:
+            self._hook_end(summary=summary, system=self.system)
+        self.finished = RunResult(summary, self.stats, self.last, self.parsed, interrupted, wall)
+        return self.finished
+
+    def close_sinks(self) -> None:
+        sinks, self.sinks = self.sinks, []
+        errors = []
+        for sink in sinks:
+            try:
+                sink.close()
+            except FusionError as exc:
+                errors.append(exc)
+        if errors:
+            raise errors[0]
+
+
+def _lines_of(source: Any) -> tuple[Iterable[str], str, Callable[[], Any] | None]:
+    """(lines, label, close) of a path, a Source or an iterable of text lines."""
+    if isinstance(source, (str, Path)):
+        from fusion.sources.select import open_source
+
+        source = open_source(str(source))
+    if isinstance(source, Source):
+        opener = getattr(source, "open", None)
+        if callable(opener):
+            opener()
+        label = getattr(source, "label", None) or str(getattr(source.params, "path", "") or source.name)
+        return source.lines(), str(label), getattr(source, "close", None)
+    return source, "<lines>", None
+
+
+def run(system: System, source: Any, sinks: Sequence[Any] = (), *, on_event: Callable[[Event], Any] | None = None,
+        progress: Callable[[float], Any] | None = None, plot: Any = None, hooks: bool = True,
+        label: str | None = None) -> RunResult:
+    """Run ``system`` over ``source`` (a recording path or source URL, a ``Source``, or an iterable of text
+    lines) and return its ``RunResult``. ``sinks`` get every estimate and are closed at the end.
+
+    Ctrl-C stops reading: what was read is processed, the sinks are closed and the result has
+    ``interrupted=True``. A bug in a component ends the run with a RuntimeError that says how far it got;
+    a ``FusionError`` (bad input the run cannot go on with, such as a vanished port) is raised as is,
+    after the sinks are closed."""
+    lines, name, close = _lines_of(source)
+    session = Run(system, sinks, on_event=on_event, progress=progress, plot=plot, hooks=hooks,
+                  label=label if label is not None else name)
+    interrupted = False
+    try:
+        session.consume(iter_messages(lines, session.parsed))
+    except KeyboardInterrupt:
+        interrupted = True
+    except FusionError:
+        session.close_sinks()
+        raise
+    except Exception as exc:
+        session.close_sinks()
+        last = session.last
+        where = f"t = {last.t:.3f} s" if last is not None and math.isfinite(last.t) else "the start"
+        raise RuntimeError(f"{exc} (the run got as far as {where}, {session.stats.estimates} estimates)") from exc
+    finally:
+        if close is not None:
+            close()
+    try:
+        return session.finish(interrupted=interrupted)
+    except KeyboardInterrupt:  # a second Ctrl-C while flushing: report what there is
+        return session.finish(flush=False, interrupted=True)
