@@ -21,31 +21,15 @@ __all__ = [
     "ConfigError", "InputError", "MalformedMessage", "RejectedMessage", "KINDS",
 ]
 
-KINDS = ("process", "measurement", "filter", "gate", "decoder", "solver", "source", "sink", "simulator")
+from fusion.kinds import KINDS  # noqa: E402
 
 BlockKind = Literal["vector", "quaternion", "angle"]
 
 
 # --------------------------------------------------------------------------- errors
-class FusionError(Exception):
-    """Base of the errors a user can act on (the CLI prints them in one line, exit code 2)."""
-
-
-class ConfigError(FusionError):
-    """A config or scenario is wrong: the message names file, field path (and YAML line) and what is valid."""
-
-
-class InputError(FusionError):
-    """An input (recording, serial port) cannot be used at all: missing, binary, wrong encoding, dead port."""
-
-
-class MalformedMessage(ValueError):
-    """One message is malformed (bad number, wrong field count, bad checksum): counted and skipped."""
-
-
-class RejectedMessage(MalformedMessage):
-    """A well-formed message outside the sensor's limits (a NaN or an out-of-range IMU sample): counted as
-    rejected and not used."""
+# Defined in fusion.errors (no numpy or pydantic there, so the CLI can report them before importing
+# either); the same classes, re-exported here as part of the plugin API.
+from fusion.errors import ConfigError, FusionError, InputError, MalformedMessage, RejectedMessage  # noqa: E402
 
 
 # --------------------------------------------------------------------------- state layout

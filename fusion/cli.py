@@ -17,7 +17,7 @@ import importlib  # noqa: E402
 import sys  # noqa: E402
 
 from fusion import __version__  # noqa: E402
-from fusion.api import FusionError  # noqa: E402
+from fusion.errors import FusionError  # noqa: E402
 
 COMMANDS = ("run", "validate", "plugins", "simulate", "tui")
 

@@ -52,6 +52,7 @@ class Registry:
 
     def __init__(self) -> None:
         self._entries: dict[str, dict[str, Entry]] = {k: {} for k in KINDS}
+        self._lazy: dict[str, dict[str, tuple[str, str]]] = {k: {} for k in KINDS}  # name -> (target, provider)
         self.providers: dict[str, str] = {}  # top-level package -> "distribution version"
         self.pm: pluggy.PluginManager | None = None  # set by make_plugin_manager
 
@@ -67,21 +68,47 @@ class Registry:
             raise ValueError(f"{cls.__qualname__}: unknown kind {kind!r}; kinds are {list(KINDS)}")
         if not nm:
             raise ValueError(f"{cls.__qualname__}: component has no name")
+        if nm in self._lazy[kind]:
+            self._resolve(kind, nm)
         prev = self._entries[kind].get(nm)
         provider = self.provider_of(cls)
         if prev is not None and prev.cls is not cls:
             raise ValueError(f"{kind} {nm!r} registered twice: by {prev.provider} and {provider}")
         self._entries[kind][nm] = Entry(kind, nm, cls, provider)
 
+    def add_lazy(self, kind: str, name: str, target: str) -> None:
+        """Register ``"package.module:ClassName"`` as ``kind`` ``name`` without importing it: the module is
+        imported when the component is first asked for (``get``, ``entries``). For components whose
+        imports are heavy and that most commands never use (the simulators: only ``fusion simulate``)."""
+        if kind not in self._lazy:
+            raise ValueError(f"{target}: unknown kind {kind!r}; kinds are {list(KINDS)}")
+        if name in self._entries[kind] or name in self._lazy[kind]:
+            raise ValueError(f"{kind} {name!r} registered twice")
+        top = target.split(".")[0]
+        self._lazy[kind][name] = (target, self.providers.get(top) or _builtin_provider())
+
+    def _resolve(self, kind: str, name: str) -> None:
+        target, provider = self._lazy[kind].pop(name)
+        modname, _, attr = target.partition(":")
+        cls = getattr(importlib.import_module(modname), attr)
+        if cls.kind != kind or (cls.name and cls.name != name):
+            raise ValueError(f"{target}: registered lazily as {kind} {name!r} but declares {cls.kind} {cls.name!r}")
+        self._entries[kind][name] = Entry(kind, name, cls, provider)
+
     def names(self, kind: str) -> list[str]:
-        return sorted(self._entries[kind])
+        return sorted([*self._entries[kind], *self._lazy[kind]])
 
     def entries(self, kind: str | None = None) -> list[Entry]:
         kinds = [kind] if kind else list(KINDS)
+        for k in kinds:
+            for n in list(self._lazy[k]):
+                self._resolve(k, n)
         return [self._entries[k][n] for k in kinds for n in sorted(self._entries[k])]
 
     def get(self, kind: str, name: str, where: str = "") -> type[Component]:
         """The class of ``kind`` named ``name``; ConfigError listing known names and a "did you mean"."""
+        if name in self._lazy.get(kind, ()):
+            self._resolve(kind, name)
         try:
             return self._entries[kind][name].cls
         except KeyError:

@@ -4,11 +4,7 @@ from __future__ import annotations
 import argparse
 import inspect
 
-from rich.console import Console
-from rich.table import Table
-
-from fusion.api import KINDS
-from fusion.registry import default_registry
+from fusion.kinds import KINDS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -31,6 +27,11 @@ def describe_params(cls) -> list[tuple[str, str, str, str]]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    from fusion.registry import default_registry
+
     reg = default_registry()
     console = Console()
     entries = reg.entries(args.kind)

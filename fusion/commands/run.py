@@ -5,13 +5,12 @@ import argparse
 import math
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import yaml
+from fusion.errors import ConfigError
 
-from fusion.api import ConfigError, Event
-from fusion.config import load_system
-from fusion.yamlsource import load_yaml
+if TYPE_CHECKING:
+    from fusion.api import Event
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -40,6 +39,10 @@ def filter_override(config: str | Path, name: str | None, params: list[str]) -> 
     without --filter reads the config, to start from its own filter spec."""
     if name is None and not params:
         return None
+    import yaml
+
+    from fusion.yamlsource import load_yaml
+
     base: dict[str, Any]
     if name is not None:
         base = {"type": name}
@@ -81,6 +84,7 @@ class EventNotes:
 
 def run(args: argparse.Namespace) -> int:
     from fusion import pipeline, report
+    from fusion.config import load_system
     from fusion.sinks.summary import write_summary_json
     from fusion.sources.select import open_sink, open_source
 

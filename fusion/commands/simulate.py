@@ -6,7 +6,7 @@ import os
 import sys
 from pathlib import Path
 
-from fusion.api import InputError
+from fusion.errors import InputError
 
 HELP = "simulate a scenario into a recording (log format with truth lines)"
 DESCRIPTION = """\

@@ -12,7 +12,7 @@ import math
 import sys
 from pathlib import Path
 
-from fusion.api import ConfigError, FusionError, InputError
+from fusion.errors import ConfigError, FusionError, InputError
 
 DEFAULT_CONFIG = Path("configs") / "abps_ins.yaml"
 

@@ -4,8 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from fusion.api import FusionError
-from fusion.config import load_system
+from fusion.errors import FusionError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -18,6 +17,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from fusion.config import load_system
+
     bad = 0
     for path in args.files:
         try:

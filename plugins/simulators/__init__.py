@@ -1,16 +1,21 @@
-"""Built-in simulators: each module holds one component; this module registers them."""
+"""Built-in simulators: each module holds one component; this module registers them.
+
+Registered lazily (by module path, imported when a scenario asks for one): they pull in scipy.spatial
+and pymap3d, which ``fusion run`` and ``fusion tui`` never need.
+"""
 from fusion import hookimpl
+
+SIMULATORS = {
+    "imu": "fusion_plugins.simulators.imu:ImuSimulator",
+    "range": "fusion_plugins.simulators.range:RangeSimulator",
+    "arrival_time": "fusion_plugins.simulators.arrival:ArrivalTimeSimulator",
+    "gps": "fusion_plugins.simulators.gps:GpsSimulator",
+    "magnetometer": "fusion_plugins.simulators.magnetometer:MagnetometerSimulator",
+    "position": "fusion_plugins.simulators.position:PositionSimulator",
+}
 
 
 @hookimpl
 def fusion_register_components(registry):
-    from fusion_plugins.simulators.arrival import ArrivalTimeSimulator
-    from fusion_plugins.simulators.gps import GpsSimulator
-    from fusion_plugins.simulators.imu import ImuSimulator
-    from fusion_plugins.simulators.magnetometer import MagnetometerSimulator
-    from fusion_plugins.simulators.position import PositionSimulator
-    from fusion_plugins.simulators.range import RangeSimulator
-
-    for cls in (ImuSimulator, RangeSimulator, ArrivalTimeSimulator, GpsSimulator, MagnetometerSimulator,
-                PositionSimulator):
-        registry.add(cls)
+    for name, target in SIMULATORS.items():
+        registry.add_lazy("simulator", name, target)

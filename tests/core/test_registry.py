@@ -9,26 +9,6 @@ from fusion.api import ConfigError, Filter
 from fusion.config import SystemSpec, wire
 from fusion.registry import Registry, make_plugin_manager
 
-EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "fusion-altimeter"
-
-
-@pytest.fixture
-def installed_example(tmp_path, monkeypatch):
-    """Make the example package importable with installed metadata (a dist-info with its entry point),
-    exactly what `pip install examples/fusion-altimeter` leaves in site-packages."""
-    site = tmp_path / "site"
-    (site / "fusion_altimeter-0.1.0.dist-info").mkdir(parents=True)
-    (site / "fusion_altimeter-0.1.0.dist-info" / "METADATA").write_text(
-        "Metadata-Version: 2.1\nName: fusion-altimeter\nVersion: 0.1.0\n")
-    (site / "fusion_altimeter-0.1.0.dist-info" / "entry_points.txt").write_text(
-        "[fusion]\naltimeter = fusion_altimeter.plugin\n")
-    monkeypatch.syspath_prepend(str(EXAMPLE))
-    monkeypatch.syspath_prepend(str(site))
-    yield
-    sys.modules.pop("fusion_altimeter.plugin", None)
-    sys.modules.pop("fusion_altimeter", None)
-
-
 def test_builtins_registered():
     _, reg = make_plugin_manager()
     assert {"pv"} <= set(reg.names("process"))

@@ -1,4 +1,5 @@
-"""A barometric altimeter as a fusion measurement plugin: z = -p_z + bias (height up, NED state)."""
+"""The example third-party package's plugin module: a barometric altimeter measurement (z = -p_z + bias,
+height up, NED state), a UDP source (udp://HOST:PORT) and a TSV sink (.tsv)."""
 from __future__ import annotations
 
 import numpy as np
@@ -36,4 +37,9 @@ class Altimeter(MeasurementModel):
 
 @hookimpl
 def fusion_register_components(registry):
+    from fusion_altimeter.tsv_sink import TsvTrack
+    from fusion_altimeter.udp_source import UdpSource
+
     registry.add(Altimeter)
+    registry.add(UdpSource)   # fusion run CONFIG --input udp://127.0.0.1:5005
+    registry.add(TsvTrack)    # fusion run CONFIG --output track.tsv

@@ -1,0 +1,95 @@
+"""Start-up cost of the ``fusion`` command, as a ratio to ``python -c "import numpy"`` measured in the
+same run, and the real-time factor of the whole headline process.
+
+    python benchmarks/bench_startup.py            # best of 7 runs each, writes benchmarks/results/startup.md
+    python benchmarks/bench_startup.py --repeats 3
+
+Measured as processes (what a user waits for), each the best wall time of ``--repeats`` runs:
+
+- ``python -c "import numpy"``: the reference;
+- ``fusion --help``: target within 2x the reference (issue 9);
+- ``fusion validate configs/abps_ins.yaml``;
+- ``fusion run configs/abps_ins.yaml -q``: the headline command, whole process; its real-time factor is
+  the recording's duration over the process's wall time (target at least 150x);
+- the replay alone (``fusion.pipeline.run`` in a warm process, best of the repeats; target at least 250x).
+
+Each command runs with the environment the CLI sets for itself (single-threaded BLAS) so that the
+reference and the commands are alike.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG = ROOT / "configs" / "abps_ins.yaml"
+OUT = ROOT / "benchmarks" / "results" / "startup.md"
+FUSION = [sys.executable, "-m", "fusion.cli"]
+
+
+def best_wall(cmd: list[str], repeats: int) -> float:
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT, env=env)
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def replay_alone(repeats: int) -> tuple[float, float]:
+    """(best wall s of the replay in this process, the recording's duration s)."""
+    from fusion import pipeline
+    from fusion.config import load_system
+
+    best, duration = float("inf"), 0.0
+    for _ in range(repeats):
+        system = load_system(CONFIG)
+        t0 = time.perf_counter()
+        result = pipeline.run(system, system.recording)
+        best = min(best, time.perf_counter() - t0)
+        meta = result.parsed.header.meta
+        duration = float(meta["duration"]) if "duration" in meta else result.summary["duration_s"]
+    return best, duration
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=7)
+    args = ap.parse_args(argv)
+    r = args.repeats
+    numpy_s = best_wall([sys.executable, "-c", "import numpy"], r)
+    help_s = best_wall([*FUSION, "--help"], r)
+    validate_s = best_wall([*FUSION, "validate", str(CONFIG)], r)
+    run_s = best_wall([*FUSION, "run", str(CONFIG), "-q"], r)
+    replay_s, duration = replay_alone(r)
+    load = os.getloadavg()[0]
+    rows = [("python -c \"import numpy\"", numpy_s, "reference"),
+            ("fusion --help", help_s, "at most 2.0x the reference"),
+            ("fusion validate configs/abps_ins.yaml", validate_s, ""),
+            ("fusion run configs/abps_ins.yaml -q (whole process)", run_s, "")]
+    lines = ["# Start-up and the headline process", "",
+             "Regenerate: `python benchmarks/bench_startup.py` (best of "
+             f"{r} runs each; load average {load:.1f} on {os.cpu_count()} cores when measured).", "",
+             "| command | wall (s) | ratio to numpy import | target |", "|---|---|---|---|"]
+    for name, s, target in rows:
+        lines.append(f"| `{name}` | {s:.3f} | {s / numpy_s:.2f} | {target} |")
+    lines += ["", f"Recording: {duration:.1f} s of data (`recordings/abps_mine.log`).", "",
+              f"- whole `fusion run configs/abps_ins.yaml` process: **{duration / run_s:.0f}x** real time "
+              "(target at least 150x)",
+              f"- the replay alone (`fusion.pipeline.run`, warm process): **{duration / replay_s:.0f}x** real time "
+              "(target at least 250x)",
+              f"- start-up and summary: {run_s - replay_s:.3f} s of the {run_s:.3f} s", ""]
+    text = "\n".join(lines)
+    print(text)
+    OUT.parent.mkdir(parents=True, exist_ok=True)
+    OUT.write_text(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,244 @@
+"""The one run loop (fusion.pipeline): reusable systems, streaming truth equal to the whole-recording
+reference, bounded memory, hooks, Ctrl-C."""
+from __future__ import annotations
+
+import json
+import math
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fusion import hookimpl, pipeline
+from fusion.api import Message, Source
+from fusion.cli import main
+from fusion.config import load_system, wire, SystemSpec
+from fusion.logformat import iter_messages
+from fusion.metrics import ErrorTracker, Truth
+from fusion.registry import make_plugin_manager
+from fusion.sinks.plot_recorder import ExtremeDecimator
+from fusion.sources.recording import open_lines
+from fusion.truth_stream import TruthWindow
+
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLE = ROOT / "configs" / "example_2d.yaml"
+ABPS = ROOT / "configs" / "abps_ins.yaml"
+TIMINGS = {"wall_s", "us_per_predict", "us_per_update"}
+
+
+def _same(a: dict, b: dict) -> None:
+    assert {k: v for k, v in a.items() if k not in TIMINGS} == {k: v for k, v in b.items() if k not in TIMINGS}
+
+
+@pytest.mark.parametrize("config", [EXAMPLE, ABPS], ids=["example_2d", "abps_ins"])
+def test_a_system_runs_twice_with_identical_results_and_is_not_modified(config):
+    system = load_system(config)
+    first = pipeline.run(system, system.recording)
+    second = pipeline.run(system, system.recording)
+    _same(first.summary, second.summary)
+    np.testing.assert_array_equal(first.last.belief.x, second.last.belief.x)
+    assert first.summary["sensors"] == second.summary["sensors"]
+    assert all(v == 0 for s in system.sensors.values() for v in s.counters.values())
+    assert not getattr(system.filter, "counters", {})
+
+
+def _reference_errors(system, path):
+    """The pre-streaming computation: every estimate kept, the whole truth, then one ErrorTracker."""
+    kept = pipeline.Collect()
+    nis = []
+
+    class Nis:
+        def on_estimate(self, est):
+            if est.update is not None:
+                nis.append((est.sensor, est.t, est.update.nis, est.update.innovation.size))
+
+        def close(self):
+            pass
+
+    result = pipeline.run(system, path, [kept, Nis()])
+    truth = Truth.from_recording(path)
+    ev = system.spec.evaluation
+    tr = ErrorTracker(system.layout, truth, settle_s=ev.settle_s, position=ev.position)
+    for est in kept.estimates:
+        tr.add(est)
+    for sensor, t, v, dim in nis:
+        tr.add_nis(sensor, v, dim, t=t)
+    return result.summary, tr.summary()
+
+
+@pytest.mark.parametrize("config", [EXAMPLE, ABPS], ids=["example_2d", "abps_ins"])
+def test_streamed_errors_equal_the_whole_truth_reference(config):
+    system = load_system(config)
+    summary, ref = _reference_errors(system, system.recording)
+    errors = dict(summary["errors"])
+    errors.pop("position_elements", None)
+    assert errors == ref["errors"]
+    assert summary["consistency"] == ref["consistency"]
+
+
+def _truth_stream(n, rng, period=0.01, gap=None):
+    t = np.cumsum(np.full(n, period) + rng.uniform(-1e-4, 1e-4, n))
+    if gap is not None:
+        t[gap:] += 0.2
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q = np.cumsum(q * 0.05, axis=0) + [1, 0, 0, 0]
+    ang = np.cumsum(rng.normal(0, 0.8, n))  # wraps often
+    vals = np.column_stack([rng.normal(size=(n, 2)).cumsum(0), q, (ang + np.pi) % (2 * np.pi) - np.pi])
+    names = ("px", "py", "qw", "qx", "qy", "qz", "psi")
+    return t, vals, names
+
+
+def test_truth_window_interpolates_as_the_whole_truth_does():
+    rng = np.random.default_rng(4)
+    t, vals, names = _truth_stream(3000, rng, gap=1500)
+    whole = Truth(t, vals, names).with_angles(["psi"])
+    win = TruthWindow(names, max_samples=100_000).with_angles(["psi"])
+    for ti, v in zip(t, vals):
+        win.add(Message(float(ti), "truth", tuple(v.tolist())))
+    win.period = whole.period
+    queries = np.concatenate([rng.uniform(t[0] - 0.02, t[-1] + 0.02, 2000), t[:50], [t[1499] + 0.1]])
+    for q in queries:
+        a, b = whole.row(float(q)), win.row(float(q))
+        assert (a is None) == (b is None), q
+        if a is not None:
+            np.testing.assert_allclose(b, a, rtol=0, atol=1e-12)
+
+
+def test_truth_window_stays_bounded_and_skips_bad_rows():
+    win = TruthWindow(("px", "py"), max_samples=500)
+    for k in range(10_000):
+        win.add(Message(k * 0.01, "truth", (float(k), 0.0)))
+        win.forget_before(k * 0.01 - 1.0)
+    assert len(win) <= 500 and win.received == 10_000
+    assert not win.add(Message(101.0, "truth", (1.0,))) and not win.add(Message(101.0, "truth", ("x", 2.0)))
+    assert win.skipped == 2
+    assert win.row(99.985)[0] == pytest.approx(9998.5) and win.row(99.995)[0] == 9999.0  # held half a period
+
+
+def _long_stream(n_messages: int):
+    """A 2-D walk with ranges to four beacons and truth at every range: lines made on the fly."""
+    rng = np.random.default_rng(1)
+    beacons = {"B1": (0, 0), "B2": (20, 0), "B3": (20, 20), "B4": (0, 20)}
+    yield "# fields truth px py vx vy\n"
+    p, v = np.array([5.0, 5.0]), np.array([0.5, 0.2])
+    for k in range(n_messages):
+        t = 0.025 * k
+        v = np.clip(v + rng.normal(0, 0.02, 2), -1, 1)
+        p = np.clip(p + 0.025 * v, 1, 19)
+        name = "B%d" % (k % 4 + 1)
+        r = math.dist(p, beacons[name]) + float(rng.normal(0, 0.1))
+        px, py, vx, vy = (float(a) for a in (*p, *v))
+        yield f"{t!r},truth,{px!r},{py!r},{vx!r},{vy!r}\n"
+        yield f"{t!r},uwb,{name},{r!r}\n"
+
+
+def _peak_kib(n_messages: int) -> tuple[float, dict]:
+    system = load_system(EXAMPLE, filter_override="ekf")
+    tracemalloc.start()
+    try:
+        result = pipeline.run(system, _long_stream(n_messages))
+        peak = tracemalloc.get_traced_memory()[1] / 1024.0
+    finally:
+        tracemalloc.stop()
+    return peak, result.summary
+
+
+def test_memory_does_not_grow_with_the_length_of_a_run():
+    short, s1 = _peak_kib(4_000)
+    long, s2 = _peak_kib(16_000)
+    assert s2["errors"]["samples"] > 3.5 * s1["errors"]["samples"]  # four times the estimates compared
+    assert long < short + 256.0, (short, long)                      # but no more memory (KiB)
+
+
+class Watcher:
+    """A plugin that watches runs through the observation hooks."""
+
+    def __init__(self):
+        self.estimates, self.events, self.ends = 0, {}, []
+
+    @hookimpl
+    def fusion_on_estimate(self, estimate, system):
+        assert system.layout.n == estimate.belief.x.size
+        self.estimates += 1
+
+    @hookimpl
+    def fusion_on_event(self, event):
+        self.events[event.kind] = self.events.get(event.kind, 0) + 1
+
+    @hookimpl
+    def fusion_on_run_end(self, summary):
+        self.ends.append(summary)
+
+
+def test_observation_hooks_see_every_estimate_event_and_the_end(tmp_path):
+    watcher = Watcher()
+    _, registry = make_plugin_manager(extra_plugins=[watcher])
+    log = tmp_path / "bad.log"
+    lines = (ROOT / "recordings" / "example_2d.log").read_text().splitlines()
+    lines.insert(40, "1.5,uwb,B1,notanumber")
+    lines.insert(41, "1.6,mystery,1.0")
+    log.write_text("\n".join(lines) + "\n")
+    system = load_system(EXAMPLE, registry=registry)
+    kept = pipeline.Collect()
+    result = pipeline.run(system, log, [kept])
+    assert watcher.estimates == len(kept.estimates) > 2000
+    assert watcher.events == result.summary["events"] and watcher.events["malformed"] == 1
+    assert watcher.ends == [result.summary]
+
+
+def test_no_hooks_when_none_is_implemented():
+    system = load_system(EXAMPLE)
+    run = pipeline.Run(system)
+    assert run._hook_estimate is None and run._hook_event is None and run._hook_end is None
+
+
+class Interrupting(Source):
+    """Yields the first ``n`` lines of a recording, then behaves as if the user pressed Ctrl-C."""
+
+    name = "interrupting"
+    n = 1200
+
+    def lines(self):
+        for k, line in enumerate(open_lines(ROOT / "recordings" / "example_2d.log")):
+            if k == self.n:
+                raise KeyboardInterrupt
+            yield line
+
+
+def test_ctrl_c_writes_the_summary_of_what_was_read_and_exits_130(tmp_path, monkeypatch):
+    import fusion.sources.select as select
+
+    monkeypatch.setattr(select, "open_source", lambda spec, registry=None, **kw: Interrupting())
+    out, csv = tmp_path / "s.json", tmp_path / "e.csv"
+    assert main(["run", str(EXAMPLE), "-q", "--summary-json", str(out), "-o", str(csv)]) == 130
+    s = json.loads(out.read_text())
+    assert s["interrupted"] is True
+    n_uwb = sum(",uwb," in ln for ln in list(open_lines(ROOT / "recordings" / "example_2d.log"))[:Interrupting.n])
+    assert s["sensors"]["uwb"]["received"] == n_uwb and "errors" in s
+    assert len(csv.read_text().splitlines()) == 1 + s["sensors"]["uwb"]["used"]  # every estimate kept on disk
+
+
+def test_extreme_decimator_is_bounded_and_keeps_the_largest():
+    rng = np.random.default_rng(0)
+    scores = rng.exponential(size=100_003)
+    scores[77_777] = 1e6
+    dec = ExtremeDecimator(max_points=500)
+    for k, s in enumerate(scores):
+        dec.add(k, float(s))
+    items = dec.items()
+    assert len(items) <= 502 and items == sorted(items)
+    assert 77_777 in items and items[-1] == 100_002
+
+
+def test_a_run_over_lines_and_a_spec_without_recording():
+    spec = SystemSpec.model_validate({"name": "x", "process": {"type": "pv", "dims": 2}, "filter": "ekf",
+                                      "beacons": {"B1": [0, 0], "B2": [10, 0], "B3": [0, 10]},
+                                      "sensors": {"uwb": {"model": "range", "noise": 0.1}}})
+    system = wire(spec)
+    lines = ["0.0,uwb,B1,5.0\n", "0.1,uwb,B2,7.0\n", "0.2,uwb,B3,7.0\n", "0.3,,1\n"]
+    result = pipeline.run(system, lines)
+    assert result.summary["sensors"]["uwb"]["used"] == 3 and result.summary["sensors"]["?"]["malformed"] == 1
+    assert result.summary["input"] == "<lines>" and result.last.t == pytest.approx(0.2)
+    assert list(iter_messages(lines))  # the lines were not consumed in place (a list)
