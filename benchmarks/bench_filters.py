@@ -195,6 +195,27 @@ def cv_range_model():
     return process, model, x0, P0, None, z, R, 0.1
 
 
+def shipped_uwb_model(config: str = "configs/uwb_pv_ukf.yaml"):
+    """The shipped plugins as a user runs them: ``pv`` and ``range`` exactly as configured in
+    ``configs/uwb_pv_ukf.yaml`` (paper 001), one range to one beacon per update, dt = the range period."""
+    from pathlib import Path
+
+    from fusion.config import load_system
+
+    system = load_system(Path(__file__).resolve().parents[1] / config)
+    process = system.process
+    sensor = next(s for s in system.sensors.values() if s.model is not None)
+    x0 = system.x0.copy()
+    x0[process.layout["p"]] = [5.0, 4.0]
+    x0[process.layout["v"]] = [1.0, 0.5]
+    P0 = np.diag([0.5, 0.5, 0.1, 0.1])
+    beacon = next(iter(system.beacons))
+    obs = sensor.model.observe(__import__("fusion.api", fromlist=["Message"]).Message(0.0, "uwb", (beacon, 5.0)))
+    model = obs.model
+    z = model.h(x0 + np.array([0.05, -0.03, 0.0, 0.0]))
+    return process, model, x0, P0, None, z, sensor.R, 0.05
+
+
 def ins_position_model():
     """16-state strapdown INS (``ins`` plugin, paper 000 eqs. 33-52, IMU input u) + position fix with
     lever arm (``position`` plugin, eq. 53); None when those plugins are not installed."""
@@ -243,6 +264,10 @@ def main(argv=None):
     process, model, x0, P0, u, z, R, dt = cv_range_model()
     bench_model("4-state constant velocity + ranges to 4 beacons", process, model, x0, P0, u, z, R, dt,
                 FILTERS_4, steps=args.steps, rounds=args.rounds, alpha=args.alpha)
+    process, model, x0, P0, u, z, R, dt = shipped_uwb_model()
+    bench_model("shipped plugins: pv + range as in configs/uwb_pv_ukf.yaml (one range a step)", process, model,
+                x0, P0, u, z, R, dt, [("ekf", {}), ("ukf", {}), ("srukf", {})], steps=args.steps,
+                rounds=args.rounds, alpha=args.alpha)
     ins = ins_position_model()
     if ins is not None:
         process, model, x0, P0, u, z, R, dt = ins

@@ -322,7 +322,7 @@ class Run:
             for sink in self.sinks:
                 sink.on_estimate(out)
             if self._hook_estimate is not None:
-                self._hook_estimate(estimate=out, system=self.system)
+                _call(self._hook_estimate, "fusion_on_estimate", estimate=out, system=self.system)
             if self.progress is not None:
                 self.progress(out.t)
         else:
@@ -332,7 +332,7 @@ class Run:
             for on_event in self._event_sinks:
                 on_event(out)
             if self._hook_event is not None:
-                self._hook_event(event=out, system=self.system)
+                _call(self._hook_event, "fusion_on_event", event=out, system=self.system)
 
     def scheduler_finish(self) -> list[Estimate | Event]:
         """End of input: release what the scheduler still buffers (dispatched, and returned); ``finish()``
@@ -361,7 +361,7 @@ class Run:
         if interrupted:
             summary["interrupted"] = True
         if self._hook_end is not None:
-            self._hook_end(summary=summary, system=self.system)
+            _call(self._hook_end, "fusion_on_run_end", summary=summary, system=self.system)
         self.finished = RunResult(summary, self.stats, self.last, self.parsed, interrupted, wall)
         return self.finished
 
@@ -375,6 +375,14 @@ class Run:
                 errors.append(exc)
         if errors:
             raise errors[0]
+
+
+def _call(hook, name: str, **kwargs) -> None:
+    """Call an observation hook; a plugin's exception becomes an internal error that names the hook."""
+    try:
+        hook(**kwargs)
+    except Exception as exc:
+        raise RuntimeError(f"a plugin's {name} hook raised {type(exc).__name__}: {exc}") from exc
 
 
 def _lines_of(source: Any) -> tuple[Iterable[str], str, Callable[[], Any] | None]:

@@ -188,6 +188,18 @@ def test_observation_hooks_see_every_estimate_event_and_the_end(tmp_path):
     assert watcher.ends == [result.summary]
 
 
+def test_a_failing_hook_is_an_internal_error_that_names_it(capsys):
+    class Broken:
+        @hookimpl
+        def fusion_on_estimate(self):
+            raise ValueError("boom")
+
+    _, registry = make_plugin_manager(extra_plugins=[Broken()])
+    system = load_system(EXAMPLE, registry=registry)
+    with pytest.raises(RuntimeError, match=r"fusion_on_estimate hook raised ValueError: boom"):
+        pipeline.run(system, system.recording)
+
+
 def test_no_hooks_when_none_is_implemented():
     system = load_system(EXAMPLE)
     run = pipeline.Run(system)
