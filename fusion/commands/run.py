@@ -29,6 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="write estimates: the sink is chosen by suffix (.csv, .jsonl, or a plugin's; '-' CSV on stdout)")
     p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON")
     p.add_argument("--plot", metavar="PATH.png", help="plot trajectory, errors with 3-sigma bounds and NIS")
+    p.add_argument("--force", action="store_true", help="replace output files that exist")
     p.add_argument("--quiet", "-q", action="store_true", help="no table on stdout")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -93,6 +94,14 @@ def run(args: argparse.Namespace) -> int:
     source = args.input or system.recording
     if source is None:
         raise ConfigError(f"{args.config}: no 'recording:' in the config; give one with --input LOG")
+    from fusion.outputs import check_outputs
+
+    check_outputs({"--output": args.output, "--summary-json": args.summary_json, "--plot": args.plot},
+                  [args.config, source], force=args.force)
+    if args.plot:
+        from fusion.sinks.plot import plot_format
+
+        plot_format(args.plot)
     src = open_source(str(source), system.registry)
     sinks = [open_sink(args.output, system.layout, system.registry)] if args.output else []
     plot = None

@@ -37,6 +37,7 @@ def register(subparsers) -> None:
     p.add_argument("--noise", choices=("on", "off"), default="on",
                    help="'off': every measurement exact (no noise, biases, scale errors or outliers; "
                         "dropouts and gaps stay)")
+    p.add_argument("--force", action="store_true", help="replace LOG if it exists")
     p.set_defaults(func=run)
 
 
@@ -46,21 +47,15 @@ def run(args: argparse.Namespace) -> int:
     if args.seed is not None and args.seed < 0:
         from fusion.api import ConfigError
         raise ConfigError(f"--seed: must be >= 0, got {args.seed}")
+    from fusion.outputs import check_outputs, write_text
+
+    check_outputs({"-o": args.output}, [args.scenario], force=args.force)
     text = simulate_file(args.scenario, seed=args.seed, noise=args.noise == "on")
     if args.output == "-":
         sys.stdout.write(text)
         return 0
     out = Path(args.output)
-    if out.parent and not out.parent.exists():
-        raise InputError(f"{out}: folder {out.parent} does not exist")
-    tmp = out.with_name(out.name + f".tmp{os.getpid()}")
-    try:
-        with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write(text)
-        os.replace(tmp, out)
-    except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        raise InputError(f"{out}: cannot write: {exc.strerror or exc}") from None
+    write_text(out, text, what="the recording")
     n = text.count("\n") - sum(1 for line in text.splitlines() if line.startswith("#"))
     print(f"wrote {out}: {n} lines, {len(text.encode('utf-8')) / 1e3:.0f} kB", file=sys.stderr)
     return 0

@@ -5,8 +5,10 @@ units, NED / body-to-NED quaternion as in the state), ``sd_<name>`` its standard
 (sqrt of the diagonal of P), ``reason`` (``update`` or ``output``) and ``sensor`` (the updating sensor,
 empty for an output). CSV has a header line first (written when the file is opened, so even a run that
 stops at once leaves a valid file); JSON Lines has one object per line with the same keys, non-finite
-numbers as ``null``. The file is line-buffered: every row is on disk as soon as it is written, so a run
-that crashes keeps everything it produced. ``-`` writes to stdout.
+numbers as ``null``. The file is line-buffered: every row is on disk as soon as it is written, under a
+temporary name beside the target (``.NAME.XXXX.tmp``) that is renamed to NAME when the run ends, so a
+run that crashes keeps everything it produced and a finished file is never half-written. ``-``, a FIFO or
+a device is written in place (fusion.outputs).
 
 Built directly as ``EstimateWriter(path, layout)`` or from a config as the registered sink
 ``estimates`` (``EstimateWriter(params, context)`` with ``Params(path=..)`` and ``context.layout``).
@@ -25,6 +27,7 @@ from typing import Literal
 from pydantic import Field
 
 from fusion.api import BuildContext, Estimate, FusionError, Params, Sink, StateLayout
+from fusion.outputs import OutputFile
 
 __all__ = ["EstimateWriter", "format_for"]
 
@@ -76,13 +79,10 @@ class EstimateWriter(Sink):
         self._columns: list[str] | None = None
         self._file: io.TextIOBase | None = None
         self._owns = self.path != "-"
-        if self._owns:
-            try:
-                self._file = open(self.path, "w", encoding="utf-8", newline="", buffering=1)
-            except OSError as exc:
-                raise FusionError(f"cannot write estimates to {self.path}: {exc.strerror or exc}") from None
-        else:
-            self._file = sys.stdout
+        # A regular file is written under a temporary name and renamed when the run closes it; a FIFO,
+        # device or '-' is written in place (fusion.outputs).
+        self._out = OutputFile(self.path, "w", what="estimates", line_buffered=True)
+        self._file = self._out.file
         self._csv = csv.writer(self._file, lineterminator="\n") if self.format == "csv" else None
         if layout is not None:
             self._start(layout.names)
@@ -98,6 +98,11 @@ class EstimateWriter(Sink):
         # line buffering flushes on newline already; stdout may be block-buffered when piped
         if not self._owns and self._file is not None:
             self._file.flush()
+
+    @property
+    def writing(self) -> str:
+        """The file being written now: the temporary name until ``close()``, or the path of a stream."""
+        return self._out.temporary or self.path
 
     @property
     def columns(self) -> list[str] | None:
@@ -128,11 +133,8 @@ class EstimateWriter(Sink):
     def close(self) -> None:
         if self._file is None:
             return
-        if self._owns:
-            self._file.close()
-        else:
-            self._file.flush()
         self._file = None
+        self._out.close()
 
     def __enter__(self) -> "EstimateWriter":
         return self

@@ -18,6 +18,7 @@ Panels:
 from __future__ import annotations
 
 import math
+import os
 from typing import Mapping
 
 import numpy as np
@@ -213,7 +214,29 @@ def plot_run(path, layout: StateLayout, estimates_t: np.ndarray, estimates_x: np
             ax.set_title(f"NIS {sensor} (dof {dim}): {inside:.0%} in 95% interval", fontsize=9)
             ax.set_xlabel("t (s)")
             ax.grid(True, alpha=0.3)
+    from fusion.outputs import OutputFile
+
+    fmt = plot_format(path)
+    out = OutputFile(path, "wb", what="plot")
     try:
-        fig.savefig(str(path), dpi=90, format="png")
+        fig.savefig(out.file, dpi=90, format=fmt)
     except OSError as exc:
+        out.discard()
         raise FusionError(f"cannot write plot to {path}: {exc.strerror or exc}") from None
+    except BaseException:
+        out.discard()
+        raise
+    out.close()
+
+
+def plot_format(path) -> str:
+    """The image format of ``path`` by its suffix (png, pdf, svg, ... as matplotlib writes them); a
+    FusionError listing the known ones otherwise."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    known = FigureCanvasBase.get_supported_filetypes()
+    suffix = os.path.splitext(str(path))[1].lower().lstrip(".")
+    if suffix not in known:
+        raise FusionError(f"--plot {path}: unknown image suffix {('.' + suffix) if suffix else '(none)'}; "
+                          f"known: {', '.join('.' + k for k in sorted(known))}")
+    return suffix

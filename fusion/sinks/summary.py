@@ -11,14 +11,9 @@ from __future__ import annotations
 import json
 import math
 import os
-import sys
-import tempfile
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from fusion.api import FusionError
 
 __all__ = ["write_summary_json", "to_jsonable"]
 
@@ -45,23 +40,7 @@ def to_jsonable(obj: Any) -> Any:
 
 def write_summary_json(path: str | os.PathLike, summary: dict) -> None:
     """Write ``summary`` as indented JSON to ``path`` (atomically; ``-`` for stdout)."""
+    from fusion.outputs import write_text
+
     text = json.dumps(to_jsonable(summary), indent=2, allow_nan=False) + "\n"
-    if str(path) == "-":
-        sys.stdout.write(text)
-        sys.stdout.flush()
-        return
-    target = Path(path)
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent or ".")
-    except OSError as exc:
-        raise FusionError(f"cannot write summary to {path}: {exc.strerror or exc}") from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, target)
-    except OSError as exc:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise FusionError(f"cannot write summary to {path}: {exc.strerror or exc}") from None
+    write_text(path, text, what="summary")

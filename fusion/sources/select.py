@@ -13,7 +13,7 @@ Sources (``open_source``), in this order:
 4. a file suffix claimed by a source's ``suffixes`` (a third party's may claim one of its own);
 5. anything else: a recording in the log format (the ``recording`` source checks its contents).
 
-Sinks (``open_sink``): ``-`` is CSV on stdout; otherwise the sink whose ``suffixes`` has the path's suffix;
+Sinks (``open_sink``): ``-`` is CSV on stdout, and so is a FIFO or device without a suffix; otherwise the sink whose ``suffixes`` has the path's suffix;
 an unknown or missing suffix is an error listing the known ones.
 """
 from __future__ import annotations
@@ -103,10 +103,12 @@ def open_source(spec: str, registry=None, device: bool = False, **options: Any) 
 
 def sink_class(path: str, registry=None) -> type[Sink]:
     """The registered sink class that writes ``path`` (by suffix; ``-`` is the CSV estimates sink)."""
+    from fusion.outputs import is_stream
+
     reg = _registry(registry)
-    if str(path) == "-":
-        return reg.get("sink", "estimates")
     suffix = Path(str(path)).suffix.lower()
+    if str(path) == "-" or (not suffix and is_stream(path)):  # stdout, a FIFO, a device: CSV
+        return reg.get("sink", "estimates")
     classes = [e.cls for e in reg.entries("sink")]
     for cls in classes:
         if suffix and suffix in cls.suffixes:

@@ -45,7 +45,7 @@ def test_filter_override_switches_filter(tmp_path):
     summ = tmp_path / "s.json"
     assert main(["run", str(CONFIG), "--filter", "ekf", "-q", "--summary-json", str(summ)]) == 0
     assert json.loads(summ.read_text())["filter"] == "ekf"
-    assert main(["run", str(CONFIG), "--filter-param", "alpha=0.3", "-q", "--summary-json", str(summ)]) == 0
+    assert main(["run", str(CONFIG), "--filter-param", "alpha=0.3", "-q", "--summary-json", str(summ), "--force"]) == 0
     assert json.loads(summ.read_text())["filter"] == "ukf"
 
 

@@ -3,6 +3,8 @@ import csv
 import json
 import math
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -23,17 +25,20 @@ def test_csv_columns_and_rows_readable_before_close(tmp_path):
     path = tmp_path / "out.csv"
     w = EstimateWriter(path, LAY)
     assert w.format == "csv"
+    live = Path(w.writing)                                     # the temporary name beside the target
+    assert live.parent == path.parent and not path.exists()
     # header on disk before any estimate
-    assert path.read_text().splitlines() == ["t,px,py,vx,vy,sd_px,sd_py,sd_vx,sd_vy,reason,sensor"]
+    assert live.read_text().splitlines() == ["t,px,py,vx,vy,sd_px,sd_py,sd_vx,sd_vy,reason,sensor"]
     w.on_estimate(estimate(0.5))
     w.on_estimate(estimate(1.0, reason="output", sensor=None))
-    rows = list(csv.DictReader(path.open()))                 # read back before close: flushed
+    rows = list(csv.DictReader(live.open()))                 # read back before close: flushed
     assert len(rows) == 2
     assert float(rows[0]["t"]) == 0.5 and float(rows[0]["vy"]) == 2.0
     assert [float(rows[1][f"sd_{n}"]) for n in LAY.names] == [0.5, 1.0, 2.0, 3.0]
     assert rows[0]["reason"] == "update" and rows[0]["sensor"] == "uwb"
     assert rows[1]["reason"] == "output" and rows[1]["sensor"] == ""
     w.close()
+    assert list(csv.DictReader(path.open())) == rows and not live.exists()  # renamed into place whole
     w.close()                                                  # idempotent
     with pytest.raises(ValueError, match="closed"):
         w.on_estimate(estimate(2.0))
@@ -46,7 +51,7 @@ def test_jsonl_rows_readable_before_close(tmp_path):
         w.on_estimate(estimate(2.0))
         bad = Estimate(3.0, Belief(3.0, np.array([np.nan, 0, 0, 0]), P=np.eye(4)), "output")
         w.on_estimate(bad)
-        lines = path.read_text().splitlines()
+        lines = Path(w.writing).read_text().splitlines()
         objs = [json.loads(line) for line in lines]            # strict JSON (no NaN token)
     assert list(objs[0]) == ["t", *LAY.names, *(f"sd_{n}" for n in LAY.names), "reason", "sensor"]
     assert objs[0]["px"] == 2.0 and objs[0]["sd_vy"] == 3.0 and objs[0]["sensor"] == "uwb"

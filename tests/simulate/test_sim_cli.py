@@ -15,7 +15,7 @@ EXAMPLE = ROOT / "scenarios" / "example_2d.yaml"
 
 def _sim(tmp_path, *args) -> bytes:
     out = tmp_path / "out.log"
-    assert main(["simulate", str(EXAMPLE), "-o", str(out), *args]) == 0
+    assert main(["simulate", str(EXAMPLE), "-o", str(out), "--force", *args]) == 0
     return out.read_bytes()
 
 
