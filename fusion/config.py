@@ -73,6 +73,13 @@ class SchedulerSpec(_Strict):
     max_latency: float = Field(0.0, ge=0.0, description="reorder buffer length, s")
     late_policy: Literal["drop", "replay"] = "drop"
     history: int = Field(500, ge=1, description="beliefs kept for replay")
+    future_s: float = Field(5.0, gt=0.0, allow_inf_nan=False,
+                            description="s a stamp may be ahead of (or behind) the newest accepted time before it "
+                                        "is held as a wild stamp or a clock jump (fusion.clock)")
+    resync_after: int = Field(3, ge=1, description="messages of a sensor that must agree on a new time base "
+                                                   "before its clock is re-synchronised")
+    max_predict_s: float = Field(60.0, gt=0.0, allow_inf_nan=False,
+                                 description="longest prediction over a gap, s; a longer gap is bounded to it")
 
 
 class OutputSpec(_Strict):

@@ -304,11 +304,20 @@ class Run:
                 dispatch(out)
 
     def _compare(self, msg: Message) -> None:
+        """A truth or reference line: through the same clock guard as the sensors (a jump of the
+        recording's clock moves truth with it), then to its comparison."""
+        sched = self.scheduler
+        admitted, events = sched.clock.admit(msg.sensor, msg, msg.t, sched._newest)
+        for ev in events:
+            self._dispatch(ev)
         comp = self.stats.comparison(msg.sensor)
-        if comp is not None:
-            comp.add_truth(msg)
-        if self.on_truth is not None and msg.sensor == "truth":
-            self.on_truth(msg)
+        for m, t in admitted:
+            if t != m.t:
+                m = m._replace(t=t)
+            if comp is not None:
+                comp.add_truth(m)
+            if self.on_truth is not None and m.sensor == "truth":
+                self.on_truth(m)
 
     def _on_nis(self, sensor: str, t: float, nis: float, dim: int) -> None:
         self.stats.add_nis(sensor, t, nis, dim)

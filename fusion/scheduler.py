@@ -30,6 +30,7 @@ from typing import Callable, Iterable, Iterator
 import numpy as np
 
 from fusion.api import Belief, Estimate, Event, MalformedMessage, Message, RejectedMessage
+from fusion.clock import ClockGuard
 from fusion.config import SensorRuntime, System
 
 
@@ -61,6 +62,10 @@ class Scheduler:
         spec = system.spec
         self.max_latency = spec.scheduler.max_latency
         self.late_policy = spec.scheduler.late_policy
+        self.clock = ClockGuard(spec.scheduler.future_s, spec.scheduler.resync_after, on_drop=self._count_wild,
+                                max_gap_s=spec.scheduler.max_predict_s)
+        self._future = spec.scheduler.future_s
+        self.max_predict = spec.scheduler.max_predict_s
         self.output_dt = 1.0 / spec.output.rate_hz if spec.output.rate_hz else None
         self.on_update = spec.output.on_update
         self.belief: Belief | None = None
@@ -110,6 +115,7 @@ class Scheduler:
                 t = item.t
                 if (sensor.role == "input" and self._batch and not sensor.time_offset and not self._buffer
                         and self.max_latency == 0.0 and t >= self._horizon and t < self._next_output
+                        and t <= self._newest + self._future and not self.clock.busy
                         and len(self._pending) < _BATCH_MAX - 1):
                     sensor.counters["received"] += 1
                     self._horizon = self._newest = t
@@ -138,8 +144,19 @@ class Scheduler:
                 yield Event(msg.t, "warning", msg.sensor, f"sensor {msg.sensor!r} is not in the config; its messages are ignored")
             return
         sensor.counters["received"] += 1
-        t = msg.t + sensor.time_offset
-        if sensor.time_offset:
+        admitted, events = self.clock.admit(sensor.name, msg, msg.t + sensor.time_offset, self._newest)
+        yield from events
+        for m, t in admitted:
+            yield from self._accept(sensor, m, t)
+
+    def _count_wild(self, sensor: str, n: int) -> None:
+        """Held messages the clock guard dropped as wild stamps: malformed (their time is)."""
+        if sensor in self.sensors:
+            self.sensors[sensor].counters["malformed"] += n
+
+    def _accept(self, sensor: SensorRuntime, msg: Message, t: float) -> Iterator[Estimate | Event]:
+        """A message on the stream's time base, stamped ``t`` (s, offsets applied)."""
+        if t != msg.t:
             msg = Message(t, msg.sensor, msg.values, msg.line)
         if t < self._horizon:
             if self.late_policy == "drop" or not self._history:
@@ -155,6 +172,7 @@ class Scheduler:
 
     def finish(self) -> Iterator[Estimate | Event]:
         """Release everything still buffered (end of input)."""
+        yield from self.clock.flush()
         yield from self._release(math.inf, flush=False)
         # What the preprocessors still gather comes before the last input samples are integrated, so a
         # final fix is not older than the belief.
@@ -247,9 +265,20 @@ class Scheduler:
         self.belief = self.filter.initial_belief(t, *self._initial())
         self._next_output = t + self.output_dt if self.output_dt else math.inf
 
-    def _predict_to(self, t: float) -> Iterator[Estimate]:
-        """Predict with the held input up to ``t``, emitting fixed-rate outputs on the way."""
+    def _predict_to(self, t: float) -> Iterator[Estimate | Event]:
+        """Predict with the held input up to ``t``, emitting fixed-rate outputs on the way. A gap longer
+        than ``max_predict_s`` is bounded: the belief is predicted over the last ``max_predict_s`` of it
+        only (its uncertainty grows as over that time, not without bound) and a ``gap`` event says so."""
         assert self.belief is not None
+        gap = t - self.belief.t
+        if gap > self.max_predict:
+            yield Event(t, "gap", None, f"{gap:.3f} s without a message; prediction bounded to the last "
+                        f"{self.max_predict:g} s (scheduler.max_predict_s)")
+            self.belief = self.belief.with_(t=t - self.max_predict)
+            if self.output_dt:
+                k = math.ceil((self.belief.t - self._next_output) / self.output_dt)
+                if k > 0:
+                    self._next_output += k * self.output_dt
         while self._next_output <= t:
             self._step(self._next_output)
             if not self._replaying:
@@ -300,10 +329,17 @@ class Scheduler:
             ts = np.array([self.belief.t] + [t for t, _ in good] + ([end] if end is not None else []))  # type: ignore[union-attr]
             us = np.vstack([self.u] + [u for _, u in (good if end is not None else good[:-1])])
             dts = np.diff(ts)
+            capped = dts.max() > self.max_predict
+            if capped:
+                yield Event(float(ts[-1]), "gap", sensor.name, f"{dts.max():.3f} s between input samples; "
+                            f"prediction bounded to {self.max_predict:g} s (scheduler.max_predict_s)")
+                np.minimum(dts, self.max_predict, out=dts)
             keep = dts > 0
             if keep.any():
                 t0 = time.perf_counter()
                 self.belief = self.filter.predict_inputs(self.belief, self.process, us[keep], dts[keep])
+                if capped:  # bounded gap: the run still ends at the last sample's time
+                    self.belief = self.belief.with_(t=last_t)
                 self.time_s["predict"] += time.perf_counter() - t0
                 self.steps["predict"] += int(keep.sum())
             self.u = good[-1][1]
