@@ -26,6 +26,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from fusion.api import (BuildContext, Component, ConfigError, Decoder, Filter, Gate, MeasurementModel,
                         ProcessModel, Solver)
+from fusion.recovery import RecoverySpec
 from fusion.registry import Registry, default_registry
 from fusion.yamlsource import LocatedYAML, load_yaml, pydantic_errors
 
@@ -54,6 +55,7 @@ class SensorSpec(_Strict):
     time_offset: float = 0.0
     max_gap: float | None = Field(None, gt=0.0, description="input sensors: report a gap between samples "
                                   "longer than this (s)")
+    recovery: RecoverySpec | None = Field(None, description="recover from a lock-out (fusion.recovery); off by default")
     enabled: bool = True
 
 
@@ -130,6 +132,7 @@ class SensorRuntime:
     gate: Gate | None
     time_offset: float
     max_gap: float | None = None
+    recovery: RecoverySpec | None = None
     counters: dict[str, int] = field(default_factory=lambda: dict(received=0, used=0, rejected=0, malformed=0, late=0))
 
 
@@ -283,7 +286,15 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
             gate = build_component(reg, "gate", s.gate, sctx, doc, [*loc, "gate"]) if s.gate else None
         elif process.input_dim == 0:
             raise ConfigError(f"{where}.role: 'input' but process {process.name!r} takes no control input")
-        sensors[sname] = SensorRuntime(sname, s.role, decoder, pre, model, R, gate, s.time_offset, s.max_gap)
+        if s.recovery is not None:
+            if s.role != "measurement":
+                raise ConfigError(f"{where}.recovery: only a measurement sensor can recover the filter")
+            for i, b in enumerate(s.recovery.blocks):
+                if b not in layout:
+                    bad = doc.where([*loc, "recovery", "blocks", i]) if doc else f"{where}.recovery.blocks"
+                    raise ConfigError(f"{bad}: state has no block {b!r}; blocks are {[x.name for x in layout.blocks]}")
+        sensors[sname] = SensorRuntime(sname, s.role, decoder, pre, model, R, gate, s.time_offset, s.max_gap,
+                                       s.recovery)
     inputs = [n for n, s in sensors.items() if s.role == "input"]
     if len(inputs) > 1:
         raise ConfigError(f"{path or 'config'}: sensors: at most one input sensor, got {inputs}")

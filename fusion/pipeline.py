@@ -65,6 +65,11 @@ class RunStats:
         self.nonfinite = 0        # estimates with a non-finite mean or sd
         self.largest_sd = 0.0     # over the run, any element
         self._nis_wait: list[tuple[str, float, float, int]] | None = []
+        self.diverged_s = 0.0     # sensor time from a non-finite estimate to the next estimate
+        self._last_nonfinite = False
+        self._last_t = math.nan
+        self.last_finite = True   # the last estimate of the run is finite
+        self._updates: dict[str, list[float]] = {}  # sensor -> [first update t, last accepted t, longest gap]
         self.on_result: Callable | None = None  # (estimate, errors, truth_row) for a plot
 
     # ------------------------------------------------------------------ feeding
@@ -102,10 +107,17 @@ class RunStats:
             self.t_last = t
         sd = est.belief.sd
         top = float(sd.max()) if sd.size else 0.0
+        if self._last_nonfinite and t > self._last_t:
+            self.diverged_s += t - self._last_t
         if top != top or top == math.inf or not np.isfinite(est.belief.x).all():
             self.nonfinite += 1
-        elif top > self.largest_sd:
-            self.largest_sd = top
+            self._last_nonfinite = True
+        else:
+            self._last_nonfinite = False
+            if top > self.largest_sd:
+                self.largest_sd = top
+        self.last_finite = not self._last_nonfinite
+        self._last_t = t
         if self.truth is not None:
             self.truth.add_estimate(est)
         elif self.on_result is not None:
@@ -127,6 +139,30 @@ class RunStats:
         wait, self._nis_wait = self._nis_wait, None
         for sensor, t, nis, dim in wait or ():
             self.tracker.add_nis(sensor, nis, dim, t=t)
+
+    def add_update(self, sensor: str, t: float, accepted: bool) -> None:
+        """One update of ``sensor`` at ``t``: tracks the longest time without an accepted one."""
+        u = self._updates.get(sensor)
+        if u is None:
+            u = self._updates[sensor] = [t, math.nan, 0.0, t]
+        u[3] = t
+        if accepted:
+            since = u[1] if u[1] == u[1] else u[0]
+            u[2] = max(u[2], t - since)
+            u[1] = t
+
+    def health(self) -> dict[str, Any]:
+        """The summary's ``health``: non-finite estimates, the largest sd, time diverged, the longest time
+        without an accepted measurement per sensor (from its first update, up to its last), resets and
+        clock events."""
+        longest = {}
+        for sensor, (first, last_ok, gap, last) in sorted(self._updates.items()):
+            tail = last - (last_ok if last_ok == last_ok else first)
+            longest[sensor] = max(gap, tail)
+        return {"nonfinite_estimates": self.nonfinite, "final_estimate_finite": self.last_finite,
+                "largest_sd": self.largest_sd, "diverged_s": self.diverged_s,
+                "longest_without_accepted_s": longest, "resets": self.scheduler.resets,
+                "clock_events": self.events.get("clock", 0)}
 
     def add_event(self, event: Event) -> None:
         self.events[event.kind] = self.events.get(event.kind, 0) + 1
@@ -182,9 +218,9 @@ class RunStats:
         if self.reference is not None:
             agreement = self.reference.tracker.summary()["errors"]
             if agreement:
-                agreement.pop("element_rmse", None)
                 summary["agreement"] = {"with": "reference (the onboard estimator's output in the log); "
                                                 "an agreement, not an error", **agreement}
+        summary["health"] = self.health()
         if sched.unused:
             summary["ignored_sensors"] = dict(sched.unused)
         if self.events:
@@ -319,8 +355,9 @@ class Run:
             if self.on_truth is not None and m.sensor == "truth":
                 self.on_truth(m)
 
-    def _on_nis(self, sensor: str, t: float, nis: float, dim: int) -> None:
+    def _on_nis(self, sensor: str, t: float, nis: float, dim: int, accepted: bool = True) -> None:
         self.stats.add_nis(sensor, t, nis, dim)
+        self.stats.add_update(sensor, t, accepted)
         if self.plot is not None:
             self.plot.on_nis(sensor, t, nis, dim)
 

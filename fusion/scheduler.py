@@ -31,6 +31,7 @@ import numpy as np
 
 from fusion.api import Belief, Estimate, Event, MalformedMessage, Message, RejectedMessage
 from fusion.clock import ClockGuard
+from fusion.recovery import LockoutWatch, recover
 from fusion.config import SensorRuntime, System
 
 
@@ -53,12 +54,12 @@ class Scheduler:
 
     MAX_UNUSED = 100  # distinct unknown sensor names counted by name; more are counted under "(other)"
 
-    def __init__(self, system: System, on_nis: Callable[[str, float, float, int], None] | None = None):
+    def __init__(self, system: System, on_nis: Callable[[str, float, float, int, bool], None] | None = None):
         self.system = system
         # Private copies: components keep diagnostics (counters, a solver's open cycle); the System stays
         # as wired (one deepcopy call, so objects shared between components stay shared).
         self.process, self.filter, self.sensors = copy.deepcopy((system.process, system.filter, system.sensors))
-        self.on_nis = on_nis  # called (sensor, t, nis, dim) after every update tried, accepted or not
+        self.on_nis = on_nis  # called (sensor, t, nis, dim, accepted) after every update tried
         spec = system.spec
         self.max_latency = spec.scheduler.max_latency
         self.late_policy = spec.scheduler.late_policy
@@ -82,6 +83,8 @@ class Scheduler:
         self.steps = {"predict": 0, "update": 0}
         self.time_s = {"predict": 0.0, "update": 0.0}
         self.unused: dict[str, int] = {}
+        self._watch = {n: LockoutWatch(s.recovery) for n, s in self.sensors.items() if s.recovery is not None}
+        self.resets = 0
         # Batched input integration (filter.predict_inputs) needs no per-sample replay log.
         self._batch = hasattr(self.filter, "predict_inputs") and self.late_policy != "replay"
         self._pending: list[Message] = []
@@ -409,6 +412,18 @@ class Scheduler:
         result = self.filter.update(self.belief, obs.model, obs.z, R, sensor.gate)
         self.time_s["update"] += time.perf_counter() - t0
         self.steps["update"] += 1
+        watch = self._watch.get(sensor.name)
+        if watch is not None and not self._replaying:
+            threshold = getattr(sensor.gate, "threshold", None)
+            th = threshold(len(obs.z)) if threshold is not None else None
+            if watch.update(obs.t, result.accepted, result.nis, th):
+                watch.clear()
+                self.resets += 1
+                self.belief, event = recover(sensor.recovery, self.belief, self.system.layout, obs, R,  # type: ignore[arg-type]
+                                             self.filter, sensor.name)
+                yield event
+                result = self.filter.update(self.belief, obs.model, obs.z, R, sensor.gate)
+                self.steps["update"] += 1
         if result.accepted:
             sensor.counters["used"] += 1
             self.belief = result.belief
@@ -420,7 +435,7 @@ class Scheduler:
                 yield Event(obs.t, "rejected", sensor.name, f"NIS {result.nis:.1f} outside the gate")
         if not self._replaying:
             if self.on_nis is not None:
-                self.on_nis(sensor.name, obs.t, result.nis, len(obs.z))
+                self.on_nis(sensor.name, obs.t, result.nis, len(obs.z), result.accepted)
             if self.on_update:
                 yield Estimate(obs.t, self.belief, "update", sensor.name, result)
 

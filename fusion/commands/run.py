@@ -124,6 +124,10 @@ def run(args: argparse.Namespace) -> int:
     if result.interrupted:
         print("fusion run: interrupted; the summary covers what was read", file=sys.stderr)
         return 130
+    if result.stats.estimates and not result.stats.last_finite:
+        print("fusion run: the estimate ended non-finite (the filter diverged); see the summary's health",
+              file=sys.stderr)
+        return 3
     return 0
 
 
