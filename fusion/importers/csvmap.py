@@ -1,0 +1,4 @@
+from fusion.api import Importer
+class CsvImporter(Importer):
+    name = "csv"
+    suffixes = (".csv",)

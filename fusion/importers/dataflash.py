@@ -1,0 +1,4 @@
+from fusion.api import Importer
+class DataflashImporter(Importer):
+    name = "dataflash"
+    suffixes = (".bin",)
