@@ -61,7 +61,8 @@ def render(log: ImportedLog) -> Iterator[str]:
         times.append(np.asarray(s.t, float))
     if not lines:
         return
-    order = np.argsort(np.concatenate(times), kind="stable")
+    # sorted on the times as written (microseconds), so that 0.1499999 and 0.15 count as equal
+    order = np.argsort(np.round(np.concatenate(times), 6), kind="stable")
     for i in order.tolist():
         yield lines[i] + "\n"
 
