@@ -470,10 +470,16 @@ class ImportRequest:
     allow_partial: bool = False
 
     def wants(self, sensor: str) -> bool:
-        """True when ``sensor`` (or its family: ``imu`` for ``imu2``) was asked for."""
+        """True when ``sensor`` (``imu2``), or its family (``imu``: every instance), was asked for."""
         if self.sensors is None:
             return True
         return sensor in self.sensors or sensor.rstrip("0123456789") in self.sensors
+
+    def wants_family(self, family: str) -> bool:
+        """True when any sensor of ``family`` (``imu``, ``imu2``, ...) was asked for: its data must be read."""
+        if self.sensors is None:
+            return True
+        return any(s.rstrip("0123456789") == family for s in self.sensors)
 
 
 @dataclass
