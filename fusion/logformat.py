@@ -175,7 +175,8 @@ def iter_messages(lines: Iterable[str], state: ParsedStream | None = None,
                 continue
         try:
             msg = _parse_stripped(text, lineno)
-            if known_sensors is not None and msg.sensor not in known_sensors and msg.sensor != "truth":
+            if (known_sensors is not None and msg.sensor not in known_sensors
+                    and msg.sensor != "truth" and msg.sensor != "reference"):
                 raise MalformedMessage(f"unknown sensor {msg.sensor!r}")
             names = fields.get(msg.sensor)
             if names is not None and len(msg.values) != len(names) and not (

@@ -105,7 +105,12 @@ def run(args: argparse.Namespace) -> int:
     check_output(args.output, [str(src)] + ([args.map] if args.map else []), args.force)
     request = ImportRequest(start=args.start, end=args.end, sensors=sensors, mapping=args.map,
                             allow_partial=args.partial)
-    log = cls().read(str(src), request)
+    try:
+        log = cls().read(str(src), request)
+    except (KeyError, IndexError, ValueError, TypeError, OverflowError, UnicodeDecodeError) as exc:
+        # a file whose content the importer's format reader did not expect (a field missing, a bad count):
+        # the user's file, not a bug of ours, in every case met so far; --debug shows the traceback
+        raise InputError(f"{src}: unexpected content for the {cls.name} importer ({type(exc).__name__}: {exc})") from exc
     streams = [s for s in log.streams if len(s)]
     if not streams:
         span = ""

@@ -6,6 +6,12 @@ level; magnetic field in uT (the unit of the project's recordings, ``# mag units
 """
 from __future__ import annotations
 
+import contextlib
+import io
+import os
+import sys
+from typing import Iterator
+
 import numpy as np
 
 from fusion.api import ImportRequest, InputError, Stream
@@ -101,3 +107,31 @@ def require(cond: bool, path: str, what: str) -> None:
     """Raise InputError ``path: what`` unless ``cond``."""
     if not cond:
         raise InputError(f"{path}: {what}")
+
+
+@contextlib.contextmanager
+def silenced() -> Iterator[io.StringIO]:
+    """Swallow what a reader library prints (pyulog and pymavlink print warnings, pymavlink's C indexer
+    writes to the process's own stdout/stderr): Python-level text is kept in the yielded buffer, C-level
+    text goes to /dev/null, so the command's one error line stays the only line."""
+    said = io.StringIO()
+    saved = []
+    try:
+        for fd, stream in ((1, sys.stdout), (2, sys.stderr)):
+            try:
+                stream.flush()
+                saved.append((fd, os.dup(fd)))
+            except (OSError, ValueError, AttributeError):
+                continue
+        null = os.open(os.devnull, os.O_WRONLY)
+        try:
+            for fd, _ in saved:
+                os.dup2(null, fd)
+        finally:
+            os.close(null)
+        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+            yield said
+    finally:
+        for fd, copy in saved:
+            os.dup2(copy, fd)
+            os.close(copy)

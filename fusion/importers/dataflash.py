@@ -24,15 +24,14 @@ in older logs.
 """
 from __future__ import annotations
 
-import contextlib
-import io
 import math
 import os
 
 import numpy as np
 
 from fusion.api import ImportedLog, Importer, ImportRequest, InputError, Stream
-from fusion.importers.common import (F32, GAUSS_TO_UT, LATLON_E7, DEG, make_stream, quat_from_euler, slerp_to)
+from fusion.importers.common import (DEG, F32, GAUSS_TO_UT, LATLON_E7, make_stream, quat_from_euler, silenced,
+                                     slerp_to)
 
 # unit label (UNIT record) -> (our unit, factor) per quantity
 _CONVERT = {
@@ -125,7 +124,6 @@ class DataflashImporter(Importer):
 def _open(path: str, request: ImportRequest):
     from pymavlink.DFReader import DFReader_binary
 
-    chatter = io.StringIO()
     try:
         with open(path, "rb") as fh:
             head = fh.read(3)
@@ -135,7 +133,7 @@ def _open(path: str, request: ImportRequest):
         raise InputError(f"{path}: not an ArduPilot DataFlash log (it does not start with a message header "
                          "0xA3 0x95; a text .log needs converting, a .tlog is MAVLink telemetry)")
     try:
-        with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
+        with silenced():
             reader = DFReader_binary(path)
     except Exception as exc:  # pymavlink raises plain errors on damaged FMT records
         raise InputError(f"{path}: damaged DataFlash log ({type(exc).__name__}: {exc})") from None
@@ -144,8 +142,8 @@ def _open(path: str, request: ImportRequest):
     cut, gap, first_gap = _integrity(reader)
     if not request.allow_partial:
         if cut is not None:
-            raise InputError(f"{path}: truncated: the last message (byte {cut}) is cut short at byte "
-                             f"{reader.data_len}; pass --partial to import what comes before it")
+            raise InputError(f"{path}: truncated: the last message, at byte {cut}, is cut short by the end of the "
+                             f"file at byte {reader.data_len}; pass --partial to import what comes before it")
         if gap:
             raise InputError(f"{path}: corrupt: {gap} byte(s) belong to no message (the first at byte {first_gap}); "
                              "pass --partial to import the messages pymavlink could read")
@@ -186,8 +184,7 @@ def _collect(reader, path: str, types: list[str], request: ImportRequest):
     mult: dict[str, float] = {}
     vehicle = ""
     stop_after = request.end + 2.0 if request.end is not None else math.inf  # messages are written ~in time order
-    chatter = io.StringIO()
-    with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
+    with silenced():
         while True:
             try:
                 m = reader.recv_match(type=list(want))
@@ -346,8 +343,11 @@ def _reference(rows, conv: _Units, request, notes):
     org = [d for _, d in rows.get("ORGN", []) if int(d.get("Type", 0)) == 0]
     if org:
         d = org[0]
-        origin = (d["Lat"] * conv.factor("ORGN", "Lat"), d["Lng"] * conv.factor("ORGN", "Lng"),
-                  d["Alt"] * conv.factor("ORGN", "Alt"))
+        o = tuple(float(d.get(c, np.nan)) * conv.factor("ORGN", c) for c in ("Lat", "Lng", "Alt"))
+        if all(math.isfinite(v) for v in o) and abs(o[0]) <= 90 and abs(o[1]) <= 180:
+            origin = o
+        else:
+            notes.append(f"reference: the ORGN record has no valid origin ({d})")
     att = rows.get("ATT", [])
     q_att = t_att = None
     if att:

@@ -21,7 +21,6 @@ clock (``timestamp_sample`` where the topic has it).
 """
 from __future__ import annotations
 
-import contextlib
 import io
 import os
 from typing import Any
@@ -29,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from fusion.api import ImportedLog, Importer, ImportRequest, InputError, Stream
-from fusion.importers.common import (F32, GAUSS_TO_UT, LATLON_E7, LATLON_F, make_stream, slerp_to)
+from fusion.importers.common import F32, GAUSS_TO_UT, LATLON_E7, LATLON_F, make_stream, silenced, slerp_to
 
 TOPICS = {
     "imu": ("sensor_combined",),
@@ -196,11 +195,10 @@ def _parse(path: str, request: ImportRequest):
     from pyulog.core import ULogException
 
     topics = sorted({t for s, ts in TOPICS.items() if request.wants(s) for t in ts})
-    chatter = io.StringIO()
     try:
         with open(path, "rb") as raw:
             fh = _Reader(raw)
-            with contextlib.redirect_stdout(chatter):
+            with silenced() as chatter:
                 ulog = ULog(fh, topics)
             size = os.fstat(raw.fileno()).st_size
     except OSError as exc:
