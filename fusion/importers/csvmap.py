@@ -257,23 +257,30 @@ def _rows(path: Path, opts: CsvOptions) -> Iterator[tuple[int, list[str]]]:
                 delim = csv.Sniffer().sniff(sample, delimiters=",;\t|").delimiter
             except csv.Error:
                 delim = "whitespace"
-        lineno = 0
-        try:
-            for lineno, line in enumerate(fh, 1):
-                if lineno <= opts.skip_rows:
+        pos = [0]
+
+        def lines():
+            for n, line in enumerate(fh, 1):
+                pos[0] = n
+                if n <= opts.skip_rows:
                     continue
                 s = line.strip()
                 if not s or (opts.comment and s.startswith(opts.comment)):
                     continue
-                if delim == "whitespace":
-                    cells = s.split()
-                else:
-                    cells = next(csv.reader(io.StringIO(line), delimiter="\t" if delim in ("tab", "\\t") else delim))
-                yield lineno, cells
+                yield line
+
+        try:
+            if delim == "whitespace":
+                for line in lines():
+                    yield pos[0], line.split()
+            else:
+                for cells in csv.reader(lines(), delimiter="\t" if delim in ("tab", "\\t") else delim):
+                    if cells:
+                        yield pos[0], cells
         except UnicodeDecodeError as exc:
-            raise InputError(f"{path}:{lineno + 1}: not UTF-8 text ({exc.reason})") from None
+            raise InputError(f"{path}:{pos[0] + 1}: not UTF-8 text ({exc.reason})") from None
         except csv.Error as exc:
-            raise InputError(f"{path}:{lineno}: {exc}") from None
+            raise InputError(f"{path}:{pos[0]}: {exc}") from None
 
 
 def _index(col: str | int, names: list[str] | None, path: Path, where: str) -> int:
@@ -290,7 +297,8 @@ def _index(col: str | int, names: list[str] | None, path: Path, where: str) -> i
         stripped = [n.strip() for n in names]
         if col.strip() in stripped:
             return stripped.index(col.strip())
-        raise ConfigError(f"{where}: no column {col!r} in {path.name} (columns: {', '.join(names)})") from None
+        shown = ", ".join(repr(n if len(n) <= 40 else n[:37] + "...") for n in names[:20]) + (f", ... ({len(names)} in all)" if len(names) > 20 else "")
+        raise ConfigError(f"{where}: no column {col!r} in {path.name} (columns: {shown})") from None
 
 
 def _read_file(path: Path, tspec: TimeSpec, opts: CsvOptions, specs: dict[str, SensorMap], request: ImportRequest,
@@ -302,11 +310,12 @@ def _read_file(path: Path, tspec: TimeSpec, opts: CsvOptions, specs: dict[str, S
         if first is None:
             raise InputError(f"{path}: no header row (the file is empty)")
         names = first[1]
-    ti = _index(tspec.column, names, path, "time.column")
+    mp = Path(request.mapping).name if request.mapping else "mapping"
+    ti = _index(tspec.column, names, path, f"{mp}: time.column")
     plan = []
     for sname, s in specs.items():
         cols = s.fields if s.fields is not None else s.pairs
-        idx = [_index(c, names, path, f"{sname}.{k}") for k, c in cols.items()]  # type: ignore[union-attr]
+        idx = [_index(c, names, path, f"{mp}: {sname}.{k}") for k, c in cols.items()]  # type: ignore[union-attr]
         keys = list(cols)  # type: ignore[arg-type]
         scale = [s.scale.get(k, 1.0) if isinstance(s.scale, dict) else s.scale for k in keys]
         offset = [s.offset.get(k, 0.0) if isinstance(s.offset, dict) else s.offset for k in keys]
