@@ -134,7 +134,9 @@ def load_mapping(path: str) -> Mapping:
 
 
 class CsvImporter(Importer):
-    """CSV datasets through a mapping file (``--map MAP.yaml``): time column (s/ms/us/ns or ISO date-time),
+    """CSV datasets through a mapping file (--map MAP.yaml).
+
+    Time column (s/ms/us/ns or ISO date-time),
     columns -> sensor fields or beacon/range pairs, unit scales and offsets, per-sensor time offsets, ground
     truth -> ``truth`` lines, several files (``file:``). See docs/import.md."""
 

@@ -70,7 +70,9 @@ _BASE = {"IMU2": "IMU", "IMU3": "IMU", "GPS2": "GPS", "GPA2": "GPA", "MAG2": "MA
 
 
 class DataflashImporter(Importer):
-    """ArduPilot DataFlash (.bin) via pymavlink: IMU (all instances), GPS (+GPA accuracies), MAG (mGauss ->
+    """ArduPilot DataFlash (.bin) logs through pymavlink.
+
+    IMU (all instances), GPS (+GPA accuracies), MAG (mGauss ->
     uT), BARO, and the onboard EKF as ``reference`` lines (XKF1/NKF1/EKF1 position and velocity NED, ATT
     attitude as a body-to-NED quaternion), with the log's own units and multipliers (FMTU). Times: boot s."""
 

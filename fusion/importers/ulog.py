@@ -76,7 +76,9 @@ def _cols(d, names: list[str]) -> np.ndarray:
 
 
 class UlogImporter(Importer):
-    """PX4 ULog (.ulg) via pyulog: IMU (sensor_combined), GPS (vehicle_gps_position / sensor_gps, both
+    """PX4 ULog (.ulg) logs through pyulog.
+
+    IMU (sensor_combined), GPS (vehicle_gps_position / sensor_gps, both
     layouts), magnetometer (vehicle_magnetometer / sensor_mag, G -> uT), barometer (vehicle_air_data /
     sensor_baro) and the onboard EKF as ``reference`` lines (vehicle_local_position + vehicle_attitude, NED,
     q body-to-NED). Times in s from the log's start."""
@@ -208,7 +210,7 @@ def _parse(path: str, request: ImportRequest):
     except Exception as exc:  # pyulog raises plain errors (struct, index, unicode) on damaged definitions
         raise InputError(f"{path}: damaged ULog file ({type(exc).__name__}: {exc})") from None
     if fh.cut_at is not None and not request.allow_partial:
-        raise InputError(f"{path}: truncated: the last message is cut short at byte {fh.cut_at} of {size}; "
+        raise InputError(f"{path}: truncated: its last message is cut short by the end of the file (byte {size}); "
                          "pass --partial to import what comes before it")
     if ulog.file_corruption and not request.allow_partial:
         said = " ".join(chatter.getvalue().split())[:200]
