@@ -185,3 +185,42 @@ def test_unknown_sensor_and_missing_topic_are_one_error(tmp_path, capsys):
     assert "lidar" in one_error_line(capsys)
     assert fusion_import(src, "-o", tmp_path / "x.log", "--start", "100") == 2
     assert "no samples" in one_error_line(capsys)
+
+
+def test_newer_layouts_float_gps_sensor_mag_and_mbar_baro(tmp_path):
+    """Layouts the shipped log lacks, in a ULog written here: sensor_gps with float degrees and metres,
+    sensor_mag (no vehicle_magnetometer), sensor_baro in mbar (older firmware), vehicle_attitude only."""
+    from ulog_builder import UlogWriter
+
+    w = UlogWriter(start_us=5_000_000)
+    w.info("sys_name", "PX4")
+    w.topic("sensor_gps", [("uint64_t", "timestamp_sample"), ("double", "latitude_deg"), ("double", "longitude_deg"),
+                           ("double", "altitude_msl_m"), ("float", "eph"), ("float", "epv"), ("float", "vel_n_m_s"),
+                           ("float", "vel_e_m_s"), ("float", "vel_d_m_s"), ("uint8_t", "fix_type"),
+                           ("uint8_t", "satellites_used")])
+    w.topic("sensor_mag", [("float", "x"), ("float", "y"), ("float", "z")])
+    w.topic("sensor_baro", [("float", "pressure"), ("float", "temperature")])
+    w.topic("vehicle_attitude", [("float[4]", "q")])
+    for name in ("sensor_gps", "sensor_mag", "sensor_baro", "vehicle_attitude"):
+        w.subscribe(name)
+    lat0, lon0 = 47.397742123456, 8.545594987654
+    for k in range(10):
+        t = 5_000_000 + 100_000 * k
+        w.data("sensor_gps", timestamp=t + 900, timestamp_sample=t, latitude_deg=lat0 + 1e-7 * k,
+               longitude_deg=lon0 - 2e-7 * k, altitude_msl_m=488.25 + 0.1 * k, eph=0.8, epv=1.5, vel_n_m_s=0.5,
+               vel_e_m_s=-0.25, vel_d_m_s=0.125, fix_type=1 if k == 0 else 3, satellites_used=14)
+        w.data("sensor_mag", timestamp=t, x=0.21, y=0.015, z=0.43)
+        w.data("sensor_baro", timestamp=t, pressure=955.5 + k, temperature=30.5)
+        w.data("vehicle_attitude", timestamp=t, q=[0.5, 0.5, -0.5, 0.5])
+    w.save(tmp_path / "new.ulg")
+    assert fusion_import(tmp_path / "new.ulg", "-o", tmp_path / "new.log") == 0
+    rec = Recording(tmp_path / "new.log")
+    k = np.arange(1, 10)                                   # the first sample has no fix
+    np.testing.assert_allclose(rec.times("gps"), 0.1 * k, atol=1e-9)    # timestamp_sample, from the start
+    np.testing.assert_allclose(rec.column("gps", "lat"), lat0 + 1e-7 * k, atol=1e-9)
+    np.testing.assert_allclose(rec.column("gps", "lon"), lon0 - 2e-7 * k, atol=1e-9)
+    np.testing.assert_allclose(rec.column("gps", "alt"), 488.25 + 0.1 * k, atol=1e-3)
+    np.testing.assert_allclose(rec.values("mag")[0], np.float32([0.21, 0.015, 0.43]) * 100.0, rtol=1e-6)
+    np.testing.assert_allclose(rec.column("baro", "pressure"), (955.5 + np.arange(10)) * 100.0, rtol=1e-7)
+    assert rec.header.fields["reference"] == ("qw", "qx", "qy", "qz")
+    np.testing.assert_allclose(rec.values("reference")[0], [0.5, 0.5, -0.5, 0.5])
