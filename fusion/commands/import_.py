@@ -46,6 +46,9 @@ def register(subparsers) -> None:
                         "only their data is read. Default: all")
     p.add_argument("--map", metavar="MAP.yaml", help="mapping file of a CSV (docs/import.md)")
     p.add_argument("--format", metavar="NAME", help="importer by name (default: by the file's suffix)")
+    p.add_argument("--gps", choices=("fields", "nmea"), default="fields",
+                   help="how GPS fixes are written: 'fields' (lat lon alt vn ve vd ..., default) or 'nmea' "
+                        "(GGA + RMC sentences a fix, for configs whose GPS goes through the nmea decoder)")
     p.add_argument("--partial", action="store_true",
                    help="import a truncated or corrupt log as far as it reads (default: refuse it)")
     p.add_argument("--force", action="store_true", help="replace an existing output file")
@@ -117,6 +120,10 @@ def run(args: argparse.Namespace) -> int:
         if args.start is not None or args.end is not None:
             span = f" between --start {args.start} and --end {args.end}"
         raise InputError(f"{src}: no samples to write{span}" + (f" ({'; '.join(log.notes)})" if log.notes else ""))
+    if args.gps == "nmea":
+        from fusion.importers.nmea import as_nmea
+        streams = [as_nmea(s, log.meta.get("start_utc")) if s.sensor.rstrip("0123456789") == "gps" and
+                   s.values is not None else s for s in streams]
     log.streams = streams
     t0 = min(float(s.t.min()) for s in streams)
     t1 = max(float(s.t.max()) for s in streams)

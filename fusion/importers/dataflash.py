@@ -24,6 +24,7 @@ in older logs.
 """
 from __future__ import annotations
 
+import datetime as dt
 import math
 import os
 
@@ -101,6 +102,9 @@ class DataflashImporter(Importer):
             if not got:
                 missing.append(fam)
         gps0 = next((s for s in streams if s.sensor == "gps" and len(s)), None)
+        utc = _start_utc(rows.get("GPS", []))
+        if utc:
+            log.meta["start_utc"] = utc
         if request.wants_family("reference"):
             ref, origin = _reference(rows, conv, request, notes)
             if ref is None:
@@ -121,6 +125,25 @@ class DataflashImporter(Importer):
             notes.append("not in the log: " + ", ".join(missing))
         log.streams = streams
         return log
+
+
+# GPS - UTC leap seconds since 1980-01-06, by the date they took effect (IERS bulletins C)
+_LEAPS = ((dt.datetime(2017, 1, 1, tzinfo=dt.timezone.utc), 18), (dt.datetime(2015, 7, 1, tzinfo=dt.timezone.utc), 17),
+          (dt.datetime(2012, 7, 1, tzinfo=dt.timezone.utc), 16), (dt.datetime(2009, 1, 1, tzinfo=dt.timezone.utc), 15),
+          (dt.datetime(2006, 1, 1, tzinfo=dt.timezone.utc), 14))
+
+
+def _start_utc(gps_rows: list) -> str | None:
+    """UTC at t = 0 from the first GPS row with a week number (GWk, GMS: GPS time), ISO 8601."""
+    for t, d in gps_rows:
+        wk, ms = int(d.get("GWk", 0) or 0), int(d.get("GMS", 0) or 0)
+        if wk <= 0:
+            continue
+        gps_time = dt.datetime(1980, 1, 6, tzinfo=dt.timezone.utc) + dt.timedelta(weeks=wk, milliseconds=ms)
+        leap = next((n for when, n in _LEAPS if gps_time >= when), 13)
+        start = gps_time - dt.timedelta(seconds=leap) - dt.timedelta(seconds=t)
+        return start.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    return None
 
 
 def _open(path: str, request: ImportRequest):
@@ -309,15 +332,18 @@ def _gps(rows, conv: _Units, request, notes) -> list[Stream]:
                 cols.append(np.array([acc[tt].get(col, np.nan) for tt, _ in r], float) * conv.factor(gmt, col))
                 fmts.append(F32)
         status = np.array([d.get("Status", 3) for _, d in r], float)
-        fields += ["fix", "nsat"]
-        cols += [status, np.array([d.get("NSats", 0) for _, d in r], float)]
-        fmts += ["d", "d"]
+        fields += ["hdop", "fix", "nsat"]
+        cols += [np.array([d.get("HDop", np.nan) for _, d in r], float), status,
+                 np.array([d.get("NSats", 0) for _, d in r], float)]
+        fmts += [F32, "d", "d"]
         ok = status >= 2
         if np.any(~ok):
             notes.append(f"{_name('gps', inst)}: {int(np.sum(~ok))} sample(s) without a fix (Status < 2) dropped")
         out.append(make_stream(_name("gps", inst), tuple(fields), t[ok], np.column_stack(cols)[ok], request,
                                tuple(fmts), meta={"units": "deg deg m(AMSL) m/s m/s m/s (NED)" +
-                                                  (" m m" if "hacc" in fields else ""), "message": mt}, notes=notes))
+                                                  (" m m" if "hacc" in fields else "") +
+                                                  " - (hdop) - - (fix type, satellites)", "message": mt},
+                               notes=notes))
     return out
 
 

@@ -241,7 +241,7 @@ def _gps(d, t: np.ndarray, request: ImportRequest, notes: list[str]) -> Stream:
             fields += ["vn", "ve", "vd"]
             cols += [np.asarray(data[f"vel_{a}_m_s"], float) for a in "ned"]
             fmts += [F32] * 3
-    for name, src in (("hacc", "eph"), ("vacc", "epv")):
+    for name, src in (("hacc", "eph"), ("vacc", "epv"), ("hdop", "hdop")):
         if src in data:
             fields.append(name)
             cols.append(np.asarray(data[src], float))
@@ -255,8 +255,15 @@ def _gps(d, t: np.ndarray, request: ImportRequest, notes: list[str]) -> Stream:
     ok = fix >= 2
     if np.any(~ok):
         notes.append(f"gps: {int(np.sum(~ok))} sample(s) without a fix (fix_type < 2) dropped")
+    if "alt_ellipsoid" in data or "altitude_ellipsoid_m" in data:   # the geoid's height above the ellipsoid
+        ell = (np.asarray(data["alt_ellipsoid"], float) / 1e3 if "alt_ellipsoid" in data
+               else np.asarray(data["altitude_ellipsoid_m"], float))
+        fields.append("geoid")
+        cols.append(ell - alt)
+        fmts.append(".3f")
     units = "deg deg m(AMSL)" + (" m/s m/s m/s (NED)" if "vn" in fields else "") + \
-            (" m m (eph epv)" if "hacc" in fields else "")
+            (" m m (eph epv)" if "hacc" in fields else "") + (" - (hdop)" if "hdop" in fields else "") + \
+            " - - (fix type, satellites)" + (" m (geoid height above the WGS84 ellipsoid)" if "geoid" in fields else "")
     return make_stream("gps", tuple(fields), t[ok], np.column_stack(cols)[ok], request, tuple(fmts),
                        meta={"units": units, "topic": f"{d.name} ({layout})"}, notes=notes)
 

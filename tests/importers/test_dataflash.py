@@ -38,7 +38,7 @@ def _flight(n: int = 60, units: bool = True, gyro_units: str | None = None, seed
         alt, spd, crs, vz = ORIGIN[2] + 0.01 * k, 1.0 + 0.1 * k, (37.0 * k) % 360, 0.3 - 0.01 * k
         status = 1 if k < 3 else 3
         w.write("GPS", TimeUS=t, I=0, Status=status, NSats=12, HDop=0.9, Lat=lat, Lng=lon, Alt=alt, Spd=spd,
-                GCrs=crs, VZ=vz)
+                GCrs=crs, VZ=vz, GWk=2300, GMS=345_600_000 + 100 * k)
         mag = rng.integers(-600, 600, 3)                 # mGauss, int16 (multiplier 1e-3 to Gauss)
         w.write("MAG", TimeUS=t + 3, I=0, MagX=mag[0], MagY=mag[1], MagZ=mag[2])
         press, temp, balt = 95000 + 10.0 * k, 25.0 + 0.01 * k, 0.5 * k
@@ -188,3 +188,12 @@ def test_truncated_corrupt_and_foreign_files_are_one_error(tmp_path, capsys):
         (tmp_path / name).write_bytes(content)
         assert fusion_import(tmp_path / name, "-o", tmp_path / "x.log") == 2
         assert name in one_error_line(capsys)
+
+
+def test_start_utc_from_gps_week_and_milliseconds(imported):
+    import datetime as dt
+    rec, v, _ = imported
+    # GPS time of the first row (t = 2.0 s): week 2300 + 345600 s; GPS - UTC = 18 s since 2017
+    want = dt.datetime(1980, 1, 6, tzinfo=dt.timezone.utc) + dt.timedelta(weeks=2300, seconds=345_600 - 18 - 2.0)
+    got = dt.datetime.fromisoformat(rec.header.meta["start_utc"].replace("Z", "+00:00"))
+    assert abs((got - want).total_seconds()) < 1e-6

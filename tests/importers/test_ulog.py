@@ -224,3 +224,28 @@ def test_newer_layouts_float_gps_sensor_mag_and_mbar_baro(tmp_path):
     np.testing.assert_allclose(rec.column("baro", "pressure"), (955.5 + np.arange(10)) * 100.0, rtol=1e-7)
     assert rec.header.fields["reference"] == ("qw", "qx", "qy", "qz")
     np.testing.assert_allclose(rec.values("reference")[0], [0.5, 0.5, -0.5, 0.5])
+
+
+def test_gps_as_nmea_sentences_read_back_by_pynmea2(tmp_path, px4):
+    import pynmea2
+    src = need_px4_log()
+    out = tmp_path / "nmea.log"
+    assert fusion_import(src, "-o", out, "--sensors", "gps", "--gps", "nmea") == 0
+    rec = Recording(out)
+    assert rec.header.fields["gps"] == ("nmea",)
+    sentences = [pynmea2.parse(row[0], check=True) for row in rec.rows["gps"]]   # checksums verified
+    gga = [s for s in sentences if s.sentence_type == "GGA"]
+    rmc = [s for s in sentences if s.sentence_type == "RMC"]
+    d = _data(px4[1], "vehicle_gps_position")
+    ok = d["fix_type"] >= 2
+    assert len(gga) == len(rmc) == ok.sum()
+    np.testing.assert_allclose([s.latitude for s in gga], d["lat"][ok] * 1e-7, atol=2e-9)
+    np.testing.assert_allclose([s.longitude for s in gga], d["lon"][ok] * 1e-7, atol=2e-9)
+    np.testing.assert_allclose([float(s.altitude) for s in gga], d["alt"][ok] * 1e-3, atol=1e-9)
+    np.testing.assert_allclose([float(s.geo_sep) for s in gga], (d["alt_ellipsoid"][ok] - d["alt"][ok]) * 1e-3,
+                               atol=1e-9)
+    speed = np.hypot(d["vel_n_m_s"][ok], d["vel_e_m_s"][ok]) / (1852 / 3600)
+    np.testing.assert_allclose([float(s.spd_over_grnd) for s in rmc], speed, atol=1e-3)
+    utc = d["time_utc_usec"][ok][0] / 1e6
+    first = gga[0].timestamp
+    assert abs((first.hour * 3600 + first.minute * 60 + first.second + first.microsecond / 1e6) - utc % 86400) < 0.011
