@@ -112,7 +112,13 @@ class UlogImporter(Importer):
                 missing.append("imu (sensor_combined)")
             else:
                 v = _cols(d, [f"accelerometer_m_s2[{i}]" for i in range(3)] + [f"gyro_rad[{i}]" for i in range(3)])
-                streams.append(make_stream("imu", ("ax", "ay", "az", "gx", "gy", "gz"), tcol(d), v, request,
+                t_imu = tcol(d)
+                rel = d.data.get("accelerometer_timestamp_relative")
+                if rel is not None and np.any(np.asarray(rel) == 0x7FFFFFFF):   # RELATIVE_TIMESTAMP_INVALID
+                    stale = np.asarray(rel) == 0x7FFFFFFF
+                    notes.append(f"imu: {int(stale.sum())} sample(s) without a new accelerometer sample dropped")
+                    v, t_imu = v[~stale], t_imu[~stale]
+                streams.append(make_stream("imu", ("ax", "ay", "az", "gx", "gy", "gz"), t_imu, v, request,
                                            meta={"units": "m/s^2 (specific force) rad/s, body FRD",
                                                  "topic": "sensor_combined"}, notes=notes))
         gps_first = None
