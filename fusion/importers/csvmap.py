@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import csv
 import datetime as dt
+from array import array
 import io
 import math
 import re
@@ -202,7 +203,8 @@ class CsvImporter(Importer):
                 log.streams.append(Stream(name, ("beacon", "range"), tt, rows=[rows[i] for i in order], meta=meta,
                                           repeat=True))
             else:
-                vals = np.array(rows, float).reshape(len(rows), len(s.fields or {}))[order]
+                m = len(s.fields or {})
+                vals = np.frombuffer(rows, float).reshape(len(tt), m)[order] if len(tt) else np.zeros((0, m))
                 log.streams.append(Stream(name, tuple(s.fields or {}), tt, vals, (CSV_FMT,) * vals.shape[1], meta))
         return log
 
@@ -321,7 +323,8 @@ def _read_file(path: Path, tspec: TimeSpec, opts: CsvOptions, specs: dict[str, S
         keys = list(cols)  # type: ignore[arg-type]
         scale = [s.scale.get(k, 1.0) if isinstance(s.scale, dict) else s.scale for k in keys]
         offset = [s.offset.get(k, 0.0) if isinstance(s.offset, dict) else s.offset for k in keys]
-        plan.append((sname, s, keys, idx, scale, offset, out.setdefault(sname, ([], []))))
+        store = (array("d"), array("d") if s.fields is not None else [])   # flat float64: ~8 B a value
+        plan.append((sname, s, keys, idx, scale, offset, out.setdefault(sname, store)))
     missing = set(opts.missing)
     t_prev = -math.inf
     monotonic = True
@@ -370,7 +373,7 @@ def _read_file(path: Path, tspec: TimeSpec, opts: CsvOptions, specs: dict[str, S
                     vals.append(row)
             elif all(v is not None for v in got):
                 ts.append(ts_s)
-                vals.append(got)
+                vals.extend(got)
             elif any(v is not None for v in got):
                 incomplete[sname] = incomplete.get(sname, 0) + 1
     for sname, n in incomplete.items():

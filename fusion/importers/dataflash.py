@@ -102,7 +102,7 @@ class DataflashImporter(Importer):
             if not got:
                 missing.append(fam)
         gps0 = next((s for s in streams if s.sensor == "gps" and len(s)), None)
-        utc = _start_utc(rows.get("GPS", []))
+        utc = _start_utc(rows.get("GPS"))
         if utc:
             log.meta["start_utc"] = utc
         if request.wants_family("reference"):
@@ -133,10 +133,12 @@ _LEAPS = ((dt.datetime(2017, 1, 1, tzinfo=dt.timezone.utc), 18), (dt.datetime(20
           (dt.datetime(2006, 1, 1, tzinfo=dt.timezone.utc), 14))
 
 
-def _start_utc(gps_rows: list) -> str | None:
+def _start_utc(gps: dict | None) -> str | None:
     """UTC at t = 0 from the first GPS row with a week number (GWk, GMS: GPS time), ISO 8601."""
-    for t, d in gps_rows:
-        wk, ms = int(d.get("GWk", 0) or 0), int(d.get("GMS", 0) or 0)
+    if gps is None or "GWk" not in gps or "GMS" not in gps:
+        return None
+    for t, wk, ms in zip(gps["t"].tolist(), np.asarray(gps["GWk"]).tolist(), np.asarray(gps["GMS"]).tolist()):
+        wk, ms = int(wk), int(ms)
         if wk <= 0:
             continue
         gps_time = dt.datetime(1980, 1, 6, tzinfo=dt.timezone.utc) + dt.timedelta(weeks=wk, milliseconds=ms)
@@ -199,66 +201,110 @@ def _integrity(reader) -> tuple[int | None, int, int | None]:
     return cut, total, first
 
 
+_TIME = ("TimeUS", "TimeMS")
+_NEEDED = {
+    "IMU": ("I", "AccX", "AccY", "AccZ", "GyrX", "GyrY", "GyrZ"),
+    "GPS": ("I", "Status", "GMS", "GWk", "NSats", "HDop", "Lat", "Lng", "Alt", "Spd", "GCrs", "VZ"),
+    "GPA": ("I", "HAcc", "VAcc"), "MAG": ("I", "MagX", "MagY", "MagZ"), "BARO": ("I", "Alt", "Press", "Temp"),
+    "ATT": ("Roll", "Pitch", "Yaw"), "EKF": ("C", "Roll", "Pitch", "Yaw", "VN", "VE", "VD", "PN", "PE", "PD"),
+    "ORGN": ("Type", "Lat", "Lng", "Alt"), "FMTU": ("FmtType", "UnitIds", "MultIds"), "UNIT": ("Id", "Label"),
+    "MULT": ("Id", "Mult"), "VER": ("FWS",), "MSG": ("Message",),
+}
+# DataFlash format characters -> numpy dtypes (pymavlink's FORMAT_TO_STRUCT, little endian, packed)
+_DTYPE = {"b": "<i1", "B": "<u1", "M": "<u1", "h": "<i2", "H": "<u2", "c": "<i2", "C": "<u2", "i": "<i4",
+          "I": "<u4", "e": "<i4", "E": "<u4", "L": "<i4", "f": "<f4", "d": "<f8", "g": "<f2", "q": "<i8",
+          "Q": "<u8", "n": "S4", "N": "S16", "Z": "S64", "a": "S64"}
+
+
+def _table(reader, name: str, request: ImportRequest | None) -> dict[str, np.ndarray] | None:
+    """The columns this importer uses of every ``name`` message, read straight from the file's bytes at the
+    offsets of pymavlink's index (vectorised: only these messages' bytes are touched, and of them only the
+    time column before the span is cut), scaled by the format characters' multipliers as pymavlink scales
+    them; ``t`` in s. None when the log has no such message."""
+    mtype = reader.name_to_id.get(name) if hasattr(reader, "name_to_id") else None
+    if mtype is None or mtype not in reader.formats or mtype >= len(reader.offsets):
+        return None
+    fmt = reader.formats[mtype]
+    offs = np.asarray(reader.offsets[mtype], np.int64)
+    offs = offs[offs + fmt.len <= reader.data_len]            # a message cut by the end of the file
+    if offs.size == 0:
+        return None
+    buf = np.frombuffer(reader.data_map, np.uint8)
+    pos, where = 3, {}
+    for c, col in zip(fmt.format, fmt.columns):
+        dtype = np.dtype(_DTYPE[c])
+        where[col] = (pos, dtype, c)
+        pos += dtype.itemsize
+
+    def read(col: str, at: np.ndarray) -> np.ndarray:
+        p0, dtype, c = where[col]
+        raw = buf[at[:, None] + (p0 + np.arange(dtype.itemsize))]
+        v = np.ascontiguousarray(raw).view(dtype).ravel()
+        if dtype.kind == "S":
+            return np.array([x.split(b"\0", 1)[0].decode("utf-8", "replace") for x in v.tolist()], object)
+        mul = FORMAT_MULT.get(c)
+        return v / (1.0 / mul) if mul is not None else v.astype(float)
+
+    tcol = next((c for c in _TIME if c in where), None)
+    out: dict[str, np.ndarray] = {}
+    if tcol is not None:
+        t = read(tcol, offs) / (1e6 if tcol == "TimeUS" else 1e3)
+        if request is not None:
+            keep = np.ones(len(t), bool)
+            if request.start is not None:
+                keep &= t >= request.start
+            if request.end is not None:
+                keep &= t <= request.end
+            offs, t = offs[keep], t[keep]
+        out["t"] = t
+    elif request is not None:
+        return None
+    for col in _NEEDED.get(_BASE.get(name, name), ()):
+        if col in where:
+            out[col] = read(col, offs)
+    out["_n"] = np.array(len(offs))
+    return out
+
+
+FORMAT_MULT = {"c": 0.01, "C": 0.01, "e": 0.01, "E": 0.01, "L": 1e-7}   # pymavlink's FORMAT_TO_STRUCT
+
+
 def _collect(reader, path: str, types: list[str], request: ImportRequest):
-    """Rows per message type as dicts of columns (scaled by pymavlink's format multipliers), the units
-    per (type, column) from FMTU/UNIT/MULT, and a vehicle description from VER or the first MSG."""
-    want = set(types) | {"FMTU", "UNIT", "MULT", "MSG", "VER"}
-    rows: dict[str, list[tuple[float, dict]]] = {t: [] for t in types}
-    fmtu: dict[int, tuple[str, str]] = {}
+    """Tables per message type (columns scaled by the format characters' multipliers), the units per
+    (type, column) from FMTU/UNIT/MULT, and a vehicle description from VER or the first MSG."""
+    rows: dict[str, dict[str, np.ndarray]] = {}
+    for mt in types:
+        tab = _table(reader, mt, request)
+        if tab is not None and int(tab["_n"]):
+            rows[mt] = tab
+    meta = {n: _table(reader, n, None) for n in ("FMTU", "UNIT", "MULT", "VER", "MSG")}
     unit_label: dict[str, str] = {}
     mult: dict[str, float] = {}
+    if meta["UNIT"] is not None and "Id" in meta["UNIT"]:
+        unit_label = {chr(int(i) & 0xFF): str(lbl) for i, lbl in zip(meta["UNIT"]["Id"], meta["UNIT"].get("Label", ()))}
+    if meta["MULT"] is not None and "Id" in meta["MULT"]:
+        mult = {chr(int(i) & 0xFF): float(f"{float(m):.7g}") for i, m in zip(meta["MULT"]["Id"], meta["MULT"].get("Mult", ()))}
     vehicle = ""
-    stop_after = request.end + 2.0 if request.end is not None else math.inf  # messages are written ~in time order
-    with silenced():
-        while True:
-            try:
-                m = reader.recv_match(type=list(want))
-            except Exception as exc:
-                raise InputError(f"{path}: damaged DataFlash message near byte {getattr(reader, 'offset', '?')} "
-                                 f"({type(exc).__name__}: {exc})") from None
-            if m is None:
+    if meta["VER"] is not None and "FWS" in meta["VER"] and len(meta["VER"]["FWS"]):
+        vehicle = str(meta["VER"]["FWS"][0]).strip()
+    if not vehicle and meta["MSG"] is not None and "Message" in meta["MSG"]:
+        for text in meta["MSG"]["Message"][:50]:
+            if any(k in str(text) for k in ("ArduCopter", "ArduPlane", "ArduRover", "ArduSub", "Rover", "Copter",
+                                            "Plane", "Blimp", "AntennaTracker")):
+                vehicle = str(text).strip()
                 break
-            mt = m.get_type()
-            if mt == "FMTU":
-                fmtu[int(m.FmtType)] = (str(m.UnitIds), str(m.MultIds))
-                continue
-            if mt == "UNIT":
-                unit_label[chr(int(m.Id))] = str(m.Label)
-                continue
-            if mt == "MULT":
-                mult[chr(int(m.Id))] = float(f"{float(m.Mult):.7g}")
-                continue
-            if mt == "VER" and not vehicle:
-                vehicle = " ".join(str(getattr(m, c, "")) for c in ("FWS",) if getattr(m, c, ""))
-                continue
-            if mt == "MSG":
-                text = str(getattr(m, "Message", ""))
-                if not vehicle and any(k in text for k in ("ArduCopter", "ArduPlane", "ArduRover", "ArduSub",
-                                                            "Rover", "Copter", "Plane", "Blimp", "AntennaTracker")):
-                    vehicle = text.strip()
-                continue
-            if mt not in rows:
-                continue
-            d = m.to_dict()
-            if "TimeUS" in d:
-                t = d["TimeUS"] / 1e6
-            elif "TimeMS" in d:
-                t = d["TimeMS"] / 1e3
-            else:
-                continue
-            if t > stop_after:
-                break
-            rows[mt].append((t, d))
     units = {}
-    for mtype, (uids, mids) in fmtu.items():
-        fmt = reader.formats.get(mtype)
-        if fmt is None:
-            continue
-        for i, col in enumerate(fmt.columns):
-            label = unit_label.get(uids[i], "") if i < len(uids) else ""
-            preset = fmt.msg_mults[i] is not None if i < len(fmt.msg_mults) else False
-            mul = 1.0 if preset or i >= len(mids) else mult.get(mids[i], 1.0)
-            units[(fmt.name, col)] = (label, mul or 1.0)
+    fm = meta["FMTU"]
+    if fm is not None and "FmtType" in fm:
+        for mtype, uids, mids in zip(fm["FmtType"], fm.get("UnitIds", ()), fm.get("MultIds", ())):
+            fmt = reader.formats.get(int(mtype))
+            if fmt is None:
+                continue
+            for i, col in enumerate(fmt.columns):
+                label = unit_label.get(uids[i], "") if i < len(uids) else ""
+                preset = i < len(fmt.format) and fmt.format[i] in FORMAT_MULT
+                mul = 1.0 if preset or i >= len(mids) else mult.get(mids[i], 1.0)
+                units[(fmt.name, col)] = (label, mul or 1.0)
     return rows, units, vehicle
 
 
@@ -282,18 +328,38 @@ class _Units:
                              f"{', '.join(table)}")
         return mul * table[label]
 
-    def column(self, rows: list, mtype: str, col: str) -> np.ndarray:
-        f = self.factor(mtype, col)
-        return np.array([d.get(col, np.nan) for _, d in rows], float) * f
+    def column(self, tab: dict, mtype: str, col: str) -> np.ndarray:
+        return _col(tab, col) * self.factor(mtype, col)
 
 
-def _instances(rows: dict, names: tuple[str, ...]) -> dict[int, tuple[str, list]]:
-    """{instance: (message type, rows)} of a sensor logged as one type with field ``I`` or as numbered types."""
-    out: dict[int, tuple[str, list]] = {}
+def _n(tab: dict) -> int:
+    return int(tab["_n"])
+
+
+def _col(tab: dict, name: str, default: float = np.nan) -> np.ndarray:
+    v = tab.get(name)
+    return np.asarray(v, float) if v is not None else np.full(_n(tab), default)
+
+
+def _take(tab: dict, mask: np.ndarray) -> dict:
+    out = {k: v[mask] for k, v in tab.items() if k != "_n"}
+    out["_n"] = np.array(int(np.sum(mask)))
+    return out
+
+
+def _instances(rows: dict, names: tuple[str, ...]) -> dict[int, tuple[str, dict]]:
+    """{instance: (message type, table)} of a sensor logged as one type with field ``I`` or as numbered types."""
+    out: dict[int, tuple[str, dict]] = {}
     for k, mt in enumerate(names):
-        for t, d in rows.get(mt, []):
-            inst = int(d["I"]) if "I" in d and k == 0 else k
-            out.setdefault(inst, (mt, []))[1].append((t, d))
+        tab = rows.get(mt)
+        if tab is None:
+            continue
+        if k == 0 and "I" in tab:
+            inst = np.asarray(tab["I"], int)
+            for i in np.unique(inst).tolist():
+                out.setdefault(int(i), (mt, _take(tab, inst == i)))
+        else:
+            out.setdefault(k, (mt, tab))
     return dict(sorted(out.items()))
 
 
@@ -301,40 +367,37 @@ def _name(family: str, inst: int) -> str:
     return family if inst == 0 else f"{family}{inst + 1}"
 
 
-def _times(r: list) -> np.ndarray:
-    return np.array([t for t, _ in r], float)
-
-
 def _imu(rows, conv: _Units, request, notes) -> list[Stream]:
     out = []
     for inst, (mt, r) in _instances(rows, ("IMU", "IMU2", "IMU3")).items():
         v = np.column_stack([conv.column(r, mt, f"Acc{a}") for a in "XYZ"] + [conv.column(r, mt, f"Gyr{a}") for a in "XYZ"])
-        out.append(make_stream(_name("imu", inst), ("ax", "ay", "az", "gx", "gy", "gz"), _times(r), v, request,
+        out.append(make_stream(_name("imu", inst), ("ax", "ay", "az", "gx", "gy", "gz"), r["t"], v, request,
                                meta={"units": "m/s^2 (specific force) rad/s, body FRD", "message": mt}, notes=notes))
     return out
 
 
 def _gps(rows, conv: _Units, request, notes) -> list[Stream]:
     out = []
-    gpa = {inst: {t: d for t, d in r} for inst, (mt, r) in _instances(rows, ("GPA", "GPA2")).items()}
+    gpa = _instances(rows, ("GPA", "GPA2"))
     for inst, (mt, r) in _instances(rows, ("GPS", "GPS2")).items():
-        t = _times(r)
+        t = r["t"]
         spd, crs = conv.column(r, mt, "Spd"), conv.column(r, mt, "GCrs") * DEG
         cols = [conv.column(r, mt, "Lat"), conv.column(r, mt, "Lng"), conv.column(r, mt, "Alt"),
                 spd * np.cos(crs), spd * np.sin(crs), conv.column(r, mt, "VZ")]
         fields = ["lat", "lon", "alt", "vn", "ve", "vd"]
         fmts = [LATLON_E7, LATLON_E7, ".2f", F32, F32, F32]
-        acc = gpa.get(inst, {})
-        if acc and all(tt in acc for tt, _ in r):
-            gmt = "GPA" if inst == 0 or "GPA2" not in rows else "GPA2"
-            for name, col in (("hacc", "HAcc"), ("vacc", "VAcc")):
-                fields.append(name)
-                cols.append(np.array([acc[tt].get(col, np.nan) for tt, _ in r], float) * conv.factor(gmt, col))
-                fmts.append(F32)
-        status = np.array([d.get("Status", 3) for _, d in r], float)
+        if inst in gpa:                                   # GPA is written with the GPS message, same TimeUS
+            gmt, a = gpa[inst]
+            j = np.searchsorted(a["t"], t)
+            jj = np.clip(j, 0, max(len(a["t"]) - 1, 0))
+            if len(a["t"]) and np.all(a["t"][jj] == t):
+                for name, col in (("hacc", "HAcc"), ("vacc", "VAcc")):
+                    fields.append(name)
+                    cols.append(conv.column(a, gmt, col)[jj])
+                    fmts.append(F32)
+        status = _col(r, "Status", 3.0)
         fields += ["hdop", "fix", "nsat"]
-        cols += [np.array([d.get("HDop", np.nan) for _, d in r], float), status,
-                 np.array([d.get("NSats", 0) for _, d in r], float)]
+        cols += [_col(r, "HDop"), status, _col(r, "NSats", 0.0)]
         fmts += [F32, "d", "d"]
         ok = status >= 2
         if np.any(~ok):
@@ -351,7 +414,7 @@ def _mag(rows, conv: _Units, request, notes) -> list[Stream]:
     out = []
     for inst, (mt, r) in _instances(rows, ("MAG", "MAG2", "MAG3")).items():
         v = np.column_stack([conv.column(r, mt, f"Mag{a}") for a in "XYZ"])
-        out.append(make_stream(_name("mag", inst), ("mx", "my", "mz"), _times(r), v, request,
+        out.append(make_stream(_name("mag", inst), ("mx", "my", "mz"), r["t"], v, request,
                                meta={"units": "uT, body FRD (offsets applied)", "message": mt}, notes=notes))
     return out
 
@@ -360,7 +423,7 @@ def _baro(rows, conv: _Units, request, notes) -> list[Stream]:
     out = []
     for inst, (mt, r) in _instances(rows, ("BARO", "BAR2", "BAR3")).items():
         v = np.column_stack([conv.column(r, mt, c) for c in ("Alt", "Press", "Temp")])
-        out.append(make_stream(_name("baro", inst), ("alt", "pressure", "temp"), _times(r), v, request,
+        out.append(make_stream(_name("baro", inst), ("alt", "pressure", "temp"), r["t"], v, request,
                                meta={"units": "m (relative to the ground at start) Pa degC", "message": mt},
                                notes=notes))
     return out
@@ -368,32 +431,33 @@ def _baro(rows, conv: _Units, request, notes) -> list[Stream]:
 
 def _reference(rows, conv: _Units, request, notes):
     origin = None
-    org = [d for _, d in rows.get("ORGN", []) if int(d.get("Type", 0)) == 0]
-    if org:
-        d = org[0]
-        o = tuple(float(d.get(c, np.nan)) * conv.factor("ORGN", c) for c in ("Lat", "Lng", "Alt"))
-        if all(math.isfinite(v) for v in o) and abs(o[0]) <= 90 and abs(o[1]) <= 180:
-            origin = o
-        else:
-            notes.append(f"reference: the ORGN record has no valid origin ({d})")
-    att = rows.get("ATT", [])
+    org = rows.get("ORGN")
+    if org is not None:
+        first = np.flatnonzero(_col(org, "Type", 0.0) == 0)
+        if first.size:
+            i = first[0]
+            o = tuple(float(_col(org, c)[i]) * conv.factor("ORGN", c) for c in ("Lat", "Lng", "Alt"))
+            if all(math.isfinite(v) for v in o) and abs(o[0]) <= 90 and abs(o[1]) <= 180:
+                origin = o
+            else:
+                notes.append(f"reference: the ORGN record has no valid origin ({o})")
+    att = rows.get("ATT")
     q_att = t_att = None
-    if att:
-        t_att = _times(att)
-        e = [conv.column(att, "ATT", c) * DEG for c in ("Roll", "Pitch", "Yaw")]
-        q_att = quat_from_euler(*e)
+    if att is not None:
+        t_att = att["t"]
+        q_att = quat_from_euler(*[conv.column(att, "ATT", c) * DEG for c in ("Roll", "Pitch", "Yaw")])
     meta = {"frame": "NED from the EKF origin; q body FRD to NED, [w x y z]"}
     for mt in _EKFS:
-        r = rows.get(mt, [])
-        if not r:
+        r = rows.get(mt)
+        if r is None:
             continue
-        if mt == "XKF1" and any("C" in d for _, d in r):
-            core = min(int(d.get("C", 0)) for _, d in r)
-            r = [(t, d) for t, d in r if int(d.get("C", 0)) == core]
-            meta["source"] = f"ArduPilot EKF3 core {core} (XKF1)" + (" + ATT" if att else "")
+        if mt == "XKF1" and "C" in r:
+            core = int(np.min(r["C"]))
+            r = _take(r, np.asarray(r["C"]) == core)
+            meta["source"] = f"ArduPilot EKF3 core {core} (XKF1)" + (" + ATT" if att is not None else "")
         else:
-            meta["source"] = f"ArduPilot EKF ({mt})" + (" + ATT" if att else "")
-        t = _times(r)
+            meta["source"] = f"ArduPilot EKF ({mt})" + (" + ATT" if att is not None else "")
+        t = r["t"]
         cols = [conv.column(r, mt, c) for c in ("PN", "PE", "PD", "VN", "VE", "VD")]
         if q_att is not None:
             q = slerp_to(t_att, q_att, t)

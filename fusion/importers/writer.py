@@ -6,6 +6,7 @@ name); an existing file is replaced only with ``force``, the input never; a FIFO
 """
 from __future__ import annotations
 
+import heapq
 import os
 import stat
 import sys
@@ -27,22 +28,38 @@ def _column_text(col: np.ndarray, spec: str) -> list[str]:
     return [format(v, spec) for v in col.tolist()]
 
 
-def stream_lines(s: Stream) -> list[str]:
-    """The message lines of one stream (no newline), ``t`` with microsecond resolution."""
-    ts = [f"{t:.6f}" for t in np.asarray(s.t, float).tolist()]
+_CHUNK = 20000
+
+
+def stream_lines(s: Stream, start: int = 0, stop: int | None = None) -> list[str]:
+    """The message lines of rows ``start:stop`` of one stream (no newline), ``t`` with microsecond resolution."""
+    ts = [f"{t:.6f}" for t in np.asarray(s.t[start:stop], float).tolist()]
     if s.rows is not None:
         return [f"{t},{s.sensor}," + ",".join(v if isinstance(v, str) else format(float(v), F32) for v in row)
-                for t, row in zip(ts, s.rows)]
-    vals = np.asarray(s.values)
+                for t, row in zip(ts, s.rows[start:stop])]
+    vals = np.asarray(s.values[start:stop])
     specs = s.formats or (F32,) * vals.shape[1]
     cols = [_column_text(vals[:, j], specs[j]) for j in range(vals.shape[1])]
     prefix = f",{s.sensor},"
     return [t + prefix + ",".join(parts) for t, parts in zip(ts, zip(*cols))]
 
 
+def _keyed(s: Stream, k: int) -> Iterator[tuple[float, int, str]]:
+    """(time as written, stream index, line) of a stream, formatted a chunk at a time."""
+    t = np.round(np.asarray(s.t, float), 6)   # sorted on the times as written: 0.1499999 and 0.15 are equal
+    order = np.argsort(t, kind="stable")
+    if np.any(np.diff(order) != 1):
+        s = Stream(s.sensor, s.fields, s.t[order], None if s.values is None else np.asarray(s.values)[order],
+                   s.formats, s.meta, s.repeat, None if s.rows is None else [s.rows[i] for i in order])
+        t = t[order]
+    for a in range(0, len(t), _CHUNK):
+        lines = stream_lines(s, a, a + _CHUNK)
+        yield from zip(t[a:a + _CHUNK].tolist(), [k] * len(lines), lines)
+
+
 def render(log: ImportedLog) -> Iterator[str]:
     """Lines (with newline) of the whole recording: header, then every stream merged by time (stable: at
-    equal times, streams keep their order)."""
+    equal times, streams keep their order), formatted a chunk at a time (memory bounded by the streams)."""
     for s in log.streams:
         if not _SENSOR.match(s.sensor):
             raise ConfigError(f"sensor name {s.sensor!r} is not valid in the log format (letters, digits, _ . -)")
@@ -54,17 +71,8 @@ def render(log: ImportedLog) -> Iterator[str]:
             yield f"# {s.sensor} {k}: {v}\n"
     for s in log.streams:
         yield f"# fields {s.sensor} " + " ".join(s.fields) + (" ..." if s.repeat else "") + "\n"
-    lines: list[str] = []
-    times: list[np.ndarray] = []
-    for s in log.streams:
-        lines.extend(stream_lines(s))
-        times.append(np.asarray(s.t, float))
-    if not lines:
-        return
-    # sorted on the times as written (microseconds), so that 0.1499999 and 0.15 count as equal
-    order = np.argsort(np.round(np.concatenate(times), 6), kind="stable")
-    for i in order.tolist():
-        yield lines[i] + "\n"
+    for _, _, line in heapq.merge(*[_keyed(s, k) for k, s in enumerate(log.streams)]):
+        yield line + "\n"
 
 
 def _same_file(a: Path, b: Path) -> bool:
