@@ -506,13 +506,15 @@ class Stream:
 @dataclass
 class ImportedLog:
     """What an importer returns: header metadata (``# key: value``, in order), the streams, notes for the
-    user (printed by the command, e.g. "gps: 3 samples without a fix dropped") and every file it read besides
-    the one it was given (``inputs``: never overwritten by the output)."""
+    user (printed by the command, e.g. "gps: 3 samples without a fix dropped"), every file it read besides
+    the one it was given (``inputs``: never overwritten by the output), and the log's own text messages
+    (``messages``: "Takeoff detected" at t; written as ``# message T: text`` header comments)."""
 
     meta: dict[str, str] = field(default_factory=dict)
     streams: list[Stream] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     inputs: list[str] = field(default_factory=list)
+    messages: list[tuple[float, str]] = field(default_factory=list)  # the log's text messages (t s, text)
 
 
 class Importer(Component):

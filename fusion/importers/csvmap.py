@@ -57,14 +57,17 @@ class CsvOptions(Params):
 
 class SensorMap(Params):
     """One sensor (or the truth): ``fields`` (field name -> column) or ``pairs`` (beacon name -> range column);
-    ``scale``/``offset`` (one number, or per field / beacon); ``time_offset`` s added to its times; ``units``
-    written to the header; ``file``/``time``/``csv`` when it comes from another file."""
+    ``scale``/``offset`` (one number, or per field / beacon); ``time_offset`` s added to its times; ``valid``
+    [lo, hi] (outside: no value); ``units`` written to the header; ``file``/``time``/``csv`` when it comes from
+    another file."""
 
     fields: dict[str, str | int] | None = None
     pairs: dict[str, str | int] | None = None
     scale: float | dict[str, float] = 1.0
     offset: float | dict[str, float] = 0.0
     time_offset: float = 0.0
+    valid: tuple[float, float] | None = Field(None, description="[lo, hi]: a value outside, after scale and "
+                                              "offset, counts as no value (a logger's 0 or 65535 for 'no range')")
     units: str | None = None
     file: str | None = None
     time: TimeSpec | None = None
@@ -348,6 +351,7 @@ def _read_file(path: Path, tspec: TimeSpec, opts: CsvOptions, specs: dict[str, S
         if request.end is not None and monotonic and t + max_off > request.end:
             break
         for sname, s, keys, idx, scale, offset, (ts, vals) in plan:
+            lo, hi = s.valid if s.valid is not None else (-math.inf, math.inf)
             ts_s = t + s.time_offset
             if (request.start is not None and ts_s < request.start) or (request.end is not None and ts_s > request.end):
                 continue
@@ -365,7 +369,8 @@ def _read_file(path: Path, tspec: TimeSpec, opts: CsvOptions, specs: dict[str, S
                 if not math.isfinite(v):
                     got.append(None)
                     continue
-                got.append(v * a + b)
+                v = v * a + b
+                got.append(v if lo <= v <= hi else None)
             if s.pairs is not None:
                 row = tuple(x for k, v in zip(keys, got) if v is not None for x in (k, v))
                 if row:

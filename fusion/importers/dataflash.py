@@ -84,13 +84,14 @@ class DataflashImporter(Importer):
     def read(self, path: str, request: ImportRequest) -> ImportedLog:
         types = sorted(t for t, fam in _FAMILY.items() if request.wants_family(fam))
         reader = _open(path, request)
-        rows, units, vehicle = _collect(reader, path, types, request)
+        rows, units, vehicle, texts = _collect(reader, path, types, request)
         log = ImportedLog()
         log.meta["source"] = f"{os.path.basename(path)} (ArduPilot DataFlash, read by pymavlink)"
         if vehicle:
             log.meta["vehicle"] = vehicle
         log.meta["time_zero"] = "0 s on the autopilot's boot clock (t = TimeUS / 1e6)"
         conv = _Units(units)
+        log.messages = texts
         notes = log.notes
         streams: list[Stream] = []
         missing: list[str] = []
@@ -305,7 +306,13 @@ def _collect(reader, path: str, types: list[str], request: ImportRequest):
                 preset = i < len(fmt.format) and fmt.format[i] in FORMAT_MULT
                 mul = 1.0 if preset or i >= len(mids) else mult.get(mids[i], 1.0)
                 units[(fmt.name, col)] = (label, mul or 1.0)
-    return rows, units, vehicle
+    texts = []
+    msg = meta["MSG"]
+    if msg is not None and "Message" in msg and "t" in msg:
+        for t, text in zip(msg["t"].tolist(), msg["Message"]):
+            if (request.start is None or t >= request.start) and (request.end is None or t <= request.end):
+                texts.append((t, str(text)))
+    return rows, units, vehicle, texts
 
 
 class _Units:

@@ -173,6 +173,10 @@ class UlogImporter(Importer):
             log.meta["origin"] = f"{gps_first[0]:.9f} {gps_first[1]:.9f} {gps_first[2]:.3f}"
             log.meta["origin_source"] = ("the first GPS fix imported (the EKF's local frame is not tied to the "
                                          "globe in this log)")
+        for m in ulog.logged_messages:
+            t = (int(m.timestamp) - t0) / 1e6
+            if (request.start is None or t >= request.start) and (request.end is None or t <= request.end):
+                log.messages.append((t, m.message))
         _check_requested(path, request, missing, notes)
         log.streams = streams
         return log

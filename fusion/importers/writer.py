@@ -29,6 +29,7 @@ def _column_text(col: np.ndarray, spec: str) -> list[str]:
 
 
 _CHUNK = 20000
+MAX_MESSAGES = 200   # the log's text messages written to the header (flight events: takeoff, landing, modes)
 
 
 def stream_lines(s: Stream, start: int = 0, stop: int | None = None) -> list[str]:
@@ -66,6 +67,10 @@ def render(log: ImportedLog) -> Iterator[str]:
     yield "# fusion-log 1\n"
     for k, v in log.meta.items():
         yield f"# {k}: {v}\n"
+    for t, text in log.messages[:MAX_MESSAGES]:
+        yield f"# message {t:.3f}: {' '.join(str(text).split())}\n"
+    if len(log.messages) > MAX_MESSAGES:
+        yield f"# message: ... and {len(log.messages) - MAX_MESSAGES} more\n"
     for s in log.streams:
         for k, v in s.meta.items():
             yield f"# {s.sensor} {k}: {v}\n"

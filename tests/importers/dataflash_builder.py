@@ -29,6 +29,7 @@ FORMATS = {
     "XKF1": ("QBccCfffffffccce", "TimeUS,C,Roll,Pitch,Yaw,VN,VE,VD,dPD,PN,PE,PD,GX,GY,GZ,OH",
              "s#ddhnnnnmmmkkkm", "F-BBB0000000BBBB"),
     "ORGN": ("QBLLe", "TimeUS,Type,Lat,Lng,Alt", "s#DUm", "F-GGB"),
+    "MSG": ("QZ", "TimeUS,Message", "s-", "F-"),
 }
 UNITS = {"s": "s", "E": "rad/s", "o": "m/s/s", "O": "degC", "z": "Hz", "S": "satellites", "D": "deglatitude",
          "U": "deglongitude", "m": "m", "n": "m/s", "h": "degheading", "G": "Gauss", "P": "Pa", "d": "deg",

@@ -180,3 +180,25 @@ def test_csv_without_mapping_and_binary_csv(tmp_path, capsys):
     mp.write_text("time: {column: t}\nsensors: {x: {fields: {v: a}}}\n")
     assert fusion_import(csv, "--map", mp, "-o", tmp_path / "o.log") == 2
     assert "binary" in one_error_line(capsys)
+
+
+def test_pairs_with_sentinels_and_per_beacon_scale(tmp_path):
+    csv = _write(tmp_path, "u.csv", """
+        t;A;B;C
+        0.00;1200;0;65535
+        0.10;;3400.5;2000
+        0.20;0;0;0
+    """)
+    mp = _write(tmp_path, "m.yaml", """
+        time: {column: t}
+        sensors:
+          uwb:
+            pairs: {A0: A, B0: B, C0: C}
+            scale: {A0: 0.001, B0: 0.001, C0: 0.0005}
+            valid: [0.01, 30]
+    """)
+    out = tmp_path / "o.log"
+    assert fusion_import(csv, "--map", mp, "-o", out) == 0
+    rec = Recording(out)
+    assert rec.rows["uwb"] == [("A0", 1.2), ("B0", 3.4005, "C0", 1.0)]   # 0 and 65535 mm are no range
+    np.testing.assert_allclose(rec.times("uwb"), [0.0, 0.1])

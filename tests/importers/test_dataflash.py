@@ -20,8 +20,9 @@ def _flight(n: int = 60, units: bool = True, gyro_units: str | None = None, seed
     writer and the values written (in the log's units)."""
     rng = np.random.default_rng(seed)
     w = DataflashWriter(units=units)
-    for name in ("ORGN", "IMU", "GPS", "MAG", "BARO", "ATT", "XKF1"):
+    for name in ("ORGN", "IMU", "GPS", "MAG", "BARO", "ATT", "XKF1", "MSG"):
         w.declare(name)
+    w.write("MSG", TimeUS=400_000, Message="ArduCopter V4.5.1 (1a2b3c4d)")
     if gyro_units:
         w.declare("IMU", units=gyro_units)   # a second FMT for IMU redeclares it (as a log may)
     w.write("ORGN", TimeUS=500_000, Type=0, Lat=ORIGIN[0], Lng=ORIGIN[1], Alt=ORIGIN[2])
@@ -46,6 +47,8 @@ def _flight(n: int = 60, units: bool = True, gyro_units: str | None = None, seed
         rpy = (5.0 * np.sin(k / 5), -3.0 + 0.1 * k, (20.0 * k) % 360)      # deg, 2 decimals in the log
         w.write("ATT", TimeUS=t, Roll=rpy[0], Pitch=rpy[1], Yaw=rpy[2])
         pos, vel = rng.normal(0, 10, 3), rng.normal(0, 2, 3)
+        if k == 10:
+            w.write("MSG", TimeUS=t, Message="EKF3 IMU0 is using GPS")
         for core, off in ((0, 0.0), (1, 100.0)):         # core 1 differs: only the lowest core is the reference
             w.write("XKF1", TimeUS=t, C=core, Roll=rpy[0], Pitch=rpy[1], Yaw=rpy[2],
                     **dict(zip(("PN", "PE", "PD", "VN", "VE", "VD"), [*(pos + off), *vel])))
@@ -197,3 +200,9 @@ def test_start_utc_from_gps_week_and_milliseconds(imported):
     want = dt.datetime(1980, 1, 6, tzinfo=dt.timezone.utc) + dt.timedelta(weeks=2300, seconds=345_600 - 18 - 2.0)
     got = dt.datetime.fromisoformat(rec.header.meta["start_utc"].replace("Z", "+00:00"))
     assert abs((got - want).total_seconds()) < 1e-6
+
+
+def test_vehicle_and_text_messages_in_the_header(imported):
+    rec, v, _ = imported
+    assert rec.header.meta["vehicle"] == "ArduCopter V4.5.1 (1a2b3c4d)"
+    assert f"# message {v['t'][10]:.3f}: EKF3 IMU0 is using GPS" in rec.comments

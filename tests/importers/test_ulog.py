@@ -119,6 +119,8 @@ def test_header_names_source_vehicle_origin_and_times_are_sorted(px4):
     i = np.flatnonzero(g["fix_type"] >= 2)[0]
     assert (lat, lon, alt) == pytest.approx((g["lat"][i] * 1e-7, g["lon"][i] * 1e-7, g["alt"][i] * 1e-3), abs=1e-9)
     assert np.all(np.diff(rec.order) >= 0)
+    for m in ulog.logged_messages:          # the flight's events, to choose --start/--end by
+        assert f"# message {(m.timestamp - ulog.start_timestamp) / 1e6:.3f}: {m.message}" in rec.comments
 
 
 def test_time_slice_and_selected_sensors(tmp_path):
