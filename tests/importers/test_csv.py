@@ -10,7 +10,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from conftest import ROOT, Recording, fusion_import, one_error_line
+from import_helpers import ROOT, Recording, fusion_import, one_error_line
 from fusion.cli import main
 
 EX = ROOT / "docs" / "examples" / "uwb_dataset"

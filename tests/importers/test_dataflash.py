@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from conftest import Recording, fusion_import, one_error_line
+from import_helpers import Recording, fusion_import, one_error_line
 from dataflash_builder import DataflashWriter
 
 pytest.importorskip("pymavlink")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 import fusion.registry as registry_mod
-from conftest import Recording, fusion_import, one_error_line
+from import_helpers import Recording, fusion_import, one_error_line
 from fusion import hookimpl
 from fusion.api import ImportedLog, Importer, Stream
 

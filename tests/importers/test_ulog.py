@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import Recording, fusion_import, need_px4_log, one_error_line
+from import_helpers import Recording, fusion_import, need_px4_log, one_error_line
 
 pyulog = pytest.importorskip("pyulog")
 

@@ -1,7 +1,12 @@
 """Helpers of the importer tests: run ``fusion import`` through the CLI, read what it wrote back with the
-project's own log parser (fusion.logformat), independently of the importers' writer."""
+project's own log parser (fusion.logformat), independently of the importers' writer. (Not a conftest.py:
+tests/simulate has one, and two modules named ``conftest`` on sys.path shadow each other.)
+
+The real PX4 log is read from ../shared/logs beside the repository (or the folder FUSION_TEST_LOGS names);
+tests that need it skip, naming the missing file, when it is absent."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +17,7 @@ from fusion.cli import main
 from fusion.logformat import ParsedStream, iter_messages
 
 ROOT = Path(__file__).resolve().parents[2]
-PX4_LOG = ROOT.parent / "shared" / "logs" / "px4_sample_log_small.ulg"
+PX4_LOG = Path(os.environ.get("FUSION_TEST_LOGS", ROOT.parent / "shared" / "logs")) / "px4_sample_log_small.ulg"
 
 
 def need_px4_log() -> Path:
