@@ -15,7 +15,6 @@ from __future__ import annotations
 import csv
 import datetime as dt
 from array import array
-import io
 import math
 import re
 from pathlib import Path
