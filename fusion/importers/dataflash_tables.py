@@ -19,6 +19,8 @@ _BASE = {"IMU2": "IMU", "IMU3": "IMU", "GPS2": "GPS", "GPA2": "GPA", "MAG2": "MA
 
 
 def open_log(path: str, request: ImportRequest):
+    """pymavlink's reader of ``path``, its index built; InputError for a file that is not a DataFlash log,
+    and for a truncated or corrupt one unless ``request.allow_partial``."""
     from pymavlink.DFReader import DFReader_binary
 
     try:
