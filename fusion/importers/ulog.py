@@ -72,6 +72,10 @@ def _first(ulog, names: tuple[str, ...]):
 
 
 def _cols(d, names: list[str]) -> np.ndarray:
+    missing = [n for n in names if n not in d.data]
+    if missing:
+        have = ", ".join(k for k in d.data if k != "timestamp")
+        raise InputError(f"topic {d.name}: no field {missing[0]!r} in this log's layout (it has: {have[:300]})")
     return np.column_stack([np.asarray(d.data[n], float) for n in names])
 
 
