@@ -110,6 +110,10 @@ def run(args: argparse.Namespace) -> int:
                             allow_partial=args.partial)
     try:
         log = cls().read(str(src), request)
+    except InputError as exc:
+        if str(src) in str(exc) or src.name in str(exc):
+            raise
+        raise InputError(f"{src}: {exc}") from exc     # every input error names the file
     except (KeyError, IndexError, ValueError, TypeError, OverflowError, UnicodeDecodeError) as exc:
         # a file whose content the importer's format reader did not expect (a field missing, a bad count):
         # the user's file, not a bug of ours, in every case met so far; --debug shows the traceback
