@@ -135,3 +135,18 @@ def silenced() -> Iterator[io.StringIO]:
         for fd, copy in saved:
             os.dup2(copy, fd)
             os.close(copy)
+
+
+def earth_field_ned(t_mag: np.ndarray, m_body: np.ndarray, t_q: np.ndarray, q: np.ndarray) -> np.ndarray | None:
+    """The Earth's field in NED (3,), in the units of ``m_body`` (k, 3): the mean of the body-frame samples
+    rotated by the attitude ``q`` (j, 4) ``[w x y z]`` body-to-NED at their times (slerp), the onboard
+    estimator's own view of the field (for configs: ``# mag earth_field_ned``). None without samples."""
+    from fusion.quaternion import rotate
+
+    if len(t_mag) == 0 or len(t_q) == 0:
+        return None
+    inside = (t_mag >= np.min(t_q) - 0.1) & (t_mag <= np.max(t_q) + 0.1)   # held 0.1 s past the ends
+    if not inside.any():
+        return None
+    qi = slerp_to(t_q, q, t_mag[inside])
+    return np.mean(rotate(qi, m_body[inside]), axis=0)

@@ -31,7 +31,8 @@ import os
 import numpy as np
 
 from fusion.api import ImportedLog, Importer, ImportRequest, InputError, Stream
-from fusion.importers.common import DEG, F32, GAUSS_TO_UT, LATLON_E7, make_stream, quat_from_euler, slerp_to
+from fusion.importers.common import (DEG, F32, GAUSS_TO_UT, LATLON_E7, earth_field_ned, make_stream, quat_from_euler,
+                                     slerp_to)
 from fusion.importers.dataflash_tables import _BASE, collect, open_log
 
 # unit label (UNIT record) -> (our unit, factor) per quantity
@@ -80,7 +81,8 @@ class DataflashImporter(Importer):
     sensors = ("imu", "gps", "mag", "baro", "reference")
 
     def read(self, path: str, request: ImportRequest) -> ImportedLog:
-        types = sorted(t for t, fam in _FAMILY.items() if request.wants_family(fam))
+        types = sorted(t for t, fam in _FAMILY.items() if request.wants_family(fam)
+                       or (t == "ATT" and request.wants_family("mag")))   # ATT: the field in NED (mag header)
         reader = open_log(path, request)
         rows, units, vehicle, texts = collect(reader, path, types, request)
         log = ImportedLog()
@@ -113,6 +115,14 @@ class DataflashImporter(Importer):
             if origin is not None:
                 log.meta["origin"] = f"{origin[0]:.7f} {origin[1]:.7f} {origin[2]:.2f}"
                 log.meta["origin_source"] = "the EKF origin (ORGN type 0)"
+        att = rows.get("ATT")
+        mag0 = next((s for s in streams if s.sensor == "mag" and len(s)), None)
+        if att is not None and mag0 is not None:
+            q = quat_from_euler(*[conv.column(att, "ATT", c) * DEG for c in ("Roll", "Pitch", "Yaw")])
+            f = earth_field_ned(mag0.t, mag0.values, att["t"], q)
+            if f is not None:
+                mag0.meta["earth_field_ned"] = " ".join(f"{v:.3f}" for v in f)
+                mag0.meta["earth_field_source"] = "mean of the samples rotated to NED by ATT (uT)"
         if "origin" not in log.meta and gps0 is not None:
             v = gps0.values[0]
             log.meta["origin"] = f"{v[0]:.7f} {v[1]:.7f} {v[2]:.2f}"

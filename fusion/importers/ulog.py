@@ -28,7 +28,8 @@ from typing import Any
 import numpy as np
 
 from fusion.api import ImportedLog, Importer, ImportRequest, InputError, Stream
-from fusion.importers.common import F32, GAUSS_TO_UT, LATLON_E7, LATLON_F, make_stream, silenced, slerp_to
+from fusion.importers.common import (F32, GAUSS_TO_UT, LATLON_E7, LATLON_F, earth_field_ned, make_stream, silenced,
+                                     slerp_to)
 
 TOPICS = {
     "imu": ("sensor_combined",),
@@ -173,6 +174,7 @@ class UlogImporter(Importer):
                 if origin is not None:
                     log.meta["origin"] = f"{origin[0]:.9f} {origin[1]:.9f} {origin[2]:.3f}"
                     log.meta["origin_source"] = "the EKF's local origin (vehicle_local_position ref_lat ref_lon ref_alt)"
+        _field_from_reference(streams, _first(ulog, ("vehicle_attitude",)) if request.wants("mag") else None, tcol)
         if "origin" not in log.meta and gps_first is not None:
             log.meta["origin"] = f"{gps_first[0]:.9f} {gps_first[1]:.9f} {gps_first[2]:.3f}"
             log.meta["origin_source"] = ("the first GPS fix imported (the EKF's local frame is not tied to the "
@@ -184,6 +186,17 @@ class UlogImporter(Importer):
         _check_requested(path, request, missing, notes)
         log.streams = streams
         return log
+
+
+def _field_from_reference(streams: list[Stream], att, tcol) -> None:
+    """``# mag earth_field_ned``: the magnetometer's mean field rotated to NED by the onboard attitude."""
+    mag = next((s for s in streams if s.sensor == "mag" and len(s)), None)
+    if mag is None or att is None or mag.meta.get("units", "").find("body") < 0:
+        return
+    f = earth_field_ned(mag.t, mag.values, tcol(att), _cols(att, [f"q[{i}]" for i in range(4)]))
+    if f is not None:
+        mag.meta["earth_field_ned"] = " ".join(f"{v:.3f}" for v in f)
+        mag.meta["earth_field_source"] = "mean of the samples rotated to NED by vehicle_attitude (uT)"
 
 
 def _software(info: dict) -> str:
@@ -210,7 +223,8 @@ def _parse(path: str, request: ImportRequest):
     from pyulog import ULog
     from pyulog.core import ULogException
 
-    topics = sorted({t for s, ts in TOPICS.items() if request.wants(s) for t in ts})
+    topics = sorted({t for s, ts in TOPICS.items() if request.wants(s) for t in ts}
+                    | ({"vehicle_attitude"} if request.wants("mag") else set()))   # the field in NED (mag header)
     try:
         with open(path, "rb") as raw:
             fh = _Reader(raw)

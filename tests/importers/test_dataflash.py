@@ -206,3 +206,12 @@ def test_vehicle_and_text_messages_in_the_header(imported):
     rec, v, _ = imported
     assert rec.header.meta["vehicle"] == "ArduCopter V4.5.1 (1a2b3c4d)"
     assert f"# message {v['t'][10]:.3f}: EKF3 IMU0 is using GPS" in rec.comments
+
+
+def test_earth_field_from_att(imported):
+    rec, v, _ = imported
+    rpy = np.round(v["rpy"], 2)
+    rot = Rotation.from_euler("ZYX", np.radians(rpy[:, ::-1]))
+    want = np.mean(rot.apply(v["mag"] * 0.1), axis=0)   # mGauss -> uT, rotated to NED (MAG 3 us after ATT)
+    line = next(c for c in rec.comments if c.startswith("# mag earth_field_ned:"))
+    np.testing.assert_allclose([float(x) for x in line.split(":")[1].split()], want, atol=5e-3)

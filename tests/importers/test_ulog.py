@@ -251,3 +251,29 @@ def test_gps_as_nmea_sentences_read_back_by_pynmea2(tmp_path, px4):
     utc = d["time_utc_usec"][ok][0] / 1e6
     first = gga[0].timestamp
     assert abs((first.hour * 3600 + first.minute * 60 + first.second + first.microsecond / 1e6) - utc % 86400) < 0.011
+
+
+def test_earth_field_in_ned_from_the_onboard_attitude(tmp_path):
+    """vehicle_magnetometer samples of a known NED field seen through a turning attitude: the header's
+    earth_field_ned is that field (the samples rotated back by vehicle_attitude, slerped to their times)."""
+    from scipy.spatial.transform import Rotation
+    from ulog_builder import UlogWriter
+
+    m_n = np.array([0.15, 0.01, 0.48])                     # G, NED (about 50 uT, inclination ~72 deg)
+    w = UlogWriter(start_us=1_000_000)
+    w.topic("vehicle_magnetometer", [("float[3]", "magnetometer_ga")])
+    w.topic("vehicle_attitude", [("float[4]", "q")])
+    w.subscribe("vehicle_magnetometer")
+    w.subscribe("vehicle_attitude")
+    for k in range(50):
+        t = 1_000_000 + 20_000 * k
+        rot = Rotation.from_euler("ZYX", [7.0 * k, 3.0, -2.0], degrees=True)     # yawing at 350 deg/s
+        w.data("vehicle_attitude", timestamp=t, q=rot.as_quat()[[3, 0, 1, 2]])
+        if k % 2:                                           # the magnetometer halfway between two attitudes
+            mid = Rotation.from_euler("ZYX", [7.0 * k + 3.5, 3.0, -2.0], degrees=True)
+            w.data("vehicle_magnetometer", timestamp=t + 10_000, magnetometer_ga=mid.inv().apply(m_n))
+    w.save(tmp_path / "f.ulg")
+    assert fusion_import(tmp_path / "f.ulg", "-o", tmp_path / "f.log", "--sensors", "mag") == 0
+    rec = Recording(tmp_path / "f.log")
+    line = next(c for c in rec.comments if c.startswith("# mag earth_field_ned:"))
+    np.testing.assert_allclose([float(x) for x in line.split(":")[1].split()], m_n * 100.0, atol=2e-3)
