@@ -145,7 +145,8 @@ def earth_field_ned(t_mag: np.ndarray, m_body: np.ndarray, t_q: np.ndarray, q: n
 
     if len(t_mag) == 0 or len(t_q) == 0:
         return None
-    inside = (t_mag >= np.min(t_q) - 0.1) & (t_mag <= np.max(t_q) + 0.1)   # held 0.1 s past the ends
+    hold = float(np.median(np.diff(np.sort(t_q)))) if len(t_q) > 1 else 0.0   # one attitude period past the ends
+    inside = (t_mag >= np.min(t_q) - hold) & (t_mag <= np.max(t_q) + hold)
     if not inside.any():
         return None
     qi = slerp_to(t_q, q, t_mag[inside])
