@@ -14,10 +14,10 @@ Messages read (only those of the requested sensors: pymavlink's index skips the 
   (``Roll Pitch Yaw`` deg, ZYX) interpolated to the EKF's times and turned into a body-to-NED quaternion.
   Without an EKF message: attitude only, from ``ATT``.
 
-Units and multipliers are the log's own: pymavlink applies those of the format characters (``c`` = int16 x
-0.01, ``L`` = int32 x 1e-7, ...); the ``FMTU`` records' multipliers of plain integer fields (e.g. ``MAG``'s
-mGauss) and their units (``UNIT`` records) are applied here, and a field whose unit is not the expected one
-(or a known conversion of it) is refused. Logs without ``FMTU`` records get the layouts' documented units.
+Units and multipliers are the log's own: those of the format characters, as pymavlink applies them
+(``c`` = int16 x 0.01, ``L`` = int32 x 1e-7, ...); the ``FMTU`` records' multipliers of plain integer
+fields (e.g. ``MAG``'s mGauss) and their units (``UNIT`` records) are applied here, and a field whose unit
+is not the expected one (or a known conversion of it) is refused. Logs without ``FMTU`` records get the layouts' documented units.
 
 Time: ``t = TimeUS / 1e6`` s, the autopilot's boot clock (as in MAVExplorer and Mission Planner); ``TimeMS``
 in older logs.
