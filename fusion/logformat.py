@@ -1,10 +1,11 @@
 """The log format (recordings and the serial wire are the same format), DESIGN.md "Log format".
 
 One message a line, UTF-8: ``t,sensor,v1,v2,...`` with an optional ``*HH`` checksum (XOR of the bytes
-before ``*``, as NMEA). ``#`` lines are comments and metadata; ``# fields SENSOR NAME NAME ...`` names a
-sensor's columns; ``# key: value`` lines are header metadata (``# scenario: uwb_route1``). A raw NMEA
-sentence may follow the prefix: ``t,gps,$GPGGA,...*HH`` (the checksum is then the sentence's own and is
-checked by the ``nmea`` decoder).
+before ``*``, as NMEA). ``#`` lines are comments and metadata; ``# fields SENSOR NAME NAME`` names a
+sensor's columns, and a literal ``...`` after the names makes them a group that repeats on a line
+(``# fields uwb beacon range ...``: ``t,uwb,B1,4.2,B3,7.9``, one or more pairs); ``# key: value`` lines
+are header metadata (``# scenario: uwb_route1``). A raw NMEA sentence may follow the prefix:
+``t,gps,$GPGGA,...*HH`` (the checksum is then the sentence's own and is checked by the ``nmea`` decoder).
 
 Fields parse as float when they look numeric; tokens that start with a letter or ``$`` are labels (a
 beacon name) kept as strings. ``nan``/``inf`` and anything else that is neither is malformed.
@@ -51,6 +52,7 @@ class Header:
 
     fields: dict[str, tuple[str, ...]] = field(default_factory=dict)
     meta: dict[str, str] = field(default_factory=dict)
+    repeating: set[str] = field(default_factory=set)  # sensors whose fields repeat as a group (``...``)
 
 
 def parse_comment(text: str, header: Header) -> None:
@@ -59,7 +61,13 @@ def parse_comment(text: str, header: Header) -> None:
     if body.startswith("fields "):
         parts = body.split()
         if len(parts) >= 2:
-            header.fields[parts[1]] = tuple(parts[2:])
+            names = parts[2:]
+            if len(names) > 1 and names[-1] == "...":
+                names = names[:-1]
+                header.repeating.add(parts[1])
+            else:
+                header.repeating.discard(parts[1])
+            header.fields[parts[1]] = tuple(names)
         return
     m = re.match(r"^([A-Za-z_][A-Za-z0-9_\-]*)\s*:\s*(.*)$", body)
     if m:
@@ -167,12 +175,17 @@ def iter_messages(lines: Iterable[str], state: ParsedStream | None = None,
                 continue
         try:
             msg = _parse_stripped(text, lineno)
-            if known_sensors is not None and msg.sensor not in known_sensors and msg.sensor != "truth":
+            if (known_sensors is not None and msg.sensor not in known_sensors
+                    and msg.sensor != "truth" and msg.sensor != "reference"):
                 raise MalformedMessage(f"unknown sensor {msg.sensor!r}")
             names = fields.get(msg.sensor)
             if names is not None and len(msg.values) != len(names) and not (
                     len(msg.values) == 1 and isinstance(msg.values[0], str) and msg.values[0].startswith("$")):
-                raise MalformedMessage(f"{len(msg.values)} values, but '# fields {msg.sensor}' names {len(names)}")
+                if msg.sensor not in st.header.repeating:
+                    raise MalformedMessage(f"{len(msg.values)} values, but '# fields {msg.sensor}' names {len(names)}")
+                if not names or len(msg.values) % len(names):
+                    raise MalformedMessage(f"{len(msg.values)} values, but '# fields {msg.sensor}' names groups of "
+                                           f"{len(names)} ({' '.join(names)} ...)")
         except MalformedMessage as exc:
             sensor = _guess_sensor(text)
             st.malformed[sensor] = st.malformed.get(sensor, 0) + 1

@@ -34,6 +34,7 @@ BUILTIN_PLUGINS: dict[str, str] = {
     "process": "fusion_plugins.process",
     "solvers": "fusion_plugins.solvers",
     "simulators": "fusion_plugins.simulators",
+    "importers": "fusion.importers",
 }
 
 

@@ -1,10 +1,16 @@
 """Measurement ``range``: distances to named beacons, paper 001 eq. 6.
 
-A message is ``beacon range`` (one range), or several pairs ``B1 r1 B2 r2 ...``; the model binds to the
-beacons a message names. With a 2-D state and 3-D beacons the tag is at the fixed height ``tag_z``:
+A message is ``beacon range`` (one range), or several pairs ``B1 r1 B2 r2 ...`` (in a recording, a
+``# fields uwb beacon range ...`` header names the repeating pair); the model binds to the beacons a message
+names. With a 2-D state and 3-D beacons the tag is at the fixed height ``tag_z``:
 
 .. math::
-    r_i = \\sqrt{(p_x - b_{i,x})^2 + (p_y - b_{i,y})^2 [+ (p_z - b_{i,z})^2 \\text{ or } (z_{tag} - b_{i,z})^2]}
+    d_i = \\sqrt{(p_x - b_{i,x})^2 + (p_y - b_{i,y})^2 [+ (p_z - b_{i,z})^2 \\text{ or } (z_{tag} - b_{i,z})^2]}
+
+Per-beacon calibration (``calibration: {B1: {bias: 0.12, scale: 1.003}}``) models what a beacon's ranging
+measures for a true distance ``d_i``: ``r_i = scale_i d_i + bias_i`` (m; defaults 1 and 0). A tag mounted
+away from the body origin (``lever_arm``, m, body FRD; needs the attitude block ``q``) ranges from
+``p + C_b^n(q) l`` instead of ``p``.
 
 Geometry check (paper 001's "non-optimal" layout, docs/results/uwb.md): ``geometry(x, P)`` gives the GDOP of
 the sensor's beacons at the estimated position and, when the beacons are degenerate (all on one line in
@@ -21,13 +27,23 @@ import numpy as np
 from pydantic import Field
 
 from fusion.api import Belief, ConfigError, Event, MalformedMessage, MeasurementModel, Message, Observation, Params
+from fusion.quaternion import rotate, rotate_jacobian
+
+
+class BeaconCalibration(Params):
+    """Range calibration of one beacon: measured = ``scale`` x true distance + ``bias``."""
+
+    bias: float = Field(0.0, description="m, added to the scaled distance")
+    scale: float = Field(1.0, gt=0.0, description="dimensionless, multiplies the true distance")
 
 
 class RangeModel(MeasurementModel):
     """Ranges (m) from the position block ``p`` (2-D or 3-D) to named beacons (config ``beacons:``).
 
     Params: ``beacons``: the beacons this sensor may range to (default: all); ``tag_z``: the tag's height
-    (m, same frame as the beacons) used when the state is 2-D and the beacons are 3-D; ``gdop_warn`` and
+    (m, same frame as the beacons) used when the state is 2-D and the beacons are 3-D; ``calibration``:
+    per-beacon ``bias`` (m) and ``scale`` (measured = scale x distance + bias); ``lever_arm``: the tag's
+    position in the body frame (m, FRD; needs the attitude block ``q``); ``gdop_warn`` and
     ``mirror_warn_sigma``: thresholds of ``check`` (see the module docstring)."""
 
     name = "range"
@@ -36,6 +52,10 @@ class RangeModel(MeasurementModel):
     class Params(Params):
         beacons: list[str] | None = None
         tag_z: float = 0.0
+        calibration: dict[str, BeaconCalibration] = Field(default_factory=dict, description="per beacon: bias "
+                                                          "(m) and scale; measured = scale x distance + bias")
+        lever_arm: list[float] | None = Field(None, min_length=3, max_length=3, description="m, body FRD: the "
+                                              "tag's offset from the body origin (needs the attitude block q)")
         gdop_warn: float | None = Field(10.0, gt=0.0, description="check(): warn when the GDOP of the beacons "
                                         "at the estimated position exceeds this (None: never)")
         mirror_warn_sigma: float | None = Field(3.0, gt=0.0, description="check(): with beacons on one line "
@@ -56,6 +76,17 @@ class RangeModel(MeasurementModel):
         if unknown:
             raise ConfigError(f"range: unknown beacon(s) {unknown}; the config defines {sorted(ctx.beacons)}")
         self._known = frozenset(names)
+        uncal = sorted(set(self.params.calibration) - self._known)
+        if uncal:
+            raise ConfigError(f"range: calibration of unknown beacon(s) {uncal}; the sensor's beacons are "
+                              f"{sorted(self._known)}")
+        self._lever = None
+        if self.params.lever_arm is not None:
+            if "q" not in ctx.layout or ctx.layout.block("q").kind != "quaternion" or self._dp != 3:
+                raise ConfigError("range: lever_arm needs a 3-D position p and an attitude quaternion block q in "
+                                  f"the state (the state is {ctx.layout!r})")
+            self._q = ctx.layout["q"]
+            self._lever = np.array(self.params.lever_arm, float)
         self._all = np.array([ctx.beacons[b] for b in names], float)
         self._all_dz2 = ((self.params.tag_z - self._all[:, 2]) ** 2 if (self._all.shape[1] == 3 and self._dp == 2)
                          else np.zeros(len(names)))
@@ -69,20 +100,37 @@ class RangeModel(MeasurementModel):
                 raise ConfigError(f"range: beacons are {B.shape[1]}-D but the state position is {self._dp}-D")
             self._B = B[:, : self._dp]
             self._dz2 = (self.params.tag_z - B[:, 2]) ** 2 if (B.shape[1] == 3 and self._dp == 2) else np.zeros(len(bound))
+            cal = self.params.calibration
+            self._scale = np.array([cal[b].scale if b in cal else 1.0 for b in bound])
+            self._bias = np.array([cal[b].bias if b in cal else 0.0 for b in bound])
+            self._calibrated = bool(np.any(self._scale != 1.0) or np.any(self._bias != 0.0))
         self._bind = lru_cache(maxsize=256)(self._make_bound)
 
     def _make_bound(self, names: tuple[str, ...]) -> "RangeModel":
         return RangeModel(self.params, self.context, names)
 
+    def _tag(self, x: np.ndarray) -> np.ndarray:
+        """Position of the tag (..., dp): p, or p + C_b^n(q) l with a lever arm."""
+        p = x[..., self._p]
+        if self._lever is None:
+            return p
+        return p + rotate(x[..., self._q], self._lever)
+
     def h(self, x: np.ndarray) -> np.ndarray:
-        d = x[..., None, self._p] - self._B  # (..., k, dp)
-        return np.sqrt(np.einsum("...kd,...kd->...k", d, d) + self._dz2)
+        d = self._tag(x)[..., None, :] - self._B  # (..., k, dp)
+        r = np.sqrt(np.einsum("...kd,...kd->...k", d, d) + self._dz2)
+        return self._scale * r + self._bias if self._calibrated else r
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
-        d = x[self._p] - self._B
+        d = self._tag(x) - self._B
         r = np.sqrt(np.einsum("kd,kd->k", d, d) + self._dz2)
+        u = d / np.maximum(r, 1e-12)[:, None]           # unit line of sight (k, dp), d d_i / d tag
+        if self._calibrated:
+            u = u * self._scale[:, None]
         H = np.zeros((len(self.bound), x.shape[-1]))
-        H[:, self._p] = d / np.maximum(r, 1e-12)[:, None]
+        H[:, self._p] = u
+        if self._lever is not None:                      # d tag / d q = d(C_b^n(q) l)/dq (3, 4)
+            H[:, self._q] = u @ rotate_jacobian(x[self._q], self._lever)
         return H
 
     # ------------------------------------------------------------------ geometry check

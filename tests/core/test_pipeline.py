@@ -254,3 +254,26 @@ def test_a_run_over_lines_and_a_spec_without_recording():
     assert result.summary["sensors"]["uwb"]["used"] == 3 and result.summary["sensors"]["?"]["malformed"] == 1
     assert result.summary["input"] == "<lines>" and result.last.t == pytest.approx(0.2)
     assert list(iter_messages(lines))  # the lines were not consumed in place (a list)
+
+
+def test_reference_lines_give_an_agreement_section_not_errors(tmp_path):
+    """`reference` lines (another estimator's output) are compared like truth and labelled agreement."""
+    lines = (ROOT / "recordings" / "example_2d.log").read_text().splitlines()
+    out = []
+    for ln in lines:
+        out.append(ln)
+        if ln.startswith("# fields truth"):
+            out.append(ln.replace("truth", "reference", 1))
+        elif ",truth," in ln:
+            t, _, rest = ln.split(",", 2)
+            vals = [float(v) for v in rest.split(",")]
+            vals[0] += 0.5                                  # the other estimator is 0.5 m off in x
+            out.append(f"{t},reference," + ",".join(repr(v) for v in vals))
+    system = load_system(EXAMPLE)
+    s = pipeline.run(system, [ln + "\n" for ln in out]).summary
+    base = pipeline.run(system, system.recording).summary
+    assert s["errors"] == base["errors"]                   # truth errors untouched by the reference
+    ag = s["agreement"]
+    assert "agreement" in ag["with"] and ag["samples"] == base["errors"]["samples"]
+    assert ag["element_rmse"]["px"] == pytest.approx(math.sqrt(base["errors"]["element_rmse"]["px"] ** 2 + 0.25), rel=0.05)
+    assert "reference" not in s["sensors"] and "reference" not in s.get("ignored_sensors", {})

@@ -1,0 +1,15 @@
+"""Built-in importers of ``fusion import`` (PX4 ULog, ArduPilot DataFlash, CSV by a mapping file),
+registered as plugins of kind ``importer`` like any other: a third party adds a format the same way.
+Each importer imports its reader library (pyulog, pymavlink) at first use, so start-up stays fast."""
+from fusion import hookimpl
+
+
+@hookimpl
+def fusion_register_components(registry):
+    from fusion.importers.csvmap import CsvImporter
+    from fusion.importers.dataflash import DataflashImporter
+    from fusion.importers.ulog import UlogImporter
+
+    registry.add(UlogImporter)
+    registry.add(DataflashImporter)
+    registry.add(CsvImporter)

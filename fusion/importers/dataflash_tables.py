@@ -1,0 +1,186 @@
+"""Reading ArduPilot DataFlash logs as column tables, for the ``dataflash`` importer.
+
+pymavlink builds the index (the offset of every message, by type: its C indexer when built, else Python);
+the columns are then read straight from the file's bytes at those offsets with numpy (a message type's
+layout is its FMT record's format string), so only the requested types' bytes are touched and a time slice
+reads only its span. The integrity of the file (a last message cut by the end, bytes that belong to no
+message) is read from the same index.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from fusion.api import ImportRequest, InputError
+from fusion.importers.common import silenced
+
+# numbered instances and the EKF generations share the layout and units of one base message
+_BASE = {"IMU2": "IMU", "IMU3": "IMU", "GPS2": "GPS", "GPA2": "GPA", "MAG2": "MAG", "MAG3": "MAG", "BAR2": "BARO",
+         "BAR3": "BARO", "XKF1": "EKF", "NKF1": "EKF", "EKF1": "EKF"}
+
+
+def open_log(path: str, request: ImportRequest):
+    """pymavlink's reader of ``path``, its index built; InputError for a file that is not a DataFlash log,
+    and for a truncated or corrupt one unless ``request.allow_partial``."""
+    from pymavlink.DFReader import DFReader_binary
+
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(3)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    if len(head) < 3 or head[:2] != b"\xa3\x95":
+        raise InputError(f"{path}: not an ArduPilot DataFlash log (it does not start with a message header "
+                         "0xA3 0x95; a text .log needs converting, a .tlog is MAVLink telemetry)")
+    try:
+        with silenced():
+            reader = DFReader_binary(path)
+    except Exception as exc:  # pymavlink raises plain errors on damaged FMT records
+        raise InputError(f"{path}: damaged DataFlash log ({type(exc).__name__}: {exc})") from None
+    if len(reader.formats) <= 1:
+        raise InputError(f"{path}: not a DataFlash log: no FMT records")
+    cut, gap, first_gap = _integrity(reader)
+    if not request.allow_partial:
+        if cut is not None:
+            raise InputError(f"{path}: truncated: the last message, at byte {cut}, is cut short by the end of the "
+                             f"file at byte {reader.data_len}; pass --partial to import what comes before it")
+        if gap:
+            raise InputError(f"{path}: corrupt: {gap} byte(s) belong to no message (the first at byte {first_gap}); "
+                             "pass --partial to import the messages pymavlink could read")
+    return reader
+
+
+def _integrity(reader) -> tuple[int | None, int, int | None]:
+    """(offset of a last message cut by the end of the file or None, bytes outside any message, first such
+    byte) from pymavlink's index of message offsets."""
+    offs, lens = [], []
+    for mtype, o in enumerate(reader.offsets):
+        if len(o) and mtype in reader.formats:
+            offs.append(np.asarray(o, np.int64))
+            lens.append(np.full(len(o), reader.formats[mtype].len, np.int64))
+    if not offs:
+        return None, 0, None
+    o = np.concatenate(offs)
+    n = np.concatenate(lens)
+    order = np.argsort(o, kind="stable")
+    o, n = o[order], n[order]
+    end = o + n
+    cut = int(o[-1]) if end[-1] > reader.data_len else None
+    gaps = o[1:] - end[:-1]
+    bad = np.flatnonzero(gaps > 0)
+    lead = int(o[0])
+    total = int(gaps[bad].sum()) + lead
+    first = int(end[bad[0]]) if bad.size else (0 if lead else None)
+    return cut, total, first
+
+
+_TIME = ("TimeUS", "TimeMS")
+_NEEDED = {
+    "IMU": ("I", "AccX", "AccY", "AccZ", "GyrX", "GyrY", "GyrZ"),
+    "GPS": ("I", "Status", "GMS", "GWk", "NSats", "HDop", "Lat", "Lng", "Alt", "Spd", "GCrs", "VZ"),
+    "GPA": ("I", "HAcc", "VAcc"), "MAG": ("I", "MagX", "MagY", "MagZ"), "BARO": ("I", "Alt", "Press", "Temp"),
+    "ATT": ("Roll", "Pitch", "Yaw"), "EKF": ("C", "Roll", "Pitch", "Yaw", "VN", "VE", "VD", "PN", "PE", "PD"),
+    "ORGN": ("Type", "Lat", "Lng", "Alt"), "FMTU": ("FmtType", "UnitIds", "MultIds"), "UNIT": ("Id", "Label"),
+    "MULT": ("Id", "Mult"), "VER": ("FWS",), "MSG": ("Message",),
+}
+# DataFlash format characters -> numpy dtypes (pymavlink's FORMAT_TO_STRUCT, little endian, packed)
+_DTYPE = {"b": "<i1", "B": "<u1", "M": "<u1", "h": "<i2", "H": "<u2", "c": "<i2", "C": "<u2", "i": "<i4",
+          "I": "<u4", "e": "<i4", "E": "<u4", "L": "<i4", "f": "<f4", "d": "<f8", "g": "<f2", "q": "<i8",
+          "Q": "<u8", "n": "S4", "N": "S16", "Z": "S64", "a": "S64"}
+
+
+def _table(reader, name: str, request: ImportRequest | None) -> dict[str, np.ndarray] | None:
+    """The columns this importer uses of every ``name`` message, read straight from the file's bytes at the
+    offsets of pymavlink's index (vectorised: only these messages' bytes are touched, and of them only the
+    time column before the span is cut), scaled by the format characters' multipliers as pymavlink scales
+    them; ``t`` in s. None when the log has no such message."""
+    mtype = reader.name_to_id.get(name) if hasattr(reader, "name_to_id") else None
+    if mtype is None or mtype not in reader.formats or mtype >= len(reader.offsets):
+        return None
+    fmt = reader.formats[mtype]
+    offs = np.asarray(reader.offsets[mtype], np.int64)
+    offs = offs[offs + fmt.len <= reader.data_len]            # a message cut by the end of the file
+    if offs.size == 0:
+        return None
+    buf = np.frombuffer(reader.data_map, np.uint8)
+    pos, where = 3, {}
+    for c, col in zip(fmt.format, fmt.columns):
+        dtype = np.dtype(_DTYPE[c])
+        where[col] = (pos, dtype, c)
+        pos += dtype.itemsize
+
+    def read(col: str, at: np.ndarray) -> np.ndarray:
+        p0, dtype, c = where[col]
+        raw = buf[at[:, None] + (p0 + np.arange(dtype.itemsize))]
+        v = np.ascontiguousarray(raw).view(dtype).ravel()
+        if dtype.kind == "S":
+            return np.array([x.split(b"\0", 1)[0].decode("utf-8", "replace") for x in v.tolist()], object)
+        mul = FORMAT_MULT.get(c)
+        return v / (1.0 / mul) if mul is not None else v.astype(float)
+
+    tcol = next((c for c in _TIME if c in where), None)
+    out: dict[str, np.ndarray] = {}
+    if tcol is not None:
+        t = read(tcol, offs) / (1e6 if tcol == "TimeUS" else 1e3)
+        if request is not None:
+            keep = np.ones(len(t), bool)
+            if request.start is not None:
+                keep &= t >= request.start
+            if request.end is not None:
+                keep &= t <= request.end
+            offs, t = offs[keep], t[keep]
+        out["t"] = t
+    elif request is not None:
+        return None
+    for col in _NEEDED.get(_BASE.get(name, name), ()):
+        if col in where:
+            out[col] = read(col, offs)
+    out["_n"] = np.array(len(offs))
+    return out
+
+
+FORMAT_MULT = {"c": 0.01, "C": 0.01, "e": 0.01, "E": 0.01, "L": 1e-7}   # pymavlink's FORMAT_TO_STRUCT
+
+
+def collect(reader, path: str, types: list[str], request: ImportRequest):
+    """Tables per message type (columns scaled by the format characters' multipliers), the units per
+    (type, column) from FMTU/UNIT/MULT, and a vehicle description from VER or the first MSG."""
+    rows: dict[str, dict[str, np.ndarray]] = {}
+    for mt in types:
+        tab = _table(reader, mt, request)
+        if tab is not None and int(tab["_n"]):
+            rows[mt] = tab
+    meta = {n: _table(reader, n, None) for n in ("FMTU", "UNIT", "MULT", "VER", "MSG")}
+    unit_label: dict[str, str] = {}
+    mult: dict[str, float] = {}
+    if meta["UNIT"] is not None and "Id" in meta["UNIT"]:
+        unit_label = {chr(int(i) & 0xFF): str(lbl) for i, lbl in zip(meta["UNIT"]["Id"], meta["UNIT"].get("Label", ()))}
+    if meta["MULT"] is not None and "Id" in meta["MULT"]:
+        mult = {chr(int(i) & 0xFF): float(f"{float(m):.7g}") for i, m in zip(meta["MULT"]["Id"], meta["MULT"].get("Mult", ()))}
+    vehicle = ""
+    if meta["VER"] is not None and "FWS" in meta["VER"] and len(meta["VER"]["FWS"]):
+        vehicle = str(meta["VER"]["FWS"][0]).strip()
+    if not vehicle and meta["MSG"] is not None and "Message" in meta["MSG"]:
+        for text in meta["MSG"]["Message"][:50]:
+            if any(k in str(text) for k in ("ArduCopter", "ArduPlane", "ArduRover", "ArduSub", "Rover", "Copter",
+                                            "Plane", "Blimp", "AntennaTracker")):
+                vehicle = str(text).strip()
+                break
+    units = {}
+    fm = meta["FMTU"]
+    if fm is not None and "FmtType" in fm:
+        for mtype, uids, mids in zip(fm["FmtType"], fm.get("UnitIds", ()), fm.get("MultIds", ())):
+            fmt = reader.formats.get(int(mtype))
+            if fmt is None:
+                continue
+            for i, col in enumerate(fmt.columns):
+                label = unit_label.get(uids[i], "") if i < len(uids) else ""
+                preset = i < len(fmt.format) and fmt.format[i] in FORMAT_MULT
+                mul = 1.0 if preset or i >= len(mids) else mult.get(mids[i], 1.0)
+                units[(fmt.name, col)] = (label, mul or 1.0)
+    texts = []
+    msg = meta["MSG"]
+    if msg is not None and "Message" in msg and "t" in msg:
+        for t, text in zip(msg["t"].tolist(), msg["Message"]):
+            if (request.start is None or t >= request.start) and (request.end is None or t <= request.end):
+                texts.append((t, str(text)))
+    return rows, units, vehicle, texts

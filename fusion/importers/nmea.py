@@ -1,0 +1,81 @@
+"""GPS streams as NMEA 0183 sentences (``fusion import --gps nmea``): one GGA and one RMC a fix, as a
+receiver sends them, for configs whose GPS goes through the ``nmea`` decoder (paper 002's system).
+
+GGA: UTC time, latitude/longitude (ddmm.mmmmmmm, 1e-7 arc-minute: ~0.2 mm), fix quality (1 GPS, 2 DGPS,
+4 RTK fixed, 5 RTK float), satellites, HDOP, altitude above mean sea level and the geoid's height above the
+WGS84 ellipsoid (so altitude + separation is the ellipsoidal height). RMC: status A, speed over ground
+(knots) and course (deg true) from the NED velocity, date. UTC: the log's ``start_utc`` plus t; without
+it, t from midnight of 2000-01-01 (the sentences then carry no real date, only a consistent clock).
+"""
+from __future__ import annotations
+
+import datetime as dt
+import math
+
+import numpy as np
+
+from fusion.api import Stream
+
+KNOT = 1852.0 / 3600.0   # m/s
+_QUALITY = {2: 1, 3: 1, 4: 2, 5: 5, 6: 4}   # PX4 fix_type / ArduPilot Status -> GGA quality
+
+
+def _checksum(body: str) -> str:
+    c = 0
+    for ch in body.encode("ascii"):
+        c ^= ch
+    return f"{c:02X}"
+
+
+def _sentence(body: str) -> str:
+    return f"${body}*{_checksum(body)}"
+
+
+def _angle(deg: float, width: int) -> tuple[str, float]:
+    a = abs(deg)
+    d = int(a)
+    m = (a - d) * 60.0
+    if round(m, 7) >= 60.0:
+        d, m = d + 1, 0.0
+    return f"{d:0{width}d}{m:010.7f}", deg
+
+
+def gga_rmc(t_utc: dt.datetime, lat: float, lon: float, alt: float, geoid: float, vn: float, ve: float,
+            quality: int, nsat: int, hdop: float) -> tuple[str, str]:
+    """The GGA and RMC sentences of one fix (angles in deg, heights in m, velocity in m/s)."""
+    hms = t_utc.strftime("%H%M%S") + f".{t_utc.microsecond // 10000:02d}"
+    la, _ = _angle(lat, 2)
+    lo, _ = _angle(lon, 3)
+    ns, ew = ("N" if lat >= 0 else "S"), ("E" if lon >= 0 else "W")
+    hd = f"{hdop:.2f}" if math.isfinite(hdop) else ""
+    gga = _sentence(f"GPGGA,{hms},{la},{ns},{lo},{ew},{quality},{nsat:02d},{hd},{alt:.3f},M,{geoid:.3f},M,,")
+    spd = math.hypot(vn, ve) / KNOT
+    crs = math.degrees(math.atan2(ve, vn)) % 360.0
+    date = t_utc.strftime("%d%m%y")
+    rmc = _sentence(f"GPRMC,{hms},A,{la},{ns},{lo},{ew},{spd:.3f},{crs:.2f},{date},,,A")
+    return gga, rmc
+
+
+def as_nmea(s: Stream, start_utc: str | None) -> Stream:
+    """The stream of GGA + RMC sentences (``# fields gps nmea``) of a numeric GPS stream."""
+    f = {name: i for i, name in enumerate(s.fields)}
+    v = np.asarray(s.values, float)
+    base = (dt.datetime.fromisoformat(start_utc.replace("Z", "+00:00")) if start_utc
+            else dt.datetime(2000, 1, 1, tzinfo=dt.timezone.utc))
+
+    def col(name, default=math.nan):
+        return v[:, f[name]] if name in f else np.full(len(v), default)
+
+    lat, lon, alt = col("lat"), col("lon"), col("alt")
+    geoid, vn, ve = col("geoid", 0.0), col("vn", 0.0), col("ve", 0.0)
+    fix, nsat, hdop = col("fix", 3.0), col("nsat", 0.0), col("hdop")
+    ts, rows = [], []
+    for k, t in enumerate(np.asarray(s.t, float).tolist()):
+        when = base + dt.timedelta(seconds=t)
+        gga, rmc = gga_rmc(when, lat[k], lon[k], alt[k], geoid[k], vn[k], ve[k],
+                           _QUALITY.get(int(fix[k]), 1), int(nsat[k]), hdop[k])
+        ts += [t, t]
+        rows += [(gga,), (rmc,)]
+    meta = dict(s.meta)
+    meta["units"] = "NMEA 0183 GGA + RMC a fix" + ("" if start_utc else " (UTC from 2000-01-01: the log gave no date)")
+    return Stream(s.sensor, ("nmea",), np.array(ts), rows=rows, meta=meta)

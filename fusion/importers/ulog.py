@@ -1,0 +1,355 @@
+"""Importer ``ulog``: PX4 ULog (``.ulg``) through pyulog.
+
+Topics read (only those of the requested sensors; pyulog skips the others while parsing):
+
+- ``imu``: ``sensor_combined`` (``gyro_rad`` rad/s, ``accelerometer_m_s2`` m/s^2 specific force, body FRD), at
+  the gyro's sample time.
+- ``gps``: ``vehicle_gps_position``, else ``sensor_gps``, in either layout: integer ``lat``/``lon`` in 1e-7 deg
+  and ``alt`` in mm (older PX4), or float ``latitude_deg``/``longitude_deg`` and ``altitude_msl_m`` (newer);
+  velocity NED m/s, ``eph``/``epv`` m. Samples without a 2-D/3-D fix are dropped.
+- ``mag``: ``vehicle_magnetometer`` (calibrated, body FRD) else ``sensor_mag`` (raw, sensor frame), Gauss
+  converted to uT.
+- ``baro``: ``vehicle_air_data`` (altitude m, pressure Pa, temperature degC) else ``sensor_baro`` (pressure in
+  Pa, or mbar in older firmware, converted; temperature).
+- ``reference``: the onboard EKF's output, ``vehicle_local_position`` (x y z, vx vy vz, NED from the EKF's
+  local origin) with the attitude of ``vehicle_attitude`` (``q``: Hamilton ``[w x y z]``, FRD to NED, as
+  ours) interpolated (slerp) to its times. Only the elements the EKF flags valid are written (e.g. no
+  ``px py`` before a horizontal fix), from the first sample at which they all are.
+
+Time: ``t = (timestamp - start_timestamp) / 1e6`` s, i.e. seconds from the log's start on the autopilot's
+clock (``timestamp_sample`` where the topic has it).
+"""
+from __future__ import annotations
+
+import io
+import os
+from typing import Any
+
+import numpy as np
+
+from fusion.api import ImportedLog, Importer, ImportRequest, InputError, Stream
+from fusion.importers.common import (F32, GAUSS_TO_UT, LATLON_E7, LATLON_F, earth_field_ned, make_stream, silenced,
+                                     slerp_to)
+
+TOPICS = {
+    "imu": ("sensor_combined",),
+    "gps": ("vehicle_gps_position", "sensor_gps"),
+    "mag": ("vehicle_magnetometer", "sensor_mag"),
+    "baro": ("vehicle_air_data", "sensor_baro"),
+    "reference": ("vehicle_local_position", "vehicle_attitude"),
+}
+
+
+class _Reader(io.RawIOBase):
+    """A file wrapper that remembers a short read: pyulog stops silently at a message cut by the end of the
+    file, and this is how a truncated log is told from a complete one."""
+
+    def __init__(self, fh):
+        self._fh = fh
+        self.cut_at: int | None = None
+
+    def readable(self) -> bool:
+        return True
+
+    def read(self, n: int = -1) -> bytes:
+        data = self._fh.read(n)
+        if n is not None and n > 0 and 0 < len(data) < n:
+            self.cut_at = self._fh.tell()
+        return data
+
+    def seek(self, *args) -> int:
+        return self._fh.seek(*args)
+
+    def tell(self) -> int:
+        return self._fh.tell()
+
+
+def _first(ulog, names: tuple[str, ...]):
+    for name in names:
+        for d in ulog.data_list:
+            if d.name == name and d.multi_id == 0 and len(d.data.get("timestamp", ())) > 0:
+                return d
+    return None
+
+
+def _cols(d, names: list[str]) -> np.ndarray:
+    missing = [n for n in names if n not in d.data]
+    if missing:
+        have = ", ".join(k for k in d.data if k != "timestamp")
+        raise InputError(f"topic {d.name}: no field {missing[0]!r} in this log's layout (it has: {have[:300]})")
+    return np.column_stack([np.asarray(d.data[n], float) for n in names])
+
+
+class UlogImporter(Importer):
+    """PX4 ULog (.ulg) logs through pyulog.
+
+    IMU (sensor_combined), GPS (vehicle_gps_position / sensor_gps, both
+    layouts), magnetometer (vehicle_magnetometer / sensor_mag, G -> uT), barometer (vehicle_air_data /
+    sensor_baro) and the onboard EKF as ``reference`` lines (vehicle_local_position + vehicle_attitude, NED,
+    q body-to-NED). Times in s from the log's start."""
+
+    name = "ulog"
+    suffixes = (".ulg",)
+    sensors = ("imu", "gps", "mag", "baro", "reference")
+
+    def read(self, path: str, request: ImportRequest) -> ImportedLog:
+        ulog = _parse(path, request)
+        t0 = int(ulog.start_timestamp)
+        log = ImportedLog()
+        info = ulog.msg_info_dict
+        vehicle = " ".join(str(info[k]) for k in ("sys_name", "ver_hw") if info.get(k))
+        log.meta["source"] = f"{os.path.basename(path)} (PX4 ULog, read by pyulog)"
+        if vehicle:
+            log.meta["vehicle"] = vehicle + _software(info)
+        log.meta["time_zero"] = (f"{t0 / 1e6:.6f} s on the autopilot's boot clock (t = boot time - "
+                                 f"{t0 / 1e6:.6f})")
+
+        def tcol(d) -> np.ndarray:
+            ts = d.data.get("timestamp_sample", d.data["timestamp"])
+            return (np.asarray(ts, np.int64) - t0) / 1e6
+
+        streams: list[Stream] = []
+        missing: list[str] = []
+        notes = log.notes
+        if request.wants("imu"):
+            d = _first(ulog, TOPICS["imu"])
+            if d is None:
+                missing.append("imu (sensor_combined)")
+            else:
+                v = _cols(d, [f"accelerometer_m_s2[{i}]" for i in range(3)] + [f"gyro_rad[{i}]" for i in range(3)])
+                t_imu = tcol(d)
+                rel = d.data.get("accelerometer_timestamp_relative")
+                if rel is not None and np.any(np.asarray(rel) == 0x7FFFFFFF):   # RELATIVE_TIMESTAMP_INVALID
+                    stale = np.asarray(rel) == 0x7FFFFFFF
+                    notes.append(f"imu: {int(stale.sum())} sample(s) without a new accelerometer sample dropped")
+                    v, t_imu = v[~stale], t_imu[~stale]
+                streams.append(make_stream("imu", ("ax", "ay", "az", "gx", "gy", "gz"), t_imu, v, request,
+                                           meta={"units": "m/s^2 (specific force) rad/s, body FRD",
+                                                 "topic": "sensor_combined"}, notes=notes))
+        gps_first = None
+        if request.wants("gps"):
+            d = _first(ulog, TOPICS["gps"])
+            if d is None:
+                missing.append("gps (vehicle_gps_position or sensor_gps)")
+            else:
+                s = _gps(d, tcol(d), request, notes)
+                streams.append(s)
+                if len(s):
+                    gps_first = s.values[0, :3]
+                if "time_utc_usec" in d.data:
+                    utc = np.asarray(d.data["time_utc_usec"], np.int64)
+                    ok = np.flatnonzero(utc > 0)
+                    if ok.size:
+                        import datetime as _dt
+                        i = ok[0]
+                        start = utc[i] / 1e6 - (int(d.data["timestamp"][i]) - t0) / 1e6
+                        log.meta["start_utc"] = _dt.datetime.fromtimestamp(start, _dt.timezone.utc).strftime(
+                            "%Y-%m-%dT%H:%M:%S.%fZ")
+        if request.wants("mag"):
+            d = _first(ulog, TOPICS["mag"])
+            if d is None:
+                missing.append("mag (vehicle_magnetometer or sensor_mag)")
+            else:
+                if d.name == "vehicle_magnetometer":
+                    v, frame = _cols(d, [f"magnetometer_ga[{i}]" for i in range(3)]), "body FRD, calibrated"
+                else:
+                    v, frame = _cols(d, ["x", "y", "z"]), "sensor frame, uncalibrated (sensor_mag)"
+                streams.append(make_stream("mag", ("mx", "my", "mz"), tcol(d), v * GAUSS_TO_UT, request,
+                                           meta={"units": f"uT, {frame}", "topic": d.name}, notes=notes))
+        if request.wants("baro"):
+            d = _first(ulog, TOPICS["baro"])
+            if d is None:
+                missing.append("baro (vehicle_air_data or sensor_baro)")
+            else:
+                streams.append(_baro(d, tcol(d), request, notes))
+        if request.wants("reference"):
+            lpos = _first(ulog, ("vehicle_local_position",))
+            att = _first(ulog, ("vehicle_attitude",))
+            if lpos is None and att is None:
+                missing.append("reference (vehicle_local_position, vehicle_attitude)")
+            else:
+                s, origin = _reference(lpos, att, tcol, request, notes)
+                if s is not None:
+                    streams.append(s)
+                if origin is not None:
+                    log.meta["origin"] = f"{origin[0]:.9f} {origin[1]:.9f} {origin[2]:.3f}"
+                    log.meta["origin_source"] = "the EKF's local origin (vehicle_local_position ref_lat ref_lon ref_alt)"
+        _field_from_reference(streams, _first(ulog, ("vehicle_attitude",)) if request.wants("mag") else None, tcol)
+        if "origin" not in log.meta and gps_first is not None:
+            log.meta["origin"] = f"{gps_first[0]:.9f} {gps_first[1]:.9f} {gps_first[2]:.3f}"
+            log.meta["origin_source"] = ("the first GPS fix imported (the EKF's local frame is not tied to the "
+                                         "globe in this log)")
+        for m in ulog.logged_messages:
+            t = (int(m.timestamp) - t0) / 1e6
+            if (request.start is None or t >= request.start) and (request.end is None or t <= request.end):
+                log.messages.append((t, m.message))
+        _check_requested(path, request, missing, notes)
+        log.streams = streams
+        return log
+
+
+def _field_from_reference(streams: list[Stream], att, tcol) -> None:
+    """``# mag earth_field_ned``: the magnetometer's mean field rotated to NED by the onboard attitude."""
+    mag = next((s for s in streams if s.sensor == "mag" and len(s)), None)
+    if mag is None or att is None or mag.meta.get("units", "").find("body") < 0:
+        return
+    f = earth_field_ned(mag.t, mag.values, tcol(att), _cols(att, [f"q[{i}]" for i in range(4)]))
+    if f is not None:
+        mag.meta["earth_field_ned"] = " ".join(f"{v:.3f}" for v in f)
+        mag.meta["earth_field_source"] = "mean of the samples rotated to NED by vehicle_attitude (uT)"
+
+
+def _software(info: dict) -> str:
+    """``, PX4 v1.11.3 (git 8583f1da)`` from ver_sw_release (0xAABBCCTT: major minor patch type) and ver_sw."""
+    out = []
+    rel = info.get("ver_sw_release")
+    if isinstance(rel, int) and rel > 0:
+        kind = {255: "", 192: " rc", 128: " beta", 64: " alpha", 0: " dev"}.get(rel & 0xFF, "")
+        out.append(f"v{(rel >> 24) & 0xFF}.{(rel >> 16) & 0xFF}.{(rel >> 8) & 0xFF}{kind}")
+    if info.get("ver_sw"):
+        out.append(f"(git {str(info['ver_sw'])[:8]})")
+    return (", software " + " ".join(out)) if out else ""
+
+
+def _check_requested(path: str, request: ImportRequest, missing: list[str], notes: list[str]) -> None:
+    if not missing:
+        return
+    if request.sensors is not None:
+        raise InputError(f"{path}: no data for {', '.join(missing)}")
+    notes.append("not in the log: " + ", ".join(missing))
+
+
+def _parse(path: str, request: ImportRequest):
+    from pyulog import ULog
+    from pyulog.core import ULogException
+
+    topics = sorted({t for s, ts in TOPICS.items() if request.wants(s) for t in ts}
+                    | ({"vehicle_attitude"} if request.wants("mag") else set()))   # the field in NED (mag header)
+    try:
+        with open(path, "rb") as raw:
+            fh = _Reader(raw)
+            with silenced() as chatter:
+                ulog = ULog(fh, topics)
+            size = os.fstat(raw.fileno()).st_size
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except ULogException as exc:
+        raise InputError(f"{path}: not a readable ULog file: {exc}") from None
+    except Exception as exc:  # pyulog raises plain errors (struct, index, unicode) on damaged definitions
+        raise InputError(f"{path}: damaged ULog file ({type(exc).__name__}: {exc})") from None
+    if fh.cut_at is not None and not request.allow_partial:
+        raise InputError(f"{path}: truncated: its last message is cut short by the end of the file (byte {size}); "
+                         "pass --partial to import what comes before it")
+    if ulog.file_corruption and not request.allow_partial:
+        said = " ".join(chatter.getvalue().split())[:200]
+        raise InputError(f"{path}: corrupt ULog data ({said or 'pyulog found invalid messages'}); pass --partial "
+                         "to import the messages pyulog could read")
+    if not any(len(d.data.get("timestamp", ())) for d in ulog.data_list):
+        raise InputError(f"{path}: no data messages of {', '.join(topics)} (is the log empty or cut in its header?)")
+    return ulog
+
+
+def _gps(d, t: np.ndarray, request: ImportRequest, notes: list[str]) -> Stream:
+    data = d.data
+    if "lat" in data:
+        lat, lon = np.asarray(data["lat"], float) / 1e7, np.asarray(data["lon"], float) / 1e7
+        alt, fmt, layout = np.asarray(data["alt"], float) / 1e3, LATLON_E7, "lat/lon 1e-7 deg, alt mm"
+    elif "latitude_deg" in data:
+        lat, lon = np.asarray(data["latitude_deg"], float), np.asarray(data["longitude_deg"], float)
+        alt, fmt, layout = np.asarray(data["altitude_msl_m"], float), LATLON_F, "lat/lon deg, alt m"
+    else:
+        raise InputError(f"{d.name}: neither lat/lon nor latitude_deg/longitude_deg fields")
+    fields = ["lat", "lon", "alt"]
+    cols = [lat, lon, alt]
+    fmts = [fmt, fmt, ".3f"]
+    if all(f"vel_{a}_m_s" in data for a in "ned"):
+        if "vel_ned_valid" in data and not np.any(np.asarray(data["vel_ned_valid"])):
+            notes.append(f"gps: {d.name} never flags its velocity valid: no vn ve vd")
+        else:
+            fields += ["vn", "ve", "vd"]
+            cols += [np.asarray(data[f"vel_{a}_m_s"], float) for a in "ned"]
+            fmts += [F32] * 3
+    for name, src in (("hacc", "eph"), ("vacc", "epv"), ("hdop", "hdop")):
+        if src in data:
+            fields.append(name)
+            cols.append(np.asarray(data[src], float))
+            fmts.append(F32)
+    for name, src in (("fix", "fix_type"), ("nsat", "satellites_used")):
+        if src in data:
+            fields.append(name)
+            cols.append(np.asarray(data[src], float))
+            fmts.append("d")
+    fix = np.asarray(data.get("fix_type", np.full(len(t), 3)), int)
+    ok = fix >= 2
+    if np.any(~ok):
+        notes.append(f"gps: {int(np.sum(~ok))} sample(s) without a fix (fix_type < 2) dropped")
+    if "alt_ellipsoid" in data or "altitude_ellipsoid_m" in data:   # the geoid's height above the ellipsoid
+        ell = (np.asarray(data["alt_ellipsoid"], float) / 1e3 if "alt_ellipsoid" in data
+               else np.asarray(data["altitude_ellipsoid_m"], float))
+        fields.append("geoid")
+        cols.append(ell - alt)
+        fmts.append(".3f")
+    units = "deg deg m(AMSL)" + (" m/s m/s m/s (NED)" if "vn" in fields else "") + \
+            (" m m (eph epv)" if "hacc" in fields else "") + (" - (hdop)" if "hdop" in fields else "") + \
+            " - - (fix type, satellites)" + (" m (geoid height above the WGS84 ellipsoid)" if "geoid" in fields else "")
+    return make_stream("gps", tuple(fields), t[ok], np.column_stack(cols)[ok], request, tuple(fmts),
+                       meta={"units": units, "topic": f"{d.name} ({layout})"}, notes=notes)
+
+
+def _baro(d, t: np.ndarray, request: ImportRequest, notes: list[str]) -> Stream:
+    data = d.data
+    if d.name == "vehicle_air_data":
+        fields, names = ("alt", "pressure", "temp"), ["baro_alt_meter", "baro_pressure_pa"]
+        names.append("baro_temp_celcius" if "baro_temp_celcius" in data else "baro_temp_celsius")
+        v = _cols(d, [n for n in names if n in data])
+        fields = tuple(f for f, n in zip(fields, names) if n in data)
+        units = "m (pressure altitude) Pa degC"
+    else:
+        v = _cols(d, ["pressure", "temperature"])
+        fields, units = ("pressure", "temp"), "Pa degC"
+        if v.size and np.nanmedian(v[:, 0]) < 2000.0:   # older firmware logs mbar (~1013), newer Pa (~101325)
+            v[:, 0] *= 100.0
+            units += " (pressure logged in mbar, converted)"
+    return make_stream("baro", fields, t, v, request, meta={"units": units, "topic": d.name}, notes=notes)
+
+
+def _reference(lpos, att, tcol, request: ImportRequest, notes: list[str]) -> tuple[Stream | None, Any]:
+    """Reference stream at the local-position times (attitude slerped to them), or attitude only."""
+    groups = (("px py", ["x", "y"], "xy_valid"), ("pz", ["z"], "z_valid"),
+              ("vx vy", ["vx", "vy"], "v_xy_valid"), ("vz", ["vz"], "v_z_valid"))
+    origin = None
+    meta = {"frame": "NED from the EKF's local origin; q body FRD to NED, [w x y z]",
+            "source": "PX4 EKF: " + " + ".join(d.name for d in (lpos, att) if d is not None)}
+    if lpos is not None:
+        data = lpos.data
+        t = tcol(lpos)
+        fields: list[str] = []
+        cols: list[np.ndarray] = []
+        keep = np.ones(len(t), bool)
+        for names, src, flag in groups:
+            valid = np.asarray(data[flag], bool) if flag in data else np.ones(len(t), bool)
+            if not valid.any():
+                notes.append(f"reference: the EKF never flags {flag}: no {names}")
+                continue
+            fields += names.split()
+            cols += [np.asarray(data[c], float) for c in src]
+            keep &= valid
+        if fields:
+            if not keep.all():
+                notes.append(f"reference: {int(np.sum(~keep))} of {len(t)} sample(s) before all of "
+                             f"{' '.join(fields)} are valid dropped")
+            if att is not None:
+                q = slerp_to(tcol(att), _cols(att, [f"q[{i}]" for i in range(4)]), t)
+                fields += ["qw", "qx", "qy", "qz"]
+                cols += [q[:, i] for i in range(4)]
+            if "xy_global" in data and "ref_lat" in data:
+                g = np.flatnonzero(np.asarray(data["xy_global"], bool) & keep)
+                if g.size:
+                    i = g[0]
+                    origin = (float(data["ref_lat"][i]), float(data["ref_lon"][i]), float(data["ref_alt"][i]))
+            v = np.column_stack(cols)[keep]
+            return make_stream("reference", tuple(fields), t[keep], v, request, meta=meta, notes=notes), origin
+    if att is None:
+        return None, None
+    q = _cols(att, [f"q[{i}]" for i in range(4)])
+    return make_stream("reference", ("qw", "qx", "qy", "qz"), tcol(att), q, request, meta=meta, notes=notes), None

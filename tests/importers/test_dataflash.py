@@ -1,0 +1,217 @@
+"""``fusion import`` of ArduPilot DataFlash logs: small .bin files written here with the format's own FMT,
+FMTU, UNIT and MULT records (dataflash_builder), so the expected values are the ones written, converted by
+their definitions (mGauss -> uT, course and speed -> NED velocity, ZYX Euler -> quaternion by scipy)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from import_helpers import Recording, fusion_import, one_error_line
+from dataflash_builder import DataflashWriter
+
+pytest.importorskip("pymavlink")
+
+ORIGIN = (-35.3632621, 149.1652374, 584.07)
+
+
+def _flight(n: int = 60, units: bool = True, gyro_units: str | None = None, seed: int = 3):
+    """A 10 Hz log of n samples with two IMUs, GPS + GPA, MAG, BARO, ATT and two EKF3 cores. Returns the
+    writer and the values written (in the log's units)."""
+    rng = np.random.default_rng(seed)
+    w = DataflashWriter(units=units)
+    for name in ("ORGN", "IMU", "GPS", "MAG", "BARO", "ATT", "XKF1", "MSG"):
+        w.declare(name)
+    w.write("MSG", TimeUS=400_000, Message="ArduCopter V4.5.1 (1a2b3c4d)")
+    if gyro_units:
+        w.declare("IMU", units=gyro_units)   # a second FMT for IMU redeclares it (as a log may)
+    w.write("ORGN", TimeUS=500_000, Type=0, Lat=ORIGIN[0], Lng=ORIGIN[1], Alt=ORIGIN[2])
+    v = {k: [] for k in ("t", "acc", "gyr", "acc2", "lat", "lon", "alt", "spd", "crs", "vz", "status", "mag",
+                         "press", "temp", "balt", "rpy", "pos", "vel")}
+    for k in range(n):
+        t = 2_000_000 + 100_000 * k
+        acc = rng.normal([0, 0, -9.8], 0.2)
+        gyr = rng.normal(0, 0.1, 3)
+        acc2 = rng.normal([0, 0, -9.8], 0.2)
+        w.write("IMU", TimeUS=t, I=0, **dict(zip(("AccX", "AccY", "AccZ", "GyrX", "GyrY", "GyrZ"), [*acc, *gyr])))
+        w.write("IMU", TimeUS=t + 7, I=1, **dict(zip(("AccX", "AccY", "AccZ"), acc2)))
+        lat, lon = ORIGIN[0] + 1e-6 * k, ORIGIN[1] + 2e-6 * k
+        alt, spd, crs, vz = ORIGIN[2] + 0.01 * k, 1.0 + 0.1 * k, (37.0 * k) % 360, 0.3 - 0.01 * k
+        status = 1 if k < 3 else 3
+        w.write("GPS", TimeUS=t, I=0, Status=status, NSats=12, HDop=0.9, Lat=lat, Lng=lon, Alt=alt, Spd=spd,
+                GCrs=crs, VZ=vz, GWk=2300, GMS=345_600_000 + 100 * k)
+        mag = rng.integers(-600, 600, 3)                 # mGauss, int16 (multiplier 1e-3 to Gauss)
+        w.write("MAG", TimeUS=t + 3, I=0, MagX=mag[0], MagY=mag[1], MagZ=mag[2])
+        press, temp, balt = 95000 + 10.0 * k, 25.0 + 0.01 * k, 0.5 * k
+        w.write("BARO", TimeUS=t + 5, I=0, Alt=balt, Press=press, Temp=temp)
+        rpy = (5.0 * np.sin(k / 5), -3.0 + 0.1 * k, (20.0 * k) % 360)      # deg, 2 decimals in the log
+        w.write("ATT", TimeUS=t, Roll=rpy[0], Pitch=rpy[1], Yaw=rpy[2])
+        pos, vel = rng.normal(0, 10, 3), rng.normal(0, 2, 3)
+        if k == 10:
+            w.write("MSG", TimeUS=t, Message="EKF3 IMU0 is using GPS")
+        for core, off in ((0, 0.0), (1, 100.0)):         # core 1 differs: only the lowest core is the reference
+            w.write("XKF1", TimeUS=t, C=core, Roll=rpy[0], Pitch=rpy[1], Yaw=rpy[2],
+                    **dict(zip(("PN", "PE", "PD", "VN", "VE", "VD"), [*(pos + off), *vel])))
+        for key, val in (("t", t / 1e6), ("acc", acc), ("gyr", gyr), ("acc2", acc2), ("lat", lat), ("lon", lon),
+                         ("alt", alt), ("spd", spd), ("crs", crs), ("vz", vz), ("status", status), ("mag", mag),
+                         ("press", press), ("temp", temp), ("balt", balt), ("rpy", rpy), ("pos", pos), ("vel", vel)):
+            v[key].append(val)
+    return w, {k: np.array(x) for k, x in v.items()}
+
+
+@pytest.fixture(scope="module")
+def imported(tmp_path_factory):
+    d = tmp_path_factory.mktemp("df")
+    w, v = _flight()
+    w.save(d / "flight.bin")
+    assert fusion_import(d / "flight.bin", "-o", d / "flight.log") == 0
+    return Recording(d / "flight.log"), v, d / "flight.bin"
+
+
+def test_imu_instances_in_si(imported):
+    rec, v, _ = imported
+    np.testing.assert_allclose(rec.times("imu"), v["t"], atol=1e-9)
+    np.testing.assert_allclose(rec.values("imu"), np.hstack([v["acc"], v["gyr"]]), rtol=1e-6, atol=1e-7)  # float32
+    np.testing.assert_allclose(rec.times("imu2"), v["t"] + 7e-6, atol=1e-9)
+    np.testing.assert_allclose(rec.values("imu2")[:, :3], v["acc2"], rtol=1e-6)
+
+
+def test_gps_fix_filter_and_velocity_from_course(imported):
+    rec, v, _ = imported
+    ok = v["status"] >= 2
+    np.testing.assert_allclose(rec.column("gps", "lat"), v["lat"][ok], atol=1e-9)
+    np.testing.assert_allclose(rec.column("gps", "lon"), v["lon"][ok], atol=1e-9)
+    np.testing.assert_allclose(rec.column("gps", "alt"), v["alt"][ok], atol=0.006)       # cm in the log
+    spd, crs = v["spd"][ok], np.radians(v["crs"][ok])
+    np.testing.assert_allclose(rec.column("gps", "vn"), spd * np.cos(crs), atol=1e-5)
+    np.testing.assert_allclose(rec.column("gps", "ve"), spd * np.sin(crs), atol=1e-5)
+    np.testing.assert_allclose(rec.column("gps", "vd"), v["vz"][ok], atol=1e-6)
+
+
+def test_mag_milligauss_multiplier_to_microtesla(imported):
+    rec, v, _ = imported
+    np.testing.assert_allclose(rec.values("mag"), v["mag"] * 1e-3 * 100.0, rtol=1e-9)   # mGauss -> G -> uT
+
+
+def test_baro(imported):
+    rec, v, _ = imported
+    np.testing.assert_allclose(rec.column("baro", "pressure"), v["press"], rtol=1e-7)
+    np.testing.assert_allclose(rec.column("baro", "temp"), v["temp"], atol=0.006)       # cdegC in the log
+
+
+def test_reference_from_lowest_ekf_core_with_att_quaternion(imported):
+    rec, v, _ = imported
+    assert rec.header.fields["reference"] == ("px", "py", "pz", "vx", "vy", "vz", "qw", "qx", "qy", "qz")
+    val = rec.values("reference")
+    np.testing.assert_allclose(val[:, :3], v["pos"], rtol=1e-6, atol=1e-5)   # core 0, not core 1 (+100 m)
+    np.testing.assert_allclose(val[:, 3:6], v["vel"], rtol=1e-6, atol=1e-6)
+    rpy = np.round(v["rpy"], 2)   # the log holds centidegrees
+    q = Rotation.from_euler("ZYX", np.radians(rpy[:, ::-1])).as_quat()[:, [3, 0, 1, 2]]   # body-to-NED, w first
+    got = val[:, 6:]
+    sign = np.sign(np.sum(q * got, axis=1))[:, None]
+    np.testing.assert_allclose(got, q * sign, atol=1e-7)
+    lat, lon, alt = map(float, rec.header.meta["origin"].split())
+    assert (lat, lon) == pytest.approx(ORIGIN[:2], abs=1e-9) and alt == pytest.approx(ORIGIN[2], abs=0.006)
+
+
+def test_values_equal_what_pymavlink_reads(imported):
+    from pymavlink.DFReader import DFReader_binary
+    rec, _, path = imported
+    r = DFReader_binary(str(path))
+    acc = []
+    while (m := r.recv_match(type="IMU")) is not None:
+        if m.I == 0:
+            acc.append([m.AccX, m.AccY, m.AccZ])
+    np.testing.assert_allclose(rec.values("imu")[:, :3], acc, rtol=1e-7)
+
+
+def test_attitude_interpolated_to_ekf_times(tmp_path):
+    """A steady yaw rate: slerp is exact, so the reference between ATT samples is the mid-point yaw."""
+    w = DataflashWriter()
+    for name in ("ATT", "XKF1"):
+        w.declare(name)
+    for k in range(10):
+        w.write("ATT", TimeUS=1_000_000 + 100_000 * k, Yaw=10.0 * k)
+        w.write("XKF1", TimeUS=1_050_000 + 100_000 * k, C=0, PN=k)
+    w.save(tmp_path / "a.bin")
+    assert fusion_import(tmp_path / "a.bin", "-o", tmp_path / "a.log") == 0
+    q = Recording(tmp_path / "a.log").values("reference")[:9, 6:]
+    want = Rotation.from_euler("Z", np.radians(10.0 * np.arange(9) + 5.0)[:, None]).as_quat()[:, [3, 0, 1, 2]]
+    np.testing.assert_allclose(np.abs(np.sum(q * want, axis=1)), 1.0, atol=1e-12)
+
+
+def test_units_from_fmtu_convert_or_are_refused(tmp_path, capsys):
+    w, v = _flight(n=5, gyro_units="s#kkkooo--O--zz")    # gyro declared in deg/s
+    w.save(tmp_path / "d.bin")
+    assert fusion_import(tmp_path / "d.bin", "-o", tmp_path / "d.log", "--sensors", "imu") == 0
+    np.testing.assert_allclose(Recording(tmp_path / "d.log").values("imu")[:, 3:], np.radians(v["gyr"]), rtol=1e-6)
+    capsys.readouterr()
+    w, _ = _flight(n=5, gyro_units="s#mmmooo--O--zz")    # gyro "in metres": refused, named
+    w.save(tmp_path / "m.bin")
+    assert fusion_import(tmp_path / "m.bin", "-o", tmp_path / "m.log") == 2
+    line = one_error_line(capsys)
+    assert "IMU.GyrX" in line and "'m'" in line
+
+
+def test_log_without_fmtu_uses_the_documented_layout(tmp_path):
+    w, v = _flight(n=5, units=False)
+    w.save(tmp_path / "old.bin")
+    assert fusion_import(tmp_path / "old.bin", "-o", tmp_path / "old.log", "--sensors", "mag") == 0
+    np.testing.assert_allclose(Recording(tmp_path / "old.log").values("mag"), v["mag"] * 0.1, rtol=1e-9)
+
+
+def test_time_slice_and_instance_selection(tmp_path):
+    w, v = _flight()
+    w.save(tmp_path / "f.bin")
+    assert fusion_import(tmp_path / "f.bin", "-o", tmp_path / "s.log", "--start", "3", "--end", "5.5",
+                         "--sensors", "imu2", "mag") == 0
+    rec = Recording(tmp_path / "s.log")
+    assert set(rec.t) == {"imu2", "mag"}
+    t = v["t"] + 7e-6
+    np.testing.assert_allclose(rec.times("imu2"), t[(t >= 3) & (t <= 5.5)], atol=1e-9)
+
+
+def test_truncated_corrupt_and_foreign_files_are_one_error(tmp_path, capsys):
+    w, _ = _flight(n=20)
+    data = bytes(w.buf)
+    (tmp_path / "cut.bin").write_bytes(data[:-11])
+    assert fusion_import(tmp_path / "cut.bin", "-o", tmp_path / "c.log") == 2
+    line = one_error_line(capsys)
+    assert "truncated" in line and "cut.bin" in line
+    assert fusion_import(tmp_path / "cut.bin", "-o", tmp_path / "c.log", "--partial") == 0
+    assert len(Recording(tmp_path / "c.log").times("imu")) >= 19
+    capsys.readouterr()
+    bad = bytearray(data)
+    mid = len(bad) // 2
+    bad[mid:mid + 40] = b"\x00" * 40
+    (tmp_path / "bad.bin").write_bytes(bytes(bad))
+    assert fusion_import(tmp_path / "bad.bin", "-o", tmp_path / "b.log") == 2
+    assert "corrupt" in one_error_line(capsys)
+    for name, content in (("text.bin", b"QGC WPL 110\n0\t1\t0\n"), ("empty.bin", b""), ("fmt.bin", data[:89])):
+        (tmp_path / name).write_bytes(content)
+        assert fusion_import(tmp_path / name, "-o", tmp_path / "x.log") == 2
+        assert name in one_error_line(capsys)
+
+
+def test_start_utc_from_gps_week_and_milliseconds(imported):
+    import datetime as dt
+    rec, v, _ = imported
+    # GPS time of the first row (t = 2.0 s): week 2300 + 345600 s; GPS - UTC = 18 s since 2017
+    want = dt.datetime(1980, 1, 6, tzinfo=dt.timezone.utc) + dt.timedelta(weeks=2300, seconds=345_600 - 18 - 2.0)
+    got = dt.datetime.fromisoformat(rec.header.meta["start_utc"].replace("Z", "+00:00"))
+    assert abs((got - want).total_seconds()) < 1e-6
+
+
+def test_vehicle_and_text_messages_in_the_header(imported):
+    rec, v, _ = imported
+    assert rec.header.meta["vehicle"] == "ArduCopter V4.5.1 (1a2b3c4d)"
+    assert f"# message {v['t'][10]:.3f}: EKF3 IMU0 is using GPS" in rec.comments
+
+
+def test_earth_field_from_att(imported):
+    rec, v, _ = imported
+    rpy = np.round(v["rpy"], 2)
+    rot = Rotation.from_euler("ZYX", np.radians(rpy[:, ::-1]))
+    want = np.mean(rot.apply(v["mag"] * 0.1), axis=0)   # mGauss -> uT, rotated to NED (MAG 3 us after ATT)
+    line = next(c for c in rec.comments if c.startswith("# mag earth_field_ned:"))
+    np.testing.assert_allclose([float(x) for x in line.split(":")[1].split()], want, atol=5e-3)
