@@ -73,6 +73,37 @@ def _slerp(q0: np.ndarray, q1: np.ndarray, f: float) -> list[float]:
 
 
 # --------------------------------------------------------------------------- truth
+def interpolate_row(tl: Sequence[float], rows, t: float, period: float, gap_periods: float,
+                    quaternions: dict[str, list[int]], angle_cols: Sequence[int]) -> np.ndarray | None:
+    """The row of ``rows`` (indexable by sample, each (m,)) at time ``t`` between the sorted sample times
+    ``tl``: linear, quaternion column groups by slerp, angle columns wrapped to (-pi, pi]; the first or last
+    row within half a ``period`` outside the span; None farther out, or inside a gap of more than
+    ``gap_periods`` periods farther than half a period from both ends (used by Truth and TruthWindow)."""
+    n = len(tl)
+    if n == 0:
+        return None
+    half = 0.5 * period
+    if t < tl[0]:
+        row = rows[0].copy() if tl[0] - t <= half else None
+    elif t >= tl[-1]:
+        row = rows[n - 1].copy() if t - tl[-1] <= half else None
+    else:
+        i = bisect.bisect_right(tl, t)  # tl[i-1] <= t < tl[i]
+        t0, t1 = tl[i - 1], tl[i]
+        dt = t1 - t0
+        if dt > gap_periods * period and min(t - t0, t1 - t) > half:
+            return None
+        f = (t - t0) / dt if dt > 0 else 1.0
+        v0, v1 = rows[i - 1], rows[i]
+        row = v0 + f * (v1 - v0)
+        for cols in quaternions.values():
+            row[cols] = _slerp(v0[cols], v1[cols], f)
+    if row is not None:
+        for c in angle_cols:
+            row[c] = (row[c] + math.pi) % (2.0 * math.pi) - math.pi
+    return row
+
+
 class Truth:
     """The true state over time, from the ``truth`` messages of a recording.
 
@@ -170,31 +201,8 @@ class Truth:
 
     def row(self, t: float) -> np.ndarray | None:
         """The interpolated truth row (m,) at time ``t`` (s), in ``names`` order, or None (see class)."""
-        n = len(self)
-        if n == 0:
-            return None
-        half = 0.5 * self.period
-        tl = self._tlist
-        if t < tl[0]:
-            return self._finish(self.values[0].copy()) if tl[0] - t <= half else None
-        if t >= tl[-1]:
-            return self._finish(self.values[-1].copy()) if t - tl[-1] <= half else None
-        i = bisect.bisect_right(tl, t)  # tl[i-1] <= t < tl[i]
-        t0, t1 = tl[i - 1], tl[i]
-        dt = t1 - t0
-        if dt > self.GAP_PERIODS * self.period and min(t - t0, t1 - t) > half:
-            return None
-        f = (t - t0) / dt if dt > 0 else 1.0
-        v0, v1 = self.values[i - 1], self.values[i]
-        row = v0 + f * (v1 - v0)
-        for cols in self.quaternions.values():
-            row[cols] = _slerp(v0[cols], v1[cols], f)
-        return self._finish(row)
-
-    def _finish(self, row: np.ndarray) -> np.ndarray:
-        for c in self._angle_cols:
-            row[c] = (row[c] + math.pi) % (2.0 * math.pi) - math.pi
-        return row
+        return interpolate_row(self._tlist, self.values, t, self.period, self.GAP_PERIODS, self.quaternions,
+                               self._angle_cols)
 
     def at(self, t: float) -> dict[str, float] | None:
         """``{name: value}`` of the truth at time ``t`` (s), or None where truth is not defined."""

@@ -26,7 +26,7 @@ from typing import Callable, Collection, Sequence
 import numpy as np
 
 from fusion.api import Estimate, Message
-from fusion.metrics import _slerp
+from fusion.metrics import interpolate_row
 
 __all__ = ["TruthWindow", "TruthComparison"]
 
@@ -150,31 +150,8 @@ class TruthWindow:
     # ------------------------------------------------------------------ output (as fusion.metrics.Truth)
     def row(self, t: float) -> np.ndarray | None:
         """The interpolated truth row at ``t`` (s), or None where truth is not defined (see the module)."""
-        tl = self._t
-        if not tl:
-            return None
-        half = 0.5 * self.period
-        if t < tl[0]:
-            return self._finish(self._v[0].copy()) if tl[0] - t <= half else None
-        if t >= tl[-1]:
-            return self._finish(self._v[-1].copy()) if t - tl[-1] <= half else None
-        i = bisect.bisect_right(tl, t)
-        t0, t1 = tl[i - 1], tl[i]
-        dt = t1 - t0
-        if dt > self.GAP_PERIODS * self.period and min(t - t0, t1 - t) > half:
-            return None
-        f = (t - t0) / dt if dt > 0 else 1.0
-        v0, v1 = self._v[i - 1], self._v[i]
-        row = v0 + f * (v1 - v0)
-        if self.quaternions:
-            for cols in self.quaternions.values():
-                row[cols] = _slerp(v0[cols], v1[cols], f)
-        return self._finish(row)
-
-    def _finish(self, row: np.ndarray) -> np.ndarray:
-        for c in self._angle_cols:
-            row[c] = (row[c] + math.pi) % (2.0 * math.pi) - math.pi
-        return row
+        return interpolate_row(self._t, self._v, t, self.period, self.GAP_PERIODS, self.quaternions,
+                               self._angle_cols)
 
     def at(self, t: float) -> dict[str, float] | None:
         row = self.row(t)
