@@ -49,6 +49,13 @@ _CHECK_EVERY_S = 0.5  # a model's check() (geometry) runs at most this often per
 _BATCH_MAX = 64  # input samples integrated per predict_inputs call at most (bounds the live latency)
 
 
+def _failed(component, exc: Exception) -> MalformedMessage:
+    """A plugin's unexpected exception on one message, as the reason that message is malformed (the
+    plugin should raise MalformedMessage itself; the run goes on either way)."""
+    who = f"{component.kind} {component.name!r}" if component is not None else "a plugin"
+    return MalformedMessage(f"{who} failed on it: {type(exc).__name__}: {exc}")
+
+
 class Scheduler:
     """Runs a wired System over a stream of Messages."""
 
@@ -220,12 +227,15 @@ class Scheduler:
             return
         try:
             decoded = sensor.decoder.decode(msg)
+            if decoded is None:
+                return
+            outs = [decoded] if sensor.preprocessor is None else sensor.preprocessor.feed(decoded)
         except MalformedMessage as exc:
             yield self._bad(sensor, msg, exc)
             return
-        if decoded is None:
+        except Exception as exc:  # a plugin that fails on one message must not stop the run
+            yield self._bad(sensor, msg, _failed(sensor.preprocessor or sensor.decoder, exc))
             return
-        outs = [decoded] if sensor.preprocessor is None else sensor.preprocessor.feed(decoded)
         yield from self._drain_solver_events(sensor)
         for out in outs:
             yield from self._measure(sensor, out)
@@ -316,6 +326,9 @@ class Scheduler:
             except MalformedMessage as exc:
                 yield self._bad(sensor, msg, exc)
                 continue
+            except Exception as exc:  # a plugin that fails on one message must not stop the run
+                yield self._bad(sensor, msg, _failed(sensor.decoder, exc))
+                continue
             if sensor.max_gap is not None and self._last_input_t is not None and msg.t - self._last_input_t > sensor.max_gap:
                 yield Event(msg.t, "gap", msg.sensor, f"no {msg.sensor} sample for {msg.t - self._last_input_t:.3f} s "
                             f"(limit {sensor.max_gap} s); prediction held the last sample")
@@ -378,6 +391,9 @@ class Scheduler:
             obs = sensor.model.observe(msg)  # type: ignore[union-attr]
         except MalformedMessage as exc:
             yield self._bad(sensor, msg, exc)
+            return
+        except Exception as exc:  # a plugin that fails on one message must not stop the run
+            yield self._bad(sensor, msg, _failed(sensor.model, exc))
             return
         if obs is None:
             return

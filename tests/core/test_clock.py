@@ -108,3 +108,23 @@ def test_cli_never_exits_1_on_stamps(tmp_path):
     assert main(["run", str(EXAMPLE), "--input", str(log), "-q", "--summary-json", str(out)]) == 0
     s = json.loads(out.read_text())
     assert s["sensors"]["uwb"]["malformed"] >= 2 and s["errors"]["position_rmse_m"] < 0.2
+
+
+def test_a_plugin_failing_on_one_message_is_counted_and_the_run_goes_on(reference, monkeypatch):
+    """Issue 10 item 1: an unknown beacon used to end the run with exit 1; whatever a plugin raises on one
+    message, that message is malformed and the rest is used."""
+    from fusion_plugins.measurement.range import RangeModel as RangeMeasurement
+
+    real = RangeMeasurement.observe
+    calls = {"n": 0}
+
+    def flaky(self, message):
+        calls["n"] += 1
+        if calls["n"] == 700:
+            raise KeyError("B9")
+        return real(self, message)
+
+    monkeypatch.setattr(RangeMeasurement, "observe", flaky)
+    s = _run(LINES)
+    uwb, ref = s["sensors"]["uwb"], reference["sensors"]["uwb"]
+    assert uwb["malformed"] == 1 and uwb["used"] == ref["used"] - 1 and s["events"]["malformed"] == 1
