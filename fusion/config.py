@@ -293,6 +293,11 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
                 if b not in layout:
                     bad = doc.where([*loc, "recovery", "blocks", i]) if doc else f"{where}.recovery.blocks"
                     raise ConfigError(f"{bad}: state has no block {b!r}; blocks are {[x.name for x in layout.blocks]}")
+            size = sum(layout[b].stop - layout[b].start for b in s.recovery.blocks)
+            if s.recovery.action == "reset" and model is not None and model.dim < size and pre is None:
+                raise ConfigError(f"{where}.recovery: action 'reset' sets {s.recovery.blocks} from the measurement, "
+                                  f"but {model.name!r} measures {model.dim} value(s) for {size} state elements; "
+                                  "use action: inflate")
         sensors[sname] = SensorRuntime(sname, s.role, decoder, pre, model, R, gate, s.time_offset, s.max_gap,
                                        s.recovery)
     inputs = [n for n, s in sensors.items() if s.role == "input"]

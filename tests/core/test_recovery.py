@@ -83,6 +83,8 @@ def test_recovery_config_is_checked():
     assert system.sensors["fix"].recovery.after_s == 2.0
     with pytest.raises(ConfigError, match="state has no block 'q'"):
         _system("fix", {"blocks": ["q"]})
+    with pytest.raises(ConfigError, match="measures 1 value.*use action: inflate"):
+        _system("uwb", {"action": "reset", "blocks": ["p"]})
 
 
 def test_health_reports_a_non_finite_end():
