@@ -90,21 +90,27 @@ class TruthWindow:
         if len(vals) != len(self.names):
             self.skipped += 1
             return False
-        try:
-            row = np.array(vals, dtype=float)
-        except (TypeError, ValueError):
-            self.skipped += 1
-            return False
-        if not np.isfinite(row).all():
-            self.skipped += 1
-            return False
-        for cols in self.quaternions.values():
-            q = row[cols]
-            n = np.linalg.norm(q)
-            if n > 0:
-                row[cols] = q / n
+        # Kept as the parsed tuple (a truth line arrives at every IMU sample, an estimate is compared far
+        # less often): converted to an array, quaternions normalised, only when interpolated (_Rows).
+        # The log parser already refuses NaN and inf; a label among the values is not a number.
+        total = 0.0
+        for v in vals:
+            if v.__class__ is not float:
+                try:
+                    v = float(v)
+                except (TypeError, ValueError):
+                    self.skipped += 1
+                    return False
+            total += v
+        if total - total != 0.0:  # a NaN or inf (from a caller other than the parser)
+            if not all(math.isfinite(float(v)) for v in vals):
+                self.skipped += 1
+                return False
+        row = vals
         if self._angle_cols:
-            self._unwrap_row(row)
+            arr = np.array(vals, dtype=float)
+            self._unwrap_row(arr)
+            row = tuple(arr.tolist())
         t = float(message.t)
         if self._t and t < self._t[-1]:  # out of order: insert in place
             i = bisect.bisect_right(self._t, t)
@@ -150,12 +156,31 @@ class TruthWindow:
     # ------------------------------------------------------------------ output (as fusion.metrics.Truth)
     def row(self, t: float) -> np.ndarray | None:
         """The interpolated truth row at ``t`` (s), or None where truth is not defined (see the module)."""
-        return interpolate_row(self._t, self._v, t, self.period, self.GAP_PERIODS, self.quaternions,
-                               self._angle_cols)
+        return interpolate_row(self._t, _Rows(self._v, self.quaternions), t, self.period, self.GAP_PERIODS,
+                               self.quaternions, self._angle_cols)
 
     def at(self, t: float) -> dict[str, float] | None:
         row = self.row(t)
         return None if row is None else dict(zip(self.names, row.tolist()))
+
+
+class _Rows:
+    """The stored samples as interpolate_row reads them: row i as a float array with its quaternion
+    columns normalised (as fusion.metrics.Truth normalises them when it is built)."""
+
+    __slots__ = ("_v", "_quats")
+
+    def __init__(self, values: list, quaternions: dict[str, list[int]]):
+        self._v, self._quats = values, quaternions
+
+    def __getitem__(self, i: int) -> np.ndarray:
+        row = np.array(self._v[i], dtype=float)
+        for cols in self._quats.values():
+            q = row[cols]
+            n = np.linalg.norm(q)
+            if n > 0:
+                row[cols] = q / n
+        return row
 
 
 class TruthComparison:
