@@ -93,15 +93,11 @@ class TruthWindow:
         # Kept as the parsed tuple (a truth line arrives at every IMU sample, an estimate is compared far
         # less often): converted to an array, quaternions normalised, only when interpolated (_Rows).
         # The log parser already refuses NaN and inf; a label among the values is not a number.
-        total = 0.0
-        for v in vals:
-            if v.__class__ is not float:
-                try:
-                    v = float(v)
-                except (TypeError, ValueError):
-                    self.skipped += 1
-                    return False
-            total += v
+        try:
+            total = sum(vals)
+        except TypeError:  # a label among the values
+            self.skipped += 1
+            return False
         if total - total != 0.0:  # a NaN or inf (from a caller other than the parser)
             if not all(math.isfinite(float(v)) for v in vals):
                 self.skipped += 1
@@ -224,7 +220,8 @@ class TruthComparison:
         # interpolates with the one after it, as the whole-recording Truth does).
         while pend and pend[0].t < newest:
             self._evaluate(pend.popleft())
-        self.window.forget_before(pend[0].t if pend else self._last_t)
+        if len(self.window) > 4 * _KEEP_BEHIND:  # trim now and then, not at every sample
+            self.window.forget_before(pend[0].t if pend else self._last_t)
 
     def _evaluate(self, estimate: Estimate) -> None:
         errors = self.tracker.add(estimate)
