@@ -13,6 +13,7 @@ consume it as it goes.
 """
 from __future__ import annotations
 
+import bisect
 import heapq
 import itertools
 import math
@@ -38,6 +39,10 @@ class _Snapshot:
 
 _CHECK_EVERY_S = 0.5  # a model's check() (geometry) runs at most this often per sensor, s of sensor time
 _BATCH_MAX = 64  # input samples integrated per predict_inputs call at most (bounds the live latency)
+
+
+def _msg_t(msg: Message) -> float:
+    return msg.t
 
 
 class Scheduler:
@@ -177,7 +182,16 @@ class Scheduler:
             yield from self._flush_inputs()
 
     def _flush_inputs(self, until: float | None = None) -> Iterator[Estimate | Event]:
-        batch, self._pending = self._pending, []
+        """Integrate the pending input samples; with ``until`` only those up to that time (the last one held
+        to it), the later ones stay pending, so a measurement at ``until`` is applied at its own time."""
+        pending = self._pending
+        if until is not None and pending and pending[-1].t > until:
+            k = bisect.bisect_right(pending, until, key=_msg_t)      # pending is in time order
+            batch, self._pending = pending[:k], pending[k:]
+            if not batch:
+                return
+        else:
+            batch, self._pending = pending, []
         yield from self._inputs(batch, until)
 
     def _process(self, msg: Message) -> Iterator[Estimate | Event]:
