@@ -24,7 +24,7 @@ from typing import Iterable, Iterator
 
 import numpy as np
 
-from fusion.api import Belief, Estimate, Event, MalformedMessage, Message, RejectedMessage
+from fusion.api import Belief, Estimate, Event, MalformedMessage, Message, ReadsBelief, RejectedMessage
 from fusion.config import SensorRuntime, System
 
 
@@ -88,6 +88,11 @@ class Scheduler:
         self._align_u: list[np.ndarray] = []
         self._align_t0: float | None = None
         self._last_input_t: float | None = None
+        # Preprocessors that read the belief (fusion.api.ReadsBelief), bound once here.
+        self._deferred: list[Estimate | Event] = []
+        for sensor in self.sensors.values():
+            if isinstance(sensor.preprocessor, ReadsBelief):
+                sensor.preprocessor.bind_belief(self._belief_at)
 
     # ------------------------------------------------------------------ public
     def run(self, messages: Iterable[Message | MalformedMessage]) -> Iterator[Estimate | Event]:
@@ -155,7 +160,11 @@ class Scheduler:
         # final fix is not older than the belief.
         for sensor in self.sensors.values():
             if sensor.preprocessor is not None:
-                for out in sensor.preprocessor.flush():
+                outs = sensor.preprocessor.flush()
+                if self._deferred:
+                    deferred, self._deferred = self._deferred, []
+                    yield from deferred
+                for out in outs:
                     yield from self._measure(sensor, out)
                 yield from self._drain_solver_events(sensor)
         if self._pending:
@@ -209,6 +218,9 @@ class Scheduler:
         if decoded is None:
             return
         outs = [decoded] if sensor.preprocessor is None else sensor.preprocessor.feed(decoded)
+        if self._deferred:                      # what a belief_at() call released (outputs, input events)
+            deferred, self._deferred = self._deferred, []
+            yield from deferred
         yield from self._drain_solver_events(sensor)
         for out in outs:
             yield from self._measure(sensor, out)
@@ -245,6 +257,18 @@ class Scheduler:
         if events:
             yield from list(events)
             events.clear()
+
+    def _belief_at(self, t: float) -> Belief | None:
+        """The belief predicted to ``t`` with the inputs so far (for a ReadsBelief preprocessor), or None before
+        initialisation; later than ``t`` when inputs past it are already integrated. What the prediction
+        emits is yielded after the preprocessor's feed returns."""
+        if self.belief is None:
+            return None
+        if self._pending:
+            self._deferred.extend(self._flush_inputs(until=t))
+        if self.belief.t < t:
+            self._deferred.extend(self._predict_to(t))
+        return self.belief
 
     def _start(self, t: float) -> None:
         """The first belief, at ``t``: the configured one, aligned and with the remembered fix if any."""
