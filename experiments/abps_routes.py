@@ -1,0 +1,173 @@
+"""ABPS/INS (configs/abps_ins.yaml) on every ABPS scenario x seeds: the study behind the route table of
+docs/results/abps_ins.md (issue 11). Used by experiments/abps_results.py; alone:
+
+    python experiments/abps_routes.py                 # every scenario x 10 seeds, noise on and off (~5 min)
+    python experiments/abps_routes.py --seeds 2 --scenario abps_l_drift
+
+For each scenario the config is the shipped one with the site's own facts: its beacons, the receiver
+height (IMU height from the first waypoint + the lever arm's -0.4 m) and the initial position and yaw of
+the route's first leg. Nothing else changes between sites. Each (scenario, seed) is simulated with
+``fusion simulate SCENARIO --seed N`` into a temporary folder and replayed; scores: horizontal RMSE and
+max (every estimate), NEES (15 dof), the fix stage (every emitted fix against the true receiver position
+at the fix's own time: RMSE and its 2-dof horizontal NEES), rejected fixes (gate), cycles without a fix,
+the longest stretch without an accepted fix while the vehicle moves among the beacons.
+"""
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import copy  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import yaml  # noqa: E402
+
+from fusion import quaternion as quat  # noqa: E402
+from fusion.commands.run import replay, summarize  # noqa: E402
+from fusion.config import SystemSpec, wire  # noqa: E402
+from fusion.metrics import Truth  # noqa: E402
+from fusion.simulate import simulate_file  # noqa: E402
+from fusion_plugins.solvers.ols_trilateration import unpack_fix  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG = ROOT / "configs" / "abps_ins.yaml"
+SCENARIOS = ("abps_mine", "abps_room_eight", "abps_l_drift", "abps_long_legs")
+LEVER_Z = -0.4            # m: the receiver's lever arm z (configs/abps_ins.yaml model.lever_arm)
+
+
+def _run(system, log):
+    """One replay and its summary (fusion.pipeline.run(system, source).summary after the pipeline merge)."""
+    result = replay(system, log)
+    return result, summarize(system, log, result)
+
+
+def site_config(scenario: Path) -> dict:
+    """configs/abps_ins.yaml with the site of ``scenario``: beacons, receiver height, initial position/yaw."""
+    data = yaml.safe_load(CONFIG.read_text())
+    sc = yaml.safe_load(scenario.read_text())
+    wps = [w["at"] if isinstance(w, dict) else w for w in sc["trajectory"]["waypoints"]]
+    p0, p1 = np.array(wps[0], float), np.array(wps[1], float)
+    yaw = math.atan2(p1[1] - p0[1], p1[0] - p0[0])
+    data["beacons"] = {k: list(map(float, v)) for k, v in sc["beacons"].items()}
+    init = data["initial"]["mean"]
+    init["p"] = [float(p0[0]), float(p0[1]), float(p0[2])]
+    init["q"] = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
+    pre = data["sensors"]["abps"]["preprocessor"]
+    if scenario.stem != "abps_mine":
+        pre["z"] = float(p0[2]) + LEVER_Z
+    data.pop("recording", None)
+    return data
+
+
+def fix_stage(fixes: list, truth: Truth, arm: np.ndarray) -> dict:
+    """Every emitted fix against the true receiver position at the time its position is of."""
+    err, nees = [], []
+    for t, vals in fixes:
+        pos, cov = unpack_fix(vals[:9])
+        t_pos = t - (vals[9] if len(vals) > 9 else 0.0)
+        tv = truth.at(t_pos)
+        if tv is None:
+            continue
+        q = np.array([tv["qw"], tv["qx"], tv["qy"], tv["qz"]])
+        rec = np.array([tv["px"], tv["py"], tv["pz"]]) + quat.rotate(q, arm)
+        e = pos[:2] - rec[:2]
+        err.append(float(np.hypot(*e)))
+        nees.append(float(e @ np.linalg.solve(cov[:2, :2], e)))
+    err_a = np.array(err)
+    return {"fix_rmse": float(np.sqrt(np.mean(err_a ** 2))) if err else math.nan,
+            "fix_max": float(err_a.max()) if err else math.nan,
+            "fix_nees": float(np.mean(nees)) if nees else math.nan, "fixes": len(err)}
+
+
+def one(scenario: str, seed: int, tmp: Path, noise: bool = True, changes: dict | None = None) -> dict:
+    """Simulate ``scenario`` with ``seed`` and replay it through the site's config; the scores."""
+    sc_path = ROOT / "scenarios" / f"{scenario}.yaml"
+    log = tmp / f"{scenario}_{seed}_{'on' if noise else 'off'}.log"
+    if not log.exists():
+        log.write_text(simulate_file(str(sc_path), seed=seed, noise=noise))
+    data = site_config(sc_path)
+    for path, value in (changes or {}).items():
+        node = data
+        *head, last = path.split(".")
+        for key in head:
+            node = node[key]
+        node[last] = value
+    system = wire(SystemSpec.model_validate(copy.deepcopy(data)), None, CONFIG)
+    pre = system.sensors["abps"].preprocessor
+    fixes: list = []
+    feed, flush = pre.feed, pre.flush
+
+    def _feed(msg):
+        out = feed(msg)
+        fixes.extend((m.t, m.values) for m in out)
+        return out
+
+    def _flush():
+        out = flush()
+        fixes.extend((m.t, m.values) for m in out)
+        return out
+
+    pre.feed, pre.flush = _feed, _flush
+    c0 = time.process_time()
+    result, s = _run(system, log)
+    cpu = time.process_time() - c0
+    sched = result["scheduler"]
+    truth = Truth.from_messages(sched.truth, result["parsed"].header.fields["truth"])
+    arm = np.array(data["sensors"]["abps"]["model"]["lever_arm"], float)
+    fs = fix_stage(fixes, truth, arm)
+    # longest time between accepted fixes after the alignment
+    ups = [e.t for e in result["estimates"] if e.reason == "update" and e.update is not None and e.update.accepted]
+    gap = float(np.max(np.diff(ups))) if len(ups) > 1 else math.inf
+    ab = s["sensors"]["abps"]
+    return {"scenario": scenario, "seed": seed, "noise": noise, "h_rmse": s["errors"]["position_rmse_m"],
+            "h_max": s["errors"]["position_max_m"], "nees": s["consistency"]["nees_mean"],
+            "rejected": ab["rejected"], "late": ab["late"], "no_fix": int(sum(pre.counters[r] for r in
+                                                                              ("inconsistent", "ambiguous", "degenerate"))),
+            "outliers_removed": pre.counters["outliers_removed"], "cycles": pre.counters["cycles"],
+            "max_gap_s": gap, "resets": 0, "cpu_s": cpu, **fs}
+
+
+def study(seeds: int = 10, scenarios=SCENARIOS, noise_off: bool = True, progress: bool = True) -> list[dict]:
+    rows = []
+    with tempfile.TemporaryDirectory() as tmpd:
+        tmp = Path(tmpd)
+        for sc in scenarios:
+            for seed in range(1, seeds + 1):
+                rows.append(one(sc, seed, tmp))
+                if progress:
+                    r = rows[-1]
+                    print(f"{sc} seed {seed}: h {r['h_rmse']:.3f} ({r['h_max']:.2f}) fix {r['fix_rmse']:.3f} ({r['fix_max']:.2f}) "
+                          f"nees {r['nees']:.1f} fix-nees {r['fix_nees']:.2f} rej {r['rejected']} "
+                          f"nofix {r['no_fix']} gap {r['max_gap_s']:.1f}", flush=True)
+                for f in tmp.glob("*.log"):
+                    f.unlink()
+            if noise_off:
+                rows.append(one(sc, 0, tmp, noise=False))
+                if progress:
+                    r = rows[-1]
+                    print(f"{sc} noise off: h {r['h_rmse']:.4f} ({r['h_max']:.3f}) fix {r['fix_rmse']:.4f}", flush=True)
+    return rows
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--scenario", action="append", help="only these scenarios (default: all ABPS ones)")
+    ap.add_argument("--no-noise-off", action="store_true")
+    ap.add_argument("--json", help="write the rows here")
+    args = ap.parse_args(argv)
+    rows = study(args.seeds, tuple(args.scenario or SCENARIOS), not args.no_noise_off)
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()
