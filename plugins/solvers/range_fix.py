@@ -83,6 +83,17 @@ class Fit:
     info: dict = field(default_factory=dict)
 
 
+def _lsolve(L: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """L^-1 M for lower-triangular L; a matrix M column by column (LAPACK's dtrtrs with a matrix right-hand
+    side goes through a threaded dtrsm that costs ~100x more at these sizes than a few vector solves)."""
+    if M.ndim == 1:
+        return _dtrtrs(L, M, lower=1)[0]
+    out = np.empty_like(M)
+    for j in range(M.shape[1]):
+        out[:, j] = _dtrtrs(L, M[:, j], lower=1)[0]
+    return out
+
+
 def range_cov(U: np.ndarray, cyc: Cycle, idx: np.ndarray, sigma: float) -> np.ndarray:
     """Sigma_r (k, k) of the ranges ``idx`` at lines of sight U (k, 3): noise + compensation (module doc)."""
     k = len(idx)
@@ -120,9 +131,8 @@ def weighted_fix(cyc: Cycle, idx: np.ndarray, x0: np.ndarray, *, dim: int, z: fl
         L, info = _dpotrf(range_cov(U, cyc, idx, sigma), lower=1)
         if info != 0:
             raise NoFix("degenerate", "range covariance not positive definite")
-        J = np.ascontiguousarray(U[:, :nu])
-        Jw = _dtrtrs(L, J, lower=1)[0]
-        rw = _dtrtrs(L, res, lower=1)[0]
+        Jw = _lsolve(L, U[:, :nu])
+        rw = _lsolve(L, res)
         N = Jw.T @ Jw
         g = Jw.T @ rw
         if prior:
@@ -134,6 +144,16 @@ def weighted_fix(cyc: Cycle, idx: np.ndarray, x0: np.ndarray, *, dim: int, z: fl
         if it >= iterations:
             break
         step = _dtrtrs(C, _dtrtrs(C, g, lower=1)[0], lower=1, trans=1)[0]   # N^-1 g by the Cholesky factor
+        # step halving: in a weak geometry the full Gauss-Newton step can overshoot (and oscillate)
+        cost = float(rw @ rw) + (((x[2] - z) / z_sd) ** 2 if prior else 0.0)
+        for _ in range(8):
+            xn = x.copy()
+            xn[:nu] += step
+            dn = xn - B
+            rn = _lsolve(L, r - np.sqrt(np.einsum("ij,ij->i", dn, dn)))
+            if float(rn @ rn) + (((xn[2] - z) / z_sd) ** 2 if prior else 0.0) <= cost * (1.0 + 1e-12):
+                break
+            step = 0.5 * step
         x[:nu] += step
         it += 1
         if float(step @ step) < 1e-16:          # converged: one more pass for the covariance at x
@@ -147,7 +167,7 @@ def weighted_fix(cyc: Cycle, idx: np.ndarray, x0: np.ndarray, *, dim: int, z: fl
         x[2] = z
         if cyc.z_var:           # the assumed height's error: var z_var, and its pull on the horizontal fix
             cov[2, 2] = cyc.z_var
-            Ku = Ninv @ (Jw.T @ _dtrtrs(L, np.ascontiguousarray(U[:, 2]), lower=1)[0])
+            Ku = Ninv @ (Jw.T @ _lsolve(L, np.ascontiguousarray(U[:, 2])))
             cov[:2, 2] = cov[2, :2] = -cyc.z_var * Ku
     dof = len(idx) + (1 if prior else 0) - nu
     return Fit(list(map(int, idx)), x, cov, stat, dof, res)
