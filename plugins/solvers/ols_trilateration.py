@@ -17,6 +17,7 @@ from pydantic import Field
 from scipy.linalg import qr, solve_triangular
 from scipy.linalg.lapack import dpotrf as _dpotrf, dpotrs as _dpotrs, dtrtrs as _dtrtrs
 
+from fusion import quaternion as quat
 from fusion.api import Belief, BuildContext, ConfigError, Event, MalformedMessage, Message, Params, Solver
 from fusion_plugins.solvers.firing_schedule import FiringSchedule
 from fusion_plugins.solvers.range_fix import Cycle, Fit, NoFix, consensus, inflate, range_cov, weighted_fix
@@ -25,17 +26,10 @@ REASONS = ("too_few_beacons", "degenerate", "inconsistent", "ambiguous")
 __all__ = ["NoFix", "trilaterate", "pack_fix", "unpack_fix", "OlsParams", "OlsTrilateration"]
 
 
-def _solve_linear(B: np.ndarray, r: np.ndarray, dim: int, z: float, ref: int,
-                  qr_condition: float, degenerate_condition: float) -> tuple[np.ndarray, np.ndarray, dict]:
-    """OLS/QR solution of eqs. 25-32 with beacon ``ref`` as the reference point; returns the position (3,),
-    the gain G (dim, k) from ranges to position (first order) and info."""
-    k = len(r)
-    others = [i for i in range(k) if i != ref]
-    D = B[others] - B[ref]                                    # B_i - B_ref (k-1, 3)
-    A = D[:, :dim]                                            # eq. 28 (the factor 2 moved into b, eq. 25)
-    b = 0.5 * (r[ref] ** 2 - r[others] ** 2 + (D * D).sum(axis=1))        # eqs. 25-26, 30
-    if dim == 2:
-        b = b - D[:, 2] * (z - B[ref, 2])                     # known height: its term moves to b
+def _condition(D: np.ndarray, dim: int, degenerate_condition: float) -> float:
+    """cond(A^T A) of eq. 28 (A = D[:, :dim], the beacons relative to the reference); raises NoFix
+    ``degenerate`` above ``degenerate_condition`` (collinear beacons in 2-D, coplanar in 3-D)."""
+    A = D[:, :dim]
     AtA = A.T @ A
     if dim == 2:                       # eigenvalues of the symmetric 2 x 2 A^T A in closed form (an SVD: ~10 us)
         h = 0.5 * (AtA[0, 0] + AtA[1, 1])
@@ -48,6 +42,23 @@ def _solve_linear(B: np.ndarray, r: np.ndarray, dim: int, z: float, ref: int,
     if not cond <= degenerate_condition:
         raise NoFix("degenerate", f"cond(A^T A) = {cond:.3g} > {degenerate_condition:.3g}: beacons "
                     f"{'collinear' if dim == 2 else 'coplanar'} or too close together")
+    return cond
+
+
+def _solve_linear(B: np.ndarray, r: np.ndarray, dim: int, z: float, ref: int,
+                  qr_condition: float, degenerate_condition: float,
+                  gain: bool = True) -> tuple[np.ndarray, np.ndarray | None, dict]:
+    """OLS/QR solution of eqs. 25-32 with beacon ``ref`` as the reference point; returns the position (3,),
+    the gain G (dim, k) from ranges to position (first order; None without ``gain``) and info."""
+    k = len(r)
+    others = [i for i in range(k) if i != ref]
+    D = B[others] - B[ref]                                    # B_i - B_ref (k-1, 3)
+    A = D[:, :dim]                                            # eq. 28 (the factor 2 moved into b, eq. 25)
+    b = 0.5 * (r[ref] ** 2 - r[others] ** 2 + (D * D).sum(axis=1))        # eqs. 25-26, 30
+    if dim == 2:
+        b = b - D[:, 2] * (z - B[ref, 2])                     # known height: its term moves to b
+    AtA = A.T @ A
+    cond = _condition(D, dim, degenerate_condition)
     M = None
     if cond <= qr_condition:                                  # eq. 32 by Cholesky of the normal equations
         c, info = _dpotrf(AtA, lower=1)                        # LAPACK directly: ~2 us, scipy's wrappers ~20
@@ -63,6 +74,8 @@ def _solve_linear(B: np.ndarray, r: np.ndarray, dim: int, z: float, ref: int,
     pos[:dim] += xrel
     if dim == 2:
         pos[2] = z
+    if not gain:
+        return pos, None, {"method": method, "cond": cond}
     # First order: db_i = r_ref dr_ref - r_i dr_i (r at the fix, less noisy than measured)
     dB = pos - B
     d_fix = np.sqrt((dB * dB).sum(axis=1))
@@ -101,7 +114,7 @@ def trilaterate(beacons: np.ndarray, ranges: np.ndarray, *, dim: int = 3, z: flo
                 degenerate_condition: float = 1e12, refine: int = 0, consistency_probability: float | None = None,
                 max_outliers: int = 1, min_beacons: int | None = None, offsets: np.ndarray | None = None,
                 velocity_cov: np.ndarray | None = None, accel_sd: float = 0.0, solve_height: bool = False,
-                inflate_misfit: bool = False) -> tuple[np.ndarray, np.ndarray, dict]:
+                inflate_misfit: bool = False, start: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
     """One position fix from ranges to known beacons (paper 000 eqs. 17-32), with outlier rejection.
 
     :param beacons: (k, 3) beacon positions (m, navigation frame; (k, 2) is padded with ``z``), already
@@ -125,6 +138,8 @@ def trilaterate(beacons: np.ndarray, ranges: np.ndarray, *, dim: int = 3, z: flo
         gives the largest consistent subset (consensus, up to ``max_outliers`` dropped, at least
         ``min_beacons`` kept) or no fix (``inconsistent`` / ``ambiguous``).
     :param inflate_misfit: scale the covariance by max(1, chi2 / dof).
+    :param start: (3,) m, where Gauss-Newton starts (``refine`` > 0) instead of the OLS fix, e.g. the last
+        fix moved by the velocity (the OLS test of eq. 28's geometry still applies).
     :returns: ``(position (3,), covariance (3, 3), info)``; ``info``: ``method`` (ols/qr[+gauss-newton]),
         ``cond`` (of A^T A), ``reference``, ``residuals`` (m, of the used ranges), ``chi2``, ``dof``,
         ``used`` and ``rejected`` (indices into the input).
@@ -149,11 +164,18 @@ def trilaterate(beacons: np.ndarray, ranges: np.ndarray, *, dim: int = 3, z: flo
     lin = (dim, z, z_sd, sigma, reference, qr_condition, degenerate_condition)
 
     def solve(idx: np.ndarray) -> Fit:
-        f = _ols_fit(cyc, idx, *lin)
         if not refine:
-            return f
-        g = weighted_fix(cyc, idx, f.pos, dim=dim, z=z, z_sd=z_sd, sigma=sigma, iterations=refine)
-        g.info = {**f.info, "method": f.info["method"] + "+gauss-newton"}
+            return _ols_fit(cyc, idx, *lin)
+        Bi, ri = cyc.B[idx], cyc.r[idx]
+        ref = int(np.argmin(ri)) if reference == "nearest" else 0
+        if start is None:                                     # the paper's OLS is the start
+            pos0, _, info = _solve_linear(Bi, ri, dim, z, ref, qr_condition, degenerate_condition, gain=False)
+        else:                                                 # a start given: only eq. 28's geometry test
+            D = np.delete(Bi, ref, axis=0) - Bi[ref]
+            pos0, info = np.asarray(start, dtype=float), {"method": "start",
+                                                          "cond": _condition(D, dim, degenerate_condition)}
+        g = weighted_fix(cyc, idx, pos0, dim=dim, z=z, z_sd=z_sd, sigma=sigma, iterations=refine)
+        g.info = {**info, "method": info["method"] + "+gauss-newton", "reference": int(idx[ref])}
         return g
 
     fit, rejected = consensus(k, solve, probability=consistency_probability, max_outliers=max_outliers,
@@ -211,6 +233,9 @@ class OlsParams(Params):
     velocity_sd: float = Field(0.05, ge=0, description="m/s: receiver velocity the state's v does not carry (a "
                                "lever arm turning), added to the filter's velocity uncertainty")
     accel_sd: float = Field(0.5, ge=0, description="m/s^2: acceleration within a cycle (unmodelled)")
+    lever_arm: tuple[float, float, float] | None = Field(None, description="receiver in the body frame (m, FRD), "
+                                                         "as the position model's: with compensation the "
+                                                         "fix starts from the belief's receiver position")
     prior_speed_sd: float = Field(1.0, gt=0, description="m/s: velocity sd while the filter has no belief yet "
                                   "(velocity 0 assumed)")
     solve_height: bool = Field(False, description="2-D with refine: estimate z with the prior N(z, z_sd^2) "
@@ -270,6 +295,9 @@ class OlsTrilateration(Solver):
         if self.min_beacons < p.dim + 1:
             raise ConfigError(f"ols_trilateration: min_beacons {self.min_beacons} < {p.dim + 1} needed for a {p.dim}-D fix")
         self._v: slice | None = None
+        self._p: slice | None = None
+        self._q: slice | None = None
+        self._arm = np.asarray(p.lever_arm, dtype=float) if p.lever_arm is not None else np.zeros(3)
         if p.motion_compensation:
             layout = self.context.layout
             if layout is not None:
@@ -277,6 +305,9 @@ class OlsTrilateration(Solver):
                     raise ConfigError("ols_trilateration: motion_compensation needs a state with a velocity "
                                       f"block 'v' (this state has {[b.name for b in layout.blocks]})")
                 self._v = layout["v"]
+                self._p = layout["p"] if "p" in layout else None
+                qs = [b.name for b in layout.blocks if b.kind == "quaternion"]
+                self._q = layout[qs[0]] if qs and np.any(self._arm) else None
         self.counters: dict[str, int] = {"cycles": 0, "fixes": 0, "qr": 0, "outliers_removed": 0,
                                          "unknown_beacon": 0, "split_cycles": 0, "compensated": 0,
                                          **{r: 0 for r in REASONS}}
@@ -339,9 +370,9 @@ class OlsTrilateration(Solver):
         t_end = float(times.max())
         t_m = float(times.sum()) / len(times)
         t_fix, age = t_m, 0.0
-        v, Pv = None, None
+        v, Pv, start = None, None, None
         if len(names) >= self.min_beacons and p.motion_compensation:
-            v, Pv, t_fix = self._velocity(t_m)
+            v, Pv, t_fix, start = self._velocity(t_m)
             age = t_fix - t_m
             dt = times - t_m
             B = B - dt[:, None] * v
@@ -356,7 +387,7 @@ class OlsTrilateration(Solver):
                 max_outliers=p.max_outliers, min_beacons=self.min_beacons,
                 offsets=None if Pv is None else times - t_m, velocity_cov=Pv,
                 accel_sd=p.accel_sd if Pv is not None else 0.0, solve_height=p.solve_height,
-                inflate_misfit=p.inflate_misfit)
+                inflate_misfit=p.inflate_misfit, start=start if p.refine_iterations else None)
         except NoFix as exc:
             self.counters[exc.reason] += 1
             self.events.append(Event(t_end, "no_fix", self._sensor, str(exc)))
@@ -374,25 +405,37 @@ class OlsTrilateration(Solver):
         self.last_fix = (t_m, pos, cov, info)
         return [Message(t_fix, self._sensor, values, self._line)]
 
-    def _velocity(self, t: float) -> tuple[np.ndarray, np.ndarray, float]:
-        """Velocity (3,) (m/s, navigation frame), its covariance (3, 3) with the unmodelled part, and the time
-        of the belief it comes from (>= t), from the filter's belief predicted to ``t``."""
+    def _velocity(self, t: float) -> tuple[np.ndarray, np.ndarray, float, np.ndarray | None]:
+        """From the filter's belief predicted to ``t``: the velocity (3,) (m/s, navigation frame), its
+        covariance (3, 3) with the unmodelled part, the belief's time (>= t) and the receiver position it
+        predicts at ``t`` (p + C_b^n r, m: where Gauss-Newton starts, in the basin of the filter's estimate
+        rather than a mirror image of the beacons' geometry); without a belief v = 0 and no start."""
         p: OlsParams = self.params  # type: ignore[assignment]
         belief = self._belief_at(t) if self._belief_at is not None else None
         extra = np.diag([p.velocity_sd ** 2] * 3)
         if belief is None or self._v is None:
-            return np.zeros(3), np.diag([p.prior_speed_sd ** 2] * 3), t
+            return np.zeros(3), np.diag([p.prior_speed_sd ** 2] * 3), t, None
         sl = self._v
         n = sl.stop - sl.start
+        x = belief.x
         v = np.zeros(3)
-        v[:n] = belief.x[sl]
-        Pv = extra.copy()
+        v[:n] = x[sl]
+        Pv = extra
         if belief.S is not None and belief.P is None:
             Sv = belief.S[sl]
             Pv[:n, :n] += Sv @ Sv.T
         else:
             Pv[:n, :n] += belief.P[sl, sl]  # type: ignore[index]
-        if p.dim == 2:
-            v[2] = 0.0 if n < 3 else v[2]
+        t_b = max(float(belief.t), t)
+        start = None
+        if self._p is not None:
+            ps = self._p
+            start = np.full(3, p.z)
+            start[:ps.stop - ps.start] = x[ps]
+            if self._q is not None:
+                start = start + quat.rotate(x[self._q] / np.linalg.norm(x[self._q]), self._arm)
+            start = start - v * (t_b - t)                 # back to t (inputs past t already integrated)
+            if p.dim == 2:
+                start[2] = p.z
         self.counters["compensated"] += 1
-        return v, Pv, max(float(belief.t), t)
+        return v, Pv, t_b, start

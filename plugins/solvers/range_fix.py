@@ -35,7 +35,7 @@ from itertools import combinations
 from typing import Callable
 
 import numpy as np
-from scipy.linalg.lapack import dpotrf as _dpotrf, dpotri as _dpotri, dtrtrs as _dtrtrs
+from scipy.linalg.lapack import dpotrf as _dpotrf, dpotrs as _dpotrs, dtrtrs as _dtrtrs
 
 from fusion.chisquare import chi2
 
@@ -83,91 +83,107 @@ class Fit:
     info: dict = field(default_factory=dict)
 
 
-def _lsolve(L: np.ndarray, M: np.ndarray) -> np.ndarray:
-    """L^-1 M for lower-triangular L; a matrix M column by column (LAPACK's dtrtrs with a matrix right-hand
-    side goes through a threaded dtrsm that costs ~100x more at these sizes than a few vector solves)."""
-    if M.ndim == 1:
-        return _dtrtrs(L, M, lower=1)[0]
-    out = np.empty_like(M)
-    for j in range(M.shape[1]):
-        out[:, j] = _dtrtrs(L, M[:, j], lower=1)[0]
-    return out
-
-
 def range_cov(U: np.ndarray, cyc: Cycle, idx: np.ndarray, sigma: float) -> np.ndarray:
     """Sigma_r (k, k) of the ranges ``idx`` at lines of sight U (k, 3): noise + compensation (module doc)."""
     k = len(idx)
-    S = np.zeros((k, k))
-    S.flat[::k + 1] = sigma * sigma
     if cyc.Pv is not None and len(cyc.dt):
         dt = cyc.dt[idx]
         G = U * dt[:, None]
-        S += G @ cyc.Pv @ G.T
+        S = G @ cyc.Pv @ G.T
+        S.flat[::k + 1] += sigma * sigma
         if cyc.accel_sd:
             H = U * (dt * dt)[:, None]
             S += (0.25 * cyc.accel_sd ** 2) * (H @ H.T)
+    else:
+        S = np.zeros((k, k))
+        S.flat[::k + 1] = sigma * sigma
     if cyc.z_var:
         uz = U[:, 2]
         S += cyc.z_var * np.outer(uz, uz)
     return S
 
 
+_EYE = {k: np.eye(k) for k in range(1, 4)}
+
+
+def _weights(U: np.ndarray, cyc: Cycle, idx: np.ndarray, sigma: float) -> np.ndarray:
+    """Sigma_r^-1 (k, k) by Cholesky (dpotrs on the identity: at these sizes faster than dpotri + mirror)."""
+    L, info = _dpotrf(range_cov(U, cyc, idx, sigma), lower=1)
+    if info != 0:
+        raise NoFix("degenerate", "range covariance not positive definite")
+    return _dpotrs(L, np.eye(len(idx)), lower=1)[0]
+
+
 def weighted_fix(cyc: Cycle, idx: np.ndarray, x0: np.ndarray, *, dim: int, z: float, z_sd: float, sigma: float,
                  iterations: int) -> Fit:
-    """Gauss-Newton from ``x0`` (3,) on the whitened range equations of the ranges ``idx`` (and the height
-    prior in 2-D when ``z_sd > 0``); the covariance ``(J^T Sigma_r^-1 J)^-1`` at the solution."""
+    """Gauss-Newton from ``x0`` (3,) on the range equations of the ranges ``idx`` weighted by Sigma_r^-1 (and
+    the height prior in 2-D when solving for it); the covariance ``(J^T Sigma_r^-1 J)^-1`` at the solution.
+
+    Sigma_r is formed at the lines of sight of the start and again after the first step (later steps turn
+    them by step / range, a negligible change of the covariance) and inverted by Cholesky: each pass is
+    then a few small products.
+    """
     B, r = cyc.B[idx], cyc.r[idx]
     prior = dim == 2 and z_sd > 0 and not cyc.z_var
     nu = 3 if (dim == 3 or prior) else 2
     x = x0.copy()
-    if dim == 2:
-        x[2] = z if not prior else x[2]
+    if dim == 2 and not prior:
+        x[2] = z
+    wz = 1.0 / z_sd ** 2 if prior else 0.0
+    d = x - B
+    rho = np.sqrt((d * d).sum(axis=1))
+    U = d / np.maximum(rho, 1e-12)[:, None]
+    W = _weights(U, cyc, idx, sigma)
     it = 0
     while True:
-        d = x - B
-        rho = np.sqrt(np.einsum("ij,ij->i", d, d))
-        U = d / np.maximum(rho, 1e-12)[:, None]
         res = r - rho
-        L, info = _dpotrf(range_cov(U, cyc, idx, sigma), lower=1)
-        if info != 0:
-            raise NoFix("degenerate", "range covariance not positive definite")
-        Jw = _lsolve(L, U[:, :nu])
-        rw = _lsolve(L, res)
-        N = Jw.T @ Jw
-        g = Jw.T @ rw
+        J = U[:, :nu]
+        WJ = W @ J
+        N = J.T @ WJ
+        g = WJ.T @ res
         if prior:
-            N[2, 2] += 1.0 / z_sd ** 2
-            g[2] += (z - x[2]) / z_sd ** 2
+            N[2, 2] += wz
+            g[2] += (z - x[2]) * wz
         C, info = _dpotrf(N, lower=1)
         if info != 0:
             raise NoFix("degenerate", "the ranges do not determine the position (normal matrix singular)")
         if it >= iterations:
             break
         step = _dtrtrs(C, _dtrtrs(C, g, lower=1)[0], lower=1, trans=1)[0]   # N^-1 g by the Cholesky factor
-        # step halving: in a weak geometry the full Gauss-Newton step can overshoot (and oscillate)
-        cost = float(rw @ rw) + (((x[2] - z) / z_sd) ** 2 if prior else 0.0)
-        for _ in range(8):
-            xn = x.copy()
-            xn[:nu] += step
-            dn = xn - B
-            rn = _lsolve(L, r - np.sqrt(np.einsum("ij,ij->i", dn, dn)))
-            if float(rn @ rn) + (((xn[2] - z) / z_sd) ** 2 if prior else 0.0) <= cost * (1.0 + 1e-12):
-                break
-            step = 0.5 * step
+        s2 = float(step @ step)
+        if s2 < 1e-8:
+            # converged (a step under 0.1 mm): the linearisation at x holds at x + step to O(step^2), so
+            # the residuals and the covariance are those of this pass, moved along the step
+            x[:nu] += step
+            res = res - J @ step
+            break
+        if s2 > 1e-4:
+            # step halving: in a weak geometry a full Gauss-Newton step of centimetres or more can overshoot
+            cost = float(res @ W @ res) + (x[2] - z) ** 2 * wz
+            for _ in range(8):
+                xn = x.copy()
+                xn[:nu] += step
+                dn = xn - B
+                rn = r - np.sqrt((dn * dn).sum(axis=1))
+                if float(rn @ W @ rn) + (xn[2] - z) ** 2 * wz <= cost * (1.0 + 1e-12):
+                    break
+                step = 0.5 * step
         x[:nu] += step
         it += 1
-        if float(step @ step) < 1e-16:          # converged: one more pass for the covariance at x
-            iterations = it
-    stat = float(rw @ rw) + (((x[2] - z) / z_sd) ** 2 if prior else 0.0)
-    Ninv = _dpotri(C, lower=1)[0]
-    Ninv = np.tril(Ninv) + np.tril(Ninv, -1).T
+        d = x - B
+        rho = np.sqrt((d * d).sum(axis=1))
+        U = d / np.maximum(rho, 1e-12)[:, None]
+        if it == 1 and s2 > 1e-4:       # moved over 1 cm from the start: the weights at the new sight lines
+            W = _weights(U, cyc, idx, sigma)
+    stat = float(res @ W @ res) + (x[2] - z) ** 2 * wz
+    Ninv = _dpotrs(C, _EYE[nu], lower=1)[0]
     cov = np.zeros((3, 3))
     cov[:nu, :nu] = Ninv
     if dim == 2 and not prior:
         x[2] = z
         if cyc.z_var:           # the assumed height's error: var z_var, and its pull on the horizontal fix
             cov[2, 2] = cyc.z_var
-            Ku = Ninv @ (Jw.T @ _lsolve(L, np.ascontiguousarray(U[:, 2])))
+            Ku = Ninv @ (WJ.T @ U[:, 2])
             cov[:2, 2] = cov[2, :2] = -cyc.z_var * Ku
     dof = len(idx) + (1 if prior else 0) - nu
     return Fit(list(map(int, idx)), x, cov, stat, dof, res)
