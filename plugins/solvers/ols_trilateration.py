@@ -263,7 +263,8 @@ class OlsTrilateration(Solver):
     belief's time; when that is later than t_m (inputs past t_m already integrated), the message carries
     the age ``t - t_m`` as a 10th value and the ``position`` model bridges it with the state's velocity.
     Before the filter has a belief, v = 0 with sd ``prior_speed_sd``. Without compensation the fix is
-    stamped at t_m.
+    stamped at t_m, and its covariance takes the unknown motion over the cycle (velocity sd
+    ``prior_speed_sd``) as correlated range errors.
 
     **The fix** (:func:`trilaterate`): eq. 25 with the nearest beacon as reference, eq. 32 by Cholesky,
     QR when cond(A^T A) > ``qr_condition``; then ``refine_iterations`` Gauss-Newton steps on the whitened
@@ -377,6 +378,10 @@ class OlsTrilateration(Solver):
             dt = times - t_m
             B = B - dt[:, None] * v
             # the velocity at t_fix bridges the age too (the position model's p - v age), so it is exact there
+        elif len(names) >= self.min_beacons and len(names) > 1:
+            # not compensated: the receiver moved at an unknown velocity (sd prior_speed_sd) between the
+            # ranges; their offsets from t_m carry that as correlated range errors (an honest covariance)
+            Pv = np.diag([p.prior_speed_sd ** 2] * 2 + [p.prior_speed_sd ** 2 if p.dim == 3 else 0.0])
         try:
             if len(names) < self.min_beacons:
                 raise NoFix("too_few_beacons", f"{len(names)} beacon(s) {names}, need {self.min_beacons}")

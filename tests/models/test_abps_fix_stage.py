@@ -124,7 +124,8 @@ def test_every_cycle_is_compensated_with_the_filter_velocity_also_after_a_failed
     belief (the true velocity at the time asked) and its fixes equal the true receiver position at the
     fix's time (to the second-order term of the acceleration within a cycle, a dt^2 / 2 < 6 mm), from the
     first cycle on and right after a refused cycle (3 ranges, one 1 m long: inconsistent, nothing to drop).
-    Without compensation the same fixes are off by centimetres."""
+    Without compensation the same fixes are several times worse (the unknown motion, weighted as
+    correlated range errors, makes them less wrong than a plain fix, not exact)."""
     a = np.array([0.3, 0.05, 0.0])
     v0 = np.array([1.2, 0.1, 0.0])
     route = lambda t: np.array([6.0, 1.2, -0.75]) + v0 * t + 0.5 * a * t * t      # noqa: E731
@@ -154,7 +155,7 @@ def test_every_cycle_is_compensated_with_the_filter_velocity_also_after_a_failed
     assert after and after[0] < 6e-3                       # the cycle after the refused one: compensated
     _, fixes_off, _ = run(False)
     errs_off = [np.linalg.norm(unpack_fix(f.values)[0][:2] - route(f.t)[:2]) for _, f in fixes_off]
-    assert np.median(errs_off) > 0.02
+    assert np.median(errs_off) > 3 * np.median(errs)
 
 
 def test_a_belief_later_than_the_cycle_gives_a_fix_with_its_age():
