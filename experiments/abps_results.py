@@ -197,7 +197,7 @@ VARIANTS = [
     ("`--filter ekf` (analytic INS Jacobian, per sample)", {"filter": {"type": "ekf"}}),
     ("paper's Euler p, v (eqs. 40-41)", {"process.integration": "euler"}),
     ("eta = 10 (eq. 50 norm correction)", {"process.eta": 10.0}),
-    ("no motion compensation (ranges of a cycle as if taken at once)", {"sensors.abps.preprocessor.motion_compensation": False}),
+    ("no motion compensation (the unknown motion in the fix covariance)", {"sensors.abps.preprocessor.motion_compensation": False}),
     ("paper's OLS fix (no Gauss-Newton, first-order covariance)", {"sensors.abps.preprocessor.refine_iterations": 0}),
     ("no misfit factor on the fix covariance", {"sensors.abps.preprocessor.inflate_misfit": False}),
     ("firing period given (0.4 s) instead of learnt", {"sensors.abps.preprocessor.firing_period": 0.4}),
