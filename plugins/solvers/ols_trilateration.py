@@ -9,12 +9,12 @@ velocity (fusion.api.ReadsBelief) and emits one fix message with an honest covar
 """
 from __future__ import annotations
 
+import math
 from typing import Any, Callable, ClassVar, Literal, Sequence
 
 import numpy as np
 from pydantic import Field
 
-from fusion import quaternion as quat
 from fusion.api import Belief, BuildContext, ConfigError, Event, MalformedMessage, Message, Params, Solver
 from fusion_plugins.solvers.firing_schedule import FiringSchedule
 from fusion_plugins.solvers.ols_linear import _condition, _ols_fit, _solve_linear
@@ -100,6 +100,17 @@ def trilaterate(beacons: np.ndarray, ranges: np.ndarray, *, dim: int = 3, z: flo
     info = {**fit.info, "residuals": fit.residuals, "chi2": fit.chi2, "dof": fit.dof, "used": fit.used,
             "rejected": rejected}
     return fit.pos, 0.5 * (cov + cov.T), info
+
+
+def _rotate(q: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """C_b^n(q) r for one quaternion (scalar first, any norm) and one body vector: r + 2 w (u x r) + 2 u x (u x r)
+    with q normalised, in floats (fusion.quaternion.rotate is for batches; this runs once per cycle)."""
+    w, a, b, c = q.tolist()
+    n = math.sqrt(w * w + a * a + b * b + c * c)
+    w, a, b, c = w / n, a / n, b / n, c / n
+    x, y, z = r.tolist()
+    tx, ty, tz = 2.0 * (b * z - c * y), 2.0 * (c * x - a * z), 2.0 * (a * y - b * x)     # t = 2 u x r
+    return np.array([x + w * tx + (b * tz - c * ty), y + w * ty + (c * tx - a * tz), z + w * tz + (a * ty - b * tx)])
 
 
 _IU3 = np.triu_indices(3)
@@ -353,7 +364,7 @@ class OlsTrilateration(Solver):
             start = np.full(3, p.z)
             start[:ps.stop - ps.start] = x[ps]
             if self._q is not None:
-                start = start + quat.rotate(x[self._q] / np.linalg.norm(x[self._q]), self._arm)
+                start = start + _rotate(x[self._q], self._arm)
             start = start - v * (t_b - t)                 # back to t (inputs past t already integrated)
             if p.dim == 2:
                 start[2] = p.z

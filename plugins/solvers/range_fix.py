@@ -99,7 +99,7 @@ def range_cov(U: np.ndarray, cyc: Cycle, idx: np.ndarray, sigma: float) -> np.nd
         S.flat[::k + 1] = sigma * sigma
     if cyc.z_var:
         uz = U[:, 2]
-        S += cyc.z_var * np.outer(uz, uz)
+        S += (cyc.z_var * uz)[:, None] * uz
     return S
 
 
@@ -119,9 +119,9 @@ def weighted_fix(cyc: Cycle, idx: np.ndarray, x0: np.ndarray, *, dim: int, z: fl
     """Gauss-Newton from ``x0`` (3,) on the range equations of the ranges ``idx`` weighted by Sigma_r^-1 (and
     the height prior in 2-D when solving for it); the covariance ``(J^T Sigma_r^-1 J)^-1`` at the solution.
 
-    Sigma_r is formed at the lines of sight of the start and again after the first step (later steps turn
-    them by step / range, a negligible change of the covariance) and inverted by Cholesky: each pass is
-    then a few small products.
+    Sigma_r is formed at the lines of sight of the start, again after a first step over 10 cm (a smaller
+    step turns them by step / range, a negligible change of the covariance), and inverted by Cholesky:
+    each pass is then a few small products.
     """
     B, r = cyc.B[idx], cyc.r[idx]
     prior = dim == 2 and z_sd > 0 and not cyc.z_var
@@ -173,7 +173,7 @@ def weighted_fix(cyc: Cycle, idx: np.ndarray, x0: np.ndarray, *, dim: int, z: fl
         d = x - B
         rho = np.sqrt((d * d).sum(axis=1))
         U = d / np.maximum(rho, 1e-12)[:, None]
-        if it == 1 and s2 > 1e-4:       # moved over 1 cm from the start: the weights at the new sight lines
+        if it == 1 and s2 > 1e-2:       # moved over 10 cm from the start: the weights at the new sight lines
             W = _weights(U, cyc, idx, sigma)
     stat = float(res @ W @ res) + (x[2] - z) ** 2 * wz
     Ninv = _dpotrs(C, _EYE[nu], lower=1)[0]
