@@ -151,9 +151,9 @@ def weighted_fix(cyc: Cycle, idx: np.ndarray, x0: np.ndarray, *, dim: int, z: fl
             break
         step = _dtrtrs(C, _dtrtrs(C, g, lower=1)[0], lower=1, trans=1)[0]   # N^-1 g by the Cholesky factor
         s2 = float(step @ step)
-        if s2 < 1e-8:
-            # converged (a step under 0.1 mm): the linearisation at x holds at x + step to O(step^2), so
-            # the residuals and the covariance are those of this pass, moved along the step
+        if s2 < 1e-6:
+            # converged (a step under 1 mm): the linearisation at x holds at x + step to O(step^2 / range),
+            # under a micrometre, so the residuals and the covariance are those of this pass, moved along it
             x[:nu] += step
             res = res - J @ step
             break
@@ -186,7 +186,7 @@ def weighted_fix(cyc: Cycle, idx: np.ndarray, x0: np.ndarray, *, dim: int, z: fl
             Ku = Ninv @ (WJ.T @ U[:, 2])
             cov[:2, 2] = cov[2, :2] = -cyc.z_var * Ku
     dof = len(idx) + (1 if prior else 0) - nu
-    return Fit(list(map(int, idx)), x, cov, stat, dof, res)
+    return Fit(idx.tolist(), x, cov, stat, dof, res)
 
 
 def consensus(k: int, solve: Callable[[np.ndarray], Fit], *, probability: float | None, max_outliers: int,
