@@ -135,8 +135,8 @@ class OlsParams(Params):
 
     dim: Literal[2, 3] = Field(2, description="2: the mine case (height z known to z_sd), 3: x y z from the ranges")
     z: float = Field(0.0, description="receiver height (m, navigation frame) assumed in 2-D")
-    z_sd: float = Field(0.1, ge=0, description="sd (m) of that height: its prior in the fix (refine > 0) and "
-                        "the sd attached to the fix's z")
+    z_sd: float = Field(0.1, ge=0, description="sd (m) of that height: a range error shared by a cycle in the fix "
+                        "covariance (refine > 0; the prior with solve_height) and the sd of the fix's z")
     range_sd: float = Field(0.05, gt=0, description="range noise sd (m)")
     firing_period: float | None = Field(None, gt=0, description="s: the beacons' firing period, which decides the "
                                         "cycles (None: learnt from the stream)")
@@ -193,9 +193,10 @@ class OlsTrilateration(Solver):
     ``prior_speed_sd``) as correlated range errors.
 
     **The fix** (:func:`trilaterate`): eq. 25 with the nearest beacon as reference, eq. 32 by Cholesky,
-    QR when cond(A^T A) > ``qr_condition``; then ``refine_iterations`` Gauss-Newton steps on the whitened
-    range equations. Covariance: range noise and geometry, the compensation uncertainty, the height prior
-    (2-D) and the residual misfit (``inflate_misfit``), plugins/solvers/range_fix.py. Emitted as
+    QR when cond(A^T A) > ``qr_condition``; then up to ``refine_iterations`` Gauss-Newton steps on the
+    whitened range equations, from the belief's receiver position (``lever_arm``) when compensating, else
+    from the OLS fix. Covariance: range noise and geometry, the compensation uncertainty, the assumed
+    height (2-D) and the residual misfit (``inflate_misfit``), plugins/solvers/range_fix.py. Emitted as
     ``Message(t, sensor, (x, y, z, cxx, cxy, cxz, cyy, cyz, czz[, age]))``: position (m) and the upper
     triangle of its covariance (m^2), which the ``position`` model uses as R.
 
