@@ -301,3 +301,11 @@ def test_no_fix_when_no_subset_is_consistent():
     pos, _, info = trilaterate(B6, r6, dim=2, z=-0.75, sigma=0.05, refine=3, consistency_probability=0.999,
                                max_outliers=2)
     assert sorted(info["rejected"]) == [1, 2] and np.linalg.norm(pos[:2] - x[:2]) < 1e-6
+
+
+def test_motion_compensation_needs_a_velocity_block():
+    from fusion.api import ConfigError
+
+    with pytest.raises(ConfigError, match="velocity block 'v'"):
+        OlsTrilateration(OlsParams(motion_compensation=True),
+                         BuildContext(layout=StateLayout.parse("p:3"), beacons=MINE, sensor="abps"))
