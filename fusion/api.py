@@ -9,7 +9,7 @@ axes, so a sigma-point filter calls them once per step with all ``2n+1`` points.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any, ClassVar, Literal, Mapping, NamedTuple, Sequence
+from typing import Any, Callable, ClassVar, Literal, Mapping, NamedTuple, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict
@@ -18,7 +18,7 @@ __all__ = [
     "Block", "StateLayout", "Belief", "Message", "Observation", "UpdateResult", "Event",
     "Estimate", "Params", "BuildContext", "Component", "ProcessModel", "MeasurementModel",
     "Filter", "Gate", "Decoder", "Solver", "Source", "Sink", "Simulator", "FusionError",
-    "ConfigError", "InputError", "MalformedMessage", "RejectedMessage", "KINDS",
+    "ConfigError", "InputError", "MalformedMessage", "RejectedMessage", "KINDS", "ReadsBelief",
     "Importer", "ImportRequest", "Stream", "ImportedLog",
 ]
 
@@ -408,6 +408,20 @@ class Solver(Component):
     def flush(self) -> list[Message]:
         """Messages still gathered at the end of the input."""
         return []
+
+
+@runtime_checkable
+class ReadsBelief(Protocol):
+    """Optional capability of a sensor preprocessor: it reads the filter's current predicted belief.
+
+    The run loop detects it once at wiring and calls ``bind_belief(belief_at)``. ``belief_at(t)`` returns
+    the belief predicted to sensor time ``t`` (s) with the input samples received so far (the prediction the
+    next update would make anyway; outputs it produces are emitted as usual), or None before the filter is
+    initialised. Its ``t`` may be later than the one asked for when inputs past it were already integrated
+    (no batching of inputs): the preprocessor then bridges the difference itself. Used by
+    ``ols_trilateration`` to refer the ranges of a firing cycle to one time with the filter's velocity."""
+
+    def bind_belief(self, belief_at: Callable[[float], Belief | None]) -> None: ...
 
 
 class Source(Component):

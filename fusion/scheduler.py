@@ -18,6 +18,7 @@ goes to ``on_nis`` (the pipeline's statistics), truth and reference lines are th
 """
 from __future__ import annotations
 
+import bisect
 import copy
 import heapq
 import itertools
@@ -29,7 +30,7 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from fusion.api import Belief, Estimate, Event, MalformedMessage, Message, RejectedMessage
+from fusion.api import Belief, Estimate, Event, MalformedMessage, Message, ReadsBelief, RejectedMessage
 from fusion.clock import ClockGuard
 from fusion.recovery import LockoutWatch, recover
 from fusion.config import SensorRuntime, System
@@ -54,6 +55,10 @@ def _failed(component, exc: Exception) -> MalformedMessage:
     plugin should raise MalformedMessage itself; the run goes on either way)."""
     who = f"{component.kind} {component.name!r}" if component is not None else "a plugin"
     return MalformedMessage(f"{who} failed on it: {type(exc).__name__}: {exc}")
+
+
+def _msg_t(msg: Message) -> float:
+    return msg.t
 
 
 class Scheduler:
@@ -106,6 +111,11 @@ class Scheduler:
         self._align_u: list[np.ndarray] = []
         self._align_t0: float | None = None
         self._last_input_t: float | None = None
+        # Preprocessors that read the belief (fusion.api.ReadsBelief), bound once here.
+        self._deferred: list[Estimate | Event] = []
+        for sensor in self.sensors.values():
+            if isinstance(sensor.preprocessor, ReadsBelief):
+                sensor.preprocessor.bind_belief(self._belief_at)
 
     # ------------------------------------------------------------------ public
     def run(self, messages: Iterable[Message | MalformedMessage]) -> Iterator[Estimate | Event]:
@@ -188,7 +198,11 @@ class Scheduler:
         # final fix is not older than the belief.
         for sensor in self.sensors.values():
             if sensor.preprocessor is not None:
-                for out in sensor.preprocessor.flush():
+                outs = sensor.preprocessor.flush()
+                if self._deferred:
+                    deferred, self._deferred = self._deferred, []
+                    yield from deferred
+                for out in outs:
                     yield from self._measure(sensor, out)
                 yield from self._drain_solver_events(sensor)
         if self._pending:
@@ -215,7 +229,16 @@ class Scheduler:
             yield from self._flush_inputs()
 
     def _flush_inputs(self, until: float | None = None) -> Iterator[Estimate | Event]:
-        batch, self._pending = self._pending, []
+        """Integrate the pending input samples; with ``until`` only those up to that time (the last one held
+        to it), the later ones stay pending, so a measurement at ``until`` is applied at its own time."""
+        pending = self._pending
+        if until is not None and pending and pending[-1].t > until:
+            k = bisect.bisect_right(pending, until, key=_msg_t)      # pending is in time order
+            batch, self._pending = pending[:k], pending[k:]
+            if not batch:
+                return
+        else:
+            batch, self._pending = pending, []
         yield from self._inputs(batch, until)
 
     def _process(self, msg: Message) -> Iterator[Estimate | Event]:
@@ -236,6 +259,9 @@ class Scheduler:
         except Exception as exc:  # a plugin that fails on one message must not stop the run
             yield self._bad(sensor, msg, _failed(sensor.preprocessor or sensor.decoder, exc))
             return
+        if self._deferred:                      # what a belief_at() call released (outputs, input events)
+            deferred, self._deferred = self._deferred, []
+            yield from deferred
         yield from self._drain_solver_events(sensor)
         for out in outs:
             yield from self._measure(sensor, out)
@@ -272,6 +298,18 @@ class Scheduler:
         if events:
             yield from list(events)
             events.clear()
+
+    def _belief_at(self, t: float) -> Belief | None:
+        """The belief predicted to ``t`` with the inputs so far (for a ReadsBelief preprocessor), or None before
+        initialisation; later than ``t`` when inputs past it are already integrated. What the prediction
+        emits is yielded after the preprocessor's feed returns."""
+        if self.belief is None:
+            return None
+        if self._pending:
+            self._deferred.extend(self._flush_inputs(until=t))
+        if self.belief.t < t:
+            self._deferred.extend(self._predict_to(t))
+        return self.belief
 
     def _start(self, t: float) -> None:
         """The first belief, at ``t``: the configured one, aligned and with the remembered fix if any."""

@@ -172,10 +172,10 @@ class _Rows:
     def __getitem__(self, i: int) -> np.ndarray:
         row = np.array(self._v[i], dtype=float)
         for cols in self._quats.values():
-            q = row[cols]
-            n = np.linalg.norm(q)
-            if n > 0:
-                row[cols] = q / n
+            # as Truth does it over all rows at once (the same reduction, so the same last bit)
+            q = row[None, cols]
+            nrm = np.linalg.norm(q, axis=1, keepdims=True)
+            row[cols] = np.divide(q, nrm, out=q.copy(), where=nrm > 0)[0]
         return row
 
 

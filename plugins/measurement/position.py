@@ -139,8 +139,8 @@ class Position(MeasurementModel):
 class AgedPosition(MeasurementModel):
     """A fix of the position ``age`` seconds before its time stamp: ``z = p - v age + C_b^n r`` (the
     position model bridged to the update time with the state's velocity, first order). Bound per
-    observation by :meth:`Position.observe` for a 10-value fix message (``ols_trilateration`` with
-    ``age: true``); not a registry component."""
+    observation by :meth:`Position.observe` for a 10-value fix message (``ols_trilateration`` when the
+    belief it compensated with is later than the cycle's mean range time); not a registry component."""
 
     name: ClassVar[str] = "position (aged)"
 

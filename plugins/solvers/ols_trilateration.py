@@ -1,143 +1,64 @@
-"""Solver ``ols_trilateration``: a position fix from one cycle of beacon ranges (paper 000 sec. IV, eqs. 17-32).
+"""Solver ``ols_trilateration``: a position fix from one firing cycle of beacon ranges (paper 000 sec. IV,
+eqs. 17-32).
 
 The pure function :func:`trilaterate` does one fix (used by tests and initialisers); the component
-:class:`OlsTrilateration` is the sensor preprocessor that gathers a cycle of ``beacon range`` messages
-and emits one fix message with its covariance.
+:class:`OlsTrilateration` is the sensor preprocessor that groups ``beacon range`` messages into firing
+cycles (plugins/solvers/firing_schedule.py), refers each cycle's ranges to one time with the filter's
+velocity (fusion.api.ReadsBelief) and emits one fix message with an honest covariance
+(plugins/solvers/range_fix.py).
 """
 from __future__ import annotations
 
 import math
-from typing import Any, ClassVar, Literal, Sequence
+from typing import Any, Callable, ClassVar, Literal, Sequence
 
 import numpy as np
 from pydantic import Field
-from scipy.linalg import cho_factor, cho_solve, qr, solve_triangular
-from scipy.linalg.lapack import dpotrf as _dpotrf, dpotrs as _dpotrs
-from fusion.chisquare import chi2
 
-from fusion.api import BuildContext, ConfigError, Event, MalformedMessage, Message, Params, Solver
+from fusion.api import Belief, BuildContext, ConfigError, Event, MalformedMessage, Message, Params, Solver
+from fusion_plugins.solvers.firing_schedule import FiringSchedule
+from fusion_plugins.solvers.ols_linear import _condition, _ols_fit, _solve_linear
+from fusion_plugins.solvers.range_fix import Cycle, Fit, NoFix, consensus, inflate, weighted_fix
 
-REASONS = ("too_few_beacons", "degenerate", "inconsistent")
-
-
-class NoFix(ValueError):
-    """No fix from these ranges; ``reason`` is one of ``too_few_beacons``, ``degenerate``, ``inconsistent``."""
-
-    def __init__(self, reason: str, detail: str):
-        super().__init__(f"{reason}: {detail}")
-        self.reason = reason
-        self.detail = detail
-
-
-def _solve_linear(B: np.ndarray, r: np.ndarray, dim: int, z: float, ref: int,
-                  qr_condition: float, degenerate_condition: float) -> tuple[np.ndarray, np.ndarray, dict]:
-    """OLS/QR solution of eqs. 25-32 with beacon ``ref`` as the reference point; returns the position (3,),
-    the gain G (dim, k) from ranges to position (first order) and info."""
-    k = len(r)
-    others = [i for i in range(k) if i != ref]
-    D = B[others] - B[ref]                                    # B_i - B_ref (k-1, 3)
-    A = D[:, :dim]                                            # eq. 28 (the factor 2 moved into b, eq. 25)
-    b = 0.5 * (r[ref] ** 2 - r[others] ** 2 + (D * D).sum(axis=1))        # eqs. 25-26, 30
-    if dim == 2:
-        b = b - D[:, 2] * (z - B[ref, 2])                     # known height: its term moves to b
-    AtA = A.T @ A
-    if dim == 2:                       # eigenvalues of the symmetric 2 x 2 A^T A in closed form (an SVD: ~10 us)
-        h = 0.5 * (AtA[0, 0] + AtA[1, 1])
-        e = math.sqrt(max(h * h - (AtA[0, 0] * AtA[1, 1] - AtA[0, 1] * AtA[1, 0]), 0.0))
-        lo, hi = h - e, h + e
-        cond = np.inf if lo <= hi * 1e-300 else hi / lo                  # cond(A^T A)
-    else:
-        sv = np.linalg.svd(A, compute_uv=False)
-        cond = np.inf if sv[-1] <= sv[0] * 1e-300 else float((sv[0] / sv[-1]) ** 2)
-    if not cond <= degenerate_condition:
-        raise NoFix("degenerate", f"cond(A^T A) = {cond:.3g} > {degenerate_condition:.3g}: beacons "
-                    f"{'collinear' if dim == 2 else 'coplanar'} or too close together")
-    M = None
-    if cond <= qr_condition:                                  # eq. 32 by Cholesky of the normal equations
-        c, info = _dpotrf(AtA, lower=1)                        # LAPACK directly: ~2 us, scipy's wrappers ~20
-        if info == 0:
-            M = _dpotrs(c, A.T, lower=1)[0]
-            method = "ols"
-    if M is None:                                             # A = QR, R x = Q^T b by back substitution
-        Qm, Rm = qr(A, mode="economic", check_finite=False)
-        M = solve_triangular(Rm, Qm.T, check_finite=False)    # (A^T A)^-1 A^T without forming A^T A
-        method = "qr"
-    xrel = M @ b                                              # eq. 29: x - x_ref
-    pos = B[ref].copy()
-    pos[:dim] += xrel
-    if dim == 2:
-        pos[2] = z
-    # First order: db_i = r_ref dr_ref - r_i dr_i (r at the fix, less noisy than measured)
-    dB = pos - B
-    d_fix = np.sqrt((dB * dB).sum(axis=1))
-    Jb = np.zeros((k - 1, k))
-    Jb[:, ref] = d_fix[ref]
-    Jb[np.arange(k - 1), others] = -d_fix[others]
-    return pos, M @ Jb, {"method": method, "cond": cond}
-
-
-def _refine(B: np.ndarray, r: np.ndarray, pos: np.ndarray, dim: int, iterations: int) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss-Newton on the range equations (eq. 17) from ``pos``; returns the position and J (k, dim)."""
-    pos = pos.copy()
-    for _ in range(iterations + 1):
-        d = pos - B
-        rng = np.linalg.norm(d, axis=1)
-        J = d[:, :dim] / np.maximum(rng, 1e-12)[:, None]     # unit lines of sight
-        if _ == iterations:
-            break
-        c = cho_factor(J.T @ J, check_finite=False)
-        pos[:dim] += cho_solve(c, J.T @ (r - rng), check_finite=False)
-    return pos, J
-
-
-def _fix(B: np.ndarray, r: np.ndarray, dim: int, z: float, z_sd: float, sigma: float, reference: str | int,
-         qr_condition: float, degenerate_condition: float, refine: int) -> tuple[np.ndarray, np.ndarray, dict]:
-    k = len(r)
-    if k < dim + 1:
-        raise NoFix("too_few_beacons", f"{k} range(s), a {dim}-D fix needs at least {dim + 1}")
-    ref = int(np.argmin(r)) if reference == "nearest" else (0 if reference == "first" else int(reference))
-    pos, G, info = _solve_linear(B, r, dim, z, ref, qr_condition, degenerate_condition)
-    cov = np.zeros((3, 3))
-    if refine:
-        pos, J = _refine(B, r, pos, dim, refine)
-        cov[:dim, :dim] = sigma**2 * cho_solve(cho_factor(J.T @ J, check_finite=False), np.eye(dim))
-        info["method"] += "+gauss-newton"
-    else:
-        cov[:dim, :dim] = sigma**2 * (G @ G.T)               # cov of the OLS fix through the linear model
-    if dim == 2:
-        cov[2, 2] = z_sd**2
-    info["reference"] = ref
-    dB = pos - B
-    info["residuals"] = r - np.sqrt((dB * dB).sum(axis=1))
-    return pos, 0.5 * (cov + cov.T), info
+REASONS = ("too_few_beacons", "degenerate", "inconsistent", "ambiguous")
+__all__ = ["NoFix", "trilaterate", "pack_fix", "unpack_fix", "OlsParams", "OlsTrilateration"]
 
 
 def trilaterate(beacons: np.ndarray, ranges: np.ndarray, *, dim: int = 3, z: float = 0.0, z_sd: float = 0.0,
                 sigma: float = 1.0, reference: str | int = "nearest", qr_condition: float = 1e6,
                 degenerate_condition: float = 1e12, refine: int = 0, consistency_probability: float | None = None,
-                consistency_sd: float | None = None, max_outliers: int = 1) -> tuple[np.ndarray, np.ndarray, dict]:
-    """One position fix from ranges to known beacons (paper 000 eqs. 17-32).
+                max_outliers: int = 1, min_beacons: int | None = None, offsets: np.ndarray | None = None,
+                velocity_cov: np.ndarray | None = None, accel_sd: float = 0.0, solve_height: bool = False,
+                inflate_misfit: bool = False, start: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+    """One position fix from ranges to known beacons (paper 000 eqs. 17-32), with outlier rejection.
 
-    :param beacons: (k, 3) beacon positions (m, navigation frame; (k, 2) is padded with ``z``).
+    :param beacons: (k, 3) beacon positions (m, navigation frame; (k, 2) is padded with ``z``), already
+        shifted by ``-v dt`` when the ranges were referred to one time (motion compensation).
     :param ranges: (k,) measured ranges (m).
-    :param dim: 3 (x, y, z unknown, k >= 4 non-coplanar) or 2 (the mine case: the receiver height is the
-        known ``z``, k >= 3 non-collinear beacons).
-    :param sigma: range noise sd (m); ``z_sd`` the sd attached to the known height in 2-D.
-    :param reference: the reference beacon of eq. 25: ``nearest`` (shortest range: its noise enters every
-        row of b scaled by its range), ``first`` (the paper's B1) or an index.
+    :param dim: 3 (x, y, z from the ranges, k >= 4 non-coplanar) or 2 (the mine case: the receiver height
+        ``z`` is known to ``z_sd``, k >= 3 non-collinear beacons).
+    :param sigma: range noise sd (m).
+    :param reference: the reference beacon of eq. 25: ``nearest`` (shortest range), ``first`` (the paper's
+        B1) or an index.
     :param qr_condition: above this cond(A^T A) the QR path (A = QR, R x = Q^T b) replaces the normal
         equations of eq. 32; above ``degenerate_condition`` there is no fix (``degenerate``).
-    :param refine: Gauss-Newton iterations on the range equations after the OLS fix (0: the paper's OLS).
-    :param consistency_probability: if set, chi-square test of the range residuals with ``k - dim`` degrees
-        of freedom at sd ``consistency_sd`` (default ``sigma``); a failed test removes the beacon whose
-        exclusion fits best (up to ``max_outliers``, needs k - dim >= 2) or gives no fix (``inconsistent``).
-    :returns: ``(position (3,), covariance (3, 3), info)``. The covariance is first order: with the OLS
-        fix ``x = M b(r)``, ``cov = sigma^2 (M J_b)(M J_b)^T`` where J_b = db/dr (b is eq. 25, so its errors
-        are correlated through the reference range); after Gauss-Newton ``cov = sigma^2 (J^T J)^-1`` with
-        J the unit line-of-sight rows. In 2-D the z row/column is ``z_sd^2`` on the diagonal only. ``info``:
-        ``method`` (ols/qr[+gauss-newton]), ``cond`` (of A^T A), ``reference``, ``residuals`` (m),
-        ``chi2``, ``dof``, ``used`` and ``rejected`` (indices into the input).
-    :raises NoFix: with ``reason`` too_few_beacons, degenerate or inconsistent.
+    :param refine: Gauss-Newton iterations on the whitened range equations (eq. 17) after the OLS fix
+        (0: the paper's OLS, with its first-order covariance). With ``refine`` > 0 in 2-D the height's
+        uncertainty ``z_sd`` is part of the range covariance, or (``solve_height``) the height is
+        estimated too, with the prior z ~ N(z, z_sd^2) (plugins/solvers/range_fix.py).
+    :param offsets: (k,) s, time of each range minus the fix time; with ``velocity_cov`` (3, 3) (m^2/s^2)
+        and ``accel_sd`` (m/s^2) the uncertainty of referring the ranges to the fix time, as correlated
+        range errors.
+    :param consistency_probability: if set, the chi-square test of the whitened residuals; a failed cycle
+        gives the largest consistent subset (consensus, up to ``max_outliers`` dropped, at least
+        ``min_beacons`` kept) or no fix (``inconsistent`` / ``ambiguous``).
+    :param inflate_misfit: scale the covariance by max(1, chi2 / dof).
+    :param start: (3,) m, where Gauss-Newton starts (``refine`` > 0) instead of the OLS fix, e.g. the last
+        fix moved by the velocity (the OLS test of eq. 28's geometry still applies).
+    :returns: ``(position (3,), covariance (3, 3), info)``; ``info``: ``method`` (ols/qr[+gauss-newton]),
+        ``cond`` (of A^T A), ``reference``, ``residuals`` (m, of the used ranges), ``chi2``, ``dof``,
+        ``used`` and ``rejected`` (indices into the input).
+    :raises NoFix: with ``reason`` too_few_beacons, degenerate, inconsistent or ambiguous.
     """
     B = np.asarray(beacons, dtype=float)
     r = np.asarray(ranges, dtype=float)
@@ -149,44 +70,47 @@ def trilaterate(beacons: np.ndarray, ranges: np.ndarray, *, dim: int = 3, z: flo
         B = np.column_stack([B, np.full(len(B), z)])
     if not (np.isfinite(B.sum()) and np.isfinite(r.sum())):     # one reduction each (a nan or inf propagates)
         raise ValueError("beacons and ranges must be finite")
-    args = (dim, z, z_sd, sigma, reference, qr_condition, degenerate_condition, refine)
-    idx = np.arange(len(r))
-    pos, cov, info = _fix(B, r, *args)
-    rejected: list[int] = []
-    if consistency_probability is not None:
-        sd = consistency_sd if consistency_sd is not None else sigma
-        while True:
-            dof = len(idx) - dim
-            stat = float(np.sum(info["residuals"] ** 2) / sd**2)
-            info.update(chi2=stat, dof=dof)
-            if dof < 1 or stat <= chi2.ppf(consistency_probability, dof):
-                break
-            if dof < 2 or len(rejected) >= max_outliers:
-                raise NoFix("inconsistent", f"range residuals chi2 = {stat:.1f} with {dof} dof "
-                            f"(limit {chi2.ppf(consistency_probability, dof):.1f}, residuals "
-                            f"{np.round(info['residuals'], 3).tolist()} m)")
-            best = None
-            for j in range(len(idx)):           # leave one out: keep the subset that fits best
-                keep = np.r_[0:j, j + 1:len(idx)]
-                sub = idx[keep]
-                ref = reference if isinstance(reference, str) else int(np.flatnonzero(sub == reference)[0]) if reference in sub else 0
-                try:
-                    cand = _fix(B[idx[keep]], r[idx[keep]], *args[:4], ref, *args[5:])
-                except NoFix:
-                    continue
-                s = float(np.sum(cand[2]["residuals"] ** 2))
-                if best is None or s < best[0]:
-                    best = (s, j, cand)
-            if best is None:
-                raise NoFix("inconsistent", "no consistent subset of the ranges")
-            _, j, (pos, cov, info) = best
-            rejected.append(int(idx[j]))
-            idx = np.delete(idx, j)
-    info["used"] = idx.tolist()
-    info["rejected"] = rejected
-    info.setdefault("chi2", float(np.sum(info["residuals"] ** 2) / sigma**2))
-    info.setdefault("dof", len(idx) - dim)
-    return pos, cov, info
+    k = len(r)
+    if k < dim + 1:
+        raise NoFix("too_few_beacons", f"{k} range(s), a {dim}-D fix needs at least {dim + 1}")
+    dt = np.zeros(k) if offsets is None else np.asarray(offsets, dtype=float)
+    cyc = Cycle(B, r, dt, None if velocity_cov is None else np.asarray(velocity_cov, dtype=float), accel_sd,
+                z_sd ** 2 if (dim == 2 and refine and not solve_height) else 0.0)
+    lin = (dim, z, z_sd, sigma, reference, qr_condition, degenerate_condition)
+
+    def solve(idx: np.ndarray) -> Fit:
+        if not refine:
+            return _ols_fit(cyc, idx, *lin)
+        Bi, ri = cyc.B[idx], cyc.r[idx]
+        ref = int(np.argmin(ri)) if reference == "nearest" else 0
+        if start is None:                                     # the paper's OLS is the start
+            pos0, _, info = _solve_linear(Bi, ri, dim, z, ref, qr_condition, degenerate_condition, gain=False)
+        else:                                                 # a start given: only eq. 28's geometry test
+            D = np.delete(Bi, ref, axis=0) - Bi[ref]
+            pos0, info = np.asarray(start, dtype=float), {"method": "start",
+                                                          "cond": _condition(D, dim, degenerate_condition)}
+        g = weighted_fix(cyc, idx, pos0, dim=dim, z=z, z_sd=z_sd, sigma=sigma, iterations=refine)
+        g.info = {**info, "method": info["method"] + "+gauss-newton", "reference": int(idx[ref])}
+        return g
+
+    fit, rejected = consensus(k, solve, probability=consistency_probability, max_outliers=max_outliers,
+                              min_beacons=max(dim + 1, min_beacons or 0),
+                              fix_dof=3 if dim == 3 or (refine and z_sd > 0 and solve_height) else 2)
+    cov = inflate(fit) if inflate_misfit else fit.cov
+    info = {**fit.info, "residuals": fit.residuals, "chi2": fit.chi2, "dof": fit.dof, "used": fit.used,
+            "rejected": rejected}
+    return fit.pos, 0.5 * (cov + cov.T), info
+
+
+def _rotate(q: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """C_b^n(q) r for one quaternion (scalar first, any norm) and one body vector: r + 2 w (u x r) + 2 u x (u x r)
+    with q normalised, in floats (fusion.quaternion.rotate is for batches; this runs once per cycle)."""
+    w, a, b, c = q.tolist()
+    n = math.sqrt(w * w + a * a + b * b + c * c)
+    w, a, b, c = w / n, a / n, b / n, c / n
+    x, y, z = r.tolist()
+    tx, ty, tz = 2.0 * (b * z - c * y), 2.0 * (c * x - a * z), 2.0 * (a * y - b * x)     # t = 2 u x r
+    return np.array([x + w * tx + (b * tz - c * ty), y + w * ty + (c * tx - a * tz), z + w * tz + (a * ty - b * tx)])
 
 
 _IU3 = np.triu_indices(3)
@@ -209,71 +133,78 @@ def unpack_fix(values: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
 class OlsParams(Params):
     """YAML parameters of ``ols_trilateration`` (lengths in m, times in s)."""
 
-    dim: Literal[2, 3] = Field(2, description="2: the mine case (z known), 3: x y z estimated")
-    z: float = Field(0.0, description="receiver height (m, navigation frame) used in 2-D")
-    z_sd: float = Field(0.1, ge=0, description="sd (m) of the known height, attached to the 2-D fix")
-    range_sd: float = Field(0.05, gt=0, description="range noise sd (m): the fix covariance scales with it")
-    window: float = Field(1.0, gt=0, description="a cycle holds ranges within this time of its first one")
+    dim: Literal[2, 3] = Field(2, description="2: the mine case (height z known to z_sd), 3: x y z from the ranges")
+    z: float = Field(0.0, description="receiver height (m, navigation frame) assumed in 2-D")
+    z_sd: float = Field(0.1, ge=0, description="sd (m) of that height: a range error shared by a cycle in the fix "
+                        "covariance (refine > 0; the prior with solve_height) and the sd of the fix's z")
+    range_sd: float = Field(0.05, gt=0, description="range noise sd (m)")
+    firing_period: float | None = Field(None, gt=0, description="s: the beacons' firing period, which decides the "
+                                        "cycles (None: learnt from the stream)")
+    speed_of_sound: float | None = Field(None, gt=0, description="m/s: ultrasonic time of flight; the emission "
+                                         "time t - r / c places a range in its firing slot (None: the arrival time)")
+    learn_s: float = Field(2.0, gt=0, description="s of ranges from which the period (if not given) and the "
+                           "slot phases are learnt (the ranges are held meanwhile)")
     min_beacons: int | None = Field(None, ge=3, description="fewest beacons for a fix (default dim + 1)")
     beacons: list[str] | None = Field(None, description="beacons this receiver ranges (default: all); a cycle "
                                       "closes as soon as each has reported")
     reference: Literal["nearest", "first"] = "nearest"
     qr_condition: float = Field(1e6, gt=1, description="cond(A^T A) above which QR replaces eq. 32")
     degenerate_condition: float = Field(1e12, gt=1, description="cond(A^T A) above which there is no fix")
-    refine_iterations: int = Field(0, ge=0, description="Gauss-Newton iterations after OLS (0: paper)")
-    consistency_probability: float | None = Field(0.999, gt=0, lt=1, description="chi-square test of range "
-                                                  "residuals (None: off, leave outliers to the filter's gate)")
-    consistency_sd: float | None = Field(None, gt=0, description="range sd (m) for that test (default "
-                                         "range_sd; raise it to tolerate motion within a cycle)")
-    max_outliers: int = Field(1, ge=0, description="ranges a cycle may drop to pass the test")
-    age: bool = Field(False, description="with stamp close: refer the ranges to their mean time instead and "
-                      "append that fix's age (s) at the closing time as a 10th value, for a measurement "
-                      "model that bridges it with the state's velocity (position: p - v age)")
-    stamp: Literal["mean", "last", "close"] = Field("mean", description="fix time: mean or last of the cycle's "
-                                                    "ranges, or when the cycle closed (needs motion_compensation)")
-    motion_compensation: bool = Field(False, description="refer every range of a cycle to the fix time with "
-                                      "the velocity fitted to the recent fixes (not in the paper)")
-    velocity_span: float = Field(1.3, gt=0, description="fixes within this many s give that velocity")
-    max_speed: float = Field(3.0, gt=0, description="m/s; a faster fitted velocity is not used")
-    accel_sd: float = Field(0.15, ge=0, description="m/s^2: unmodelled acceleration, adds to the covariance of "
-                            "a compensated fix (with the velocity's own uncertainty)")
+    refine_iterations: int = Field(0, ge=0, description="Gauss-Newton iterations after OLS (0: the paper's OLS)")
+    consistency_probability: float | None = Field(0.999, gt=0, lt=1, description="chi-square test of the "
+                                                  "whitened range residuals (None: off, outliers left to the gate)")
+    max_outliers: int = Field(2, ge=0, description="ranges a cycle may drop to pass the test (consensus)")
+    motion_compensation: bool = Field(False, description="refer every range of a cycle to the fix time with the "
+                                      "filter's predicted velocity (fusion.api.ReadsBelief; not in the paper)")
+    velocity_sd: float = Field(0.05, ge=0, description="m/s: receiver velocity the state's v does not carry (a "
+                               "lever arm turning), added to the filter's velocity uncertainty")
+    accel_sd: float = Field(0.5, ge=0, description="m/s^2: acceleration within a cycle (unmodelled)")
+    lever_arm: tuple[float, float, float] | None = Field(None, description="receiver in the body frame (m, FRD), "
+                                                         "as the position model's: with compensation the "
+                                                         "fix starts from the belief's receiver position")
+    prior_speed_sd: float = Field(1.0, gt=0, description="m/s: velocity sd while the filter has no belief yet "
+                                  "(velocity 0 assumed)")
+    solve_height: bool = Field(False, description="2-D with refine: estimate z with the prior N(z, z_sd^2) "
+                               "(for beacons well above the receiver) instead of taking it as known to z_sd")
+    inflate_misfit: bool = Field(True, description="scale the fix covariance by max(1, chi2 / dof)")
 
 
 class OlsTrilateration(Solver):
     """ABPS position fixes by OLS trilateration (paper 000 sec. IV, eqs. 17-32), as a sensor preprocessor.
 
     Input messages: ``beacon range`` (label, m); beacon positions from the config (``context.beacons``).
-    A cycle gathers the latest range per beacon, starting at its first range; it closes when a beacon
-    repeats, when a range comes ``window`` s after the first, or when every expected beacon has reported
-    (then at once). A closed cycle with at least ``min_beacons`` ranges gives one fix (see
-    :func:`trilaterate`: eq. 25 with the nearest beacon as reference, eq. 32 by Cholesky, QR when
-    cond(A^T A) > ``qr_condition``), emitted as ``Message(t, sensor, (x, y, z, cxx, cxy, cxz, cyy, cyz,
-    czz))``: position (m) and the upper triangle of its covariance (m^2), which the ``position`` model uses
-    as R. ``t`` is set by ``stamp`` (below).
 
-    Ranges of one cycle are taken at different times (paper 000: beacons fire in turn) while the vehicle
-    moves (1 m/s over a 0.3 s cycle: 0.3 m). ``motion_compensation`` refers them all to the fix time
-    t_fix: with v the least-squares velocity of the recent fixes (those within ``velocity_span`` s, each
-    taken at the mean time of its ranges, so the velocity does not feed back on itself), the range taken
-    at t_i is from the fix position displaced by v (t_i - t_fix), i.e. from the beacon shifted by
-    -v (t_i - t_fix), and the same linear model applies. The covariance then gains tau^2 P_v plus an
-    unmodelled-acceleration term (``accel_sd``), tau = t_fix - mean range time. ``stamp``: ``mean`` (the
-    mean time of the ranges: best fix, 0.09 m RMSE on the ABPS recording), ``last`` (the last range),
-    or ``close`` (needs compensation: the time of the message that closed the cycle, i.e. when the
-    scheduler applies the fix, so an update is never applied later than its time stamp; 0.12 m RMSE,
-    fix NEES ~2.3 for 2 dof on the recording). Without compensation the fix is an average over the cycle
-    (0.145 m RMSE) and ``mean`` is its best time. ``age`` (with ``close``): the ranges are referred to
-    their mean time t_m (where an error of the fitted velocity hardly matters) and the message, still
-    sent at the closing time, carries the fix's age ``t_close - t_m`` as a 10th value; the ``position``
-    model then predicts it as ``p - v age + C_b^n r`` with the filter's own velocity, instead of the fix
-    extrapolating with the fitted one (whose error is shared by consecutive fixes).
+    **Cycles from the firing schedule** (plugins/solvers/firing_schedule.py): the beacons fire in turn
+    every ``firing_period`` (given, or learnt from the first ``learn_s`` of the stream); the emission time of
+    a range (arrival time minus r / ``speed_of_sound``) puts it in its firing cycle. A repeat of a beacon
+    never merges two cycles; a cycle that would span more than its period, or hold a beacon twice, is
+    split. A cycle closes when a range of a later cycle arrives, when every expected beacon has reported,
+    or at the end of the input (flush).
 
-    Outliers (1% in the ABPS recording, a longer reflected path): with redundancy (k > dim + 1) the range
-    residuals are tested (chi-square, ``consistency_probability``) and the one beacon whose exclusion fits
-    best is dropped; with k = dim + 1 the test can only refuse the fix. Smaller outliers are left to the
-    filter's gate on the fix. No fix: ``counters`` counts the reason (``too_few_beacons``, ``degenerate``,
-    ``inconsistent``) and ``events`` gets an Event ``no_fix``; a dropped range counts ``outliers_removed``
-    and gives an Event ``rejected``.
+    **Motion compensation** (``motion_compensation``): the fix is of the receiver at the mean time t_m of
+    the cycle's ranges; the filter's belief predicted to t_m (fusion.api.ReadsBelief) gives the velocity v
+    and its covariance P_v, and the range taken at t_i is from the beacon shifted by ``-v (t_i - t_m)``.
+    The uncertainty of that shift (P_v plus ``velocity_sd``^2, and ``accel_sd``) is part of the fix
+    covariance. Every cycle is compensated, also right after a failed fix. The fix is stamped at the
+    belief's time; when that is later than t_m (inputs past t_m already integrated), the message carries
+    the age ``t - t_m`` as a 10th value and the ``position`` model bridges it with the state's velocity.
+    Before the filter has a belief, v = 0 with sd ``prior_speed_sd``. Without compensation the fix is
+    stamped at t_m, and its covariance takes the unknown motion over the cycle (velocity sd
+    ``prior_speed_sd``) as correlated range errors.
+
+    **The fix** (:func:`trilaterate`): eq. 25 with the nearest beacon as reference, eq. 32 by Cholesky,
+    QR when cond(A^T A) > ``qr_condition``; then up to ``refine_iterations`` Gauss-Newton steps on the
+    whitened range equations, from the belief's receiver position (``lever_arm``) when compensating, else
+    from the OLS fix. Covariance: range noise and geometry, the compensation uncertainty, the assumed
+    height (2-D) and the residual misfit (``inflate_misfit``), plugins/solvers/range_fix.py. Emitted as
+    ``Message(t, sensor, (x, y, z, cxx, cxy, cxz, cyy, cyz, czz[, age]))``: position (m) and the upper
+    triangle of its covariance (m^2), which the ``position`` model uses as R.
+
+    **Outliers** (1% in the ABPS recording, a longer reflected path): consensus over subsets scored by
+    the chi-square of the residuals; no fix when no subset is consistent or two disagree. No fix:
+    ``counters`` counts the reason (``too_few_beacons``, ``degenerate``, ``inconsistent``, ``ambiguous``)
+    and ``events`` gets an Event ``no_fix``; a dropped range counts ``outliers_removed`` and gives an
+    Event ``rejected``.
     """
 
     name: ClassVar[str] = "ols_trilateration"
@@ -289,28 +220,41 @@ class OlsTrilateration(Solver):
                               f"{sorted(self.context.beacons)}")
         self.beacon_positions = {n: self._pad(self.context.beacons[n]) for n in names}
         self.min_beacons = p.min_beacons if p.min_beacons is not None else p.dim + 1
-        if p.stamp == "close" and not p.motion_compensation:
-            raise ConfigError("ols_trilateration: stamp: close needs motion_compensation: true (the ranges are "
-                              "referred to the closing time with the fitted velocity)")
-        if p.age and p.stamp != "close":
-            raise ConfigError("ols_trilateration: age: true needs stamp: close (the age is the time from the "
-                              "position the fix gives to the closing message)")
         if self.min_beacons < p.dim + 1:
             raise ConfigError(f"ols_trilateration: min_beacons {self.min_beacons} < {p.dim + 1} needed for a {p.dim}-D fix")
+        self._v: slice | None = None
+        self._p: slice | None = None
+        self._q: slice | None = None
+        self._arm = np.asarray(p.lever_arm, dtype=float) if p.lever_arm is not None else np.zeros(3)
+        if p.motion_compensation:
+            layout = self.context.layout
+            if layout is not None:
+                if "v" not in layout:
+                    raise ConfigError("ols_trilateration: motion_compensation needs a state with a velocity "
+                                      f"block 'v' (this state has {[b.name for b in layout.blocks]})")
+                self._v = layout["v"]
+                self._p = layout["p"] if "p" in layout else None
+                qs = [b.name for b in layout.blocks if b.kind == "quaternion"]
+                self._q = layout[qs[0]] if qs and np.any(self._arm) else None
         self.counters: dict[str, int] = {"cycles": 0, "fixes": 0, "qr": 0, "outliers_removed": 0,
-                                         "unknown_beacon": 0, **{r: 0 for r in REASONS}}
+                                         "unknown_beacon": 0, "split_cycles": 0, "compensated": 0,
+                                         **{r: 0 for r in REASONS}}
         self.events: list[Event] = []
-        self._cycle: dict[str, tuple[float, float]] = {}
-        self._track: list[tuple[float, np.ndarray, np.ndarray]] = []   # recent fixes (t, position, cov)
-        self._t_first = 0.0
-        self._last: Message | None = None
+        self.schedule = FiringSchedule(p.firing_period, p.speed_of_sound, p.learn_s, len(self.beacon_positions))
+        self._belief_at: Callable[[float], Belief | None] | None = None
+        self._sensor = self.context.sensor or "abps"
+        self._line: int | None = None
 
     def _pad(self, b: Any) -> np.ndarray:
         b = np.asarray(b, dtype=float)
         return np.r_[b, self.params.z] if b.shape == (2,) else b  # type: ignore[attr-defined]
 
+    def bind_belief(self, belief_at: Callable[[float], Belief | None]) -> None:
+        """fusion.api.ReadsBelief: the run loop's ``belief_at(t)``, the filter's belief predicted to t."""
+        self._belief_at = belief_at
+
     def feed(self, message: Message) -> list[Message]:
-        """Take one ``beacon range`` message (or several pairs); return the fix of a cycle that closed."""
+        """Take one ``beacon range`` message (or several pairs); return the fixes of the cycles it closes."""
         vals = message.values
         if len(vals) < 2 or len(vals) % 2:
             raise MalformedMessage(f"ols_trilateration expects 'beacon range' pairs, got {vals!r}")
@@ -326,43 +270,45 @@ class OlsTrilateration(Solver):
             if not np.isfinite(rng) or rng < 0:
                 raise MalformedMessage(f"range to {label} must be finite and >= 0, got {rng}")
             pairs.append((label, rng))
+        self._sensor, self._line = message.sensor, message.line
         out: list[Message] = []
         for label, rng in pairs:
-            if self._cycle and (label in self._cycle or message.t - self._t_first >= self.params.window):  # type: ignore[attr-defined]
-                out += self._close(message.t)
-            if not self._cycle:
-                self._t_first = message.t
-            self._cycle[label] = (message.t, rng)
-            self._last = message
-        if len(self._cycle) == len(self.beacon_positions):
-            out += self._close(message.t)
+            for cycle in self.schedule.add(message.t, label, rng):
+                out += self._solve(cycle)
+        if self.schedule.open_beacons() == len(self.beacon_positions):   # every expected beacon heard
+            out += self._solve(self.schedule.close_open())
         return out
 
     def flush(self) -> list[Message]:
-        """The fix of the last, incomplete cycle (end of input)."""
-        return self._close(None) if self._cycle else []
+        """The fixes of the cycles still gathered (end of input)."""
+        out: list[Message] = []
+        for cycle in self.schedule.flush():
+            out += self._solve(cycle)
+        return out
 
-    def _close(self, t_close: float | None) -> list[Message]:
-        """Solve the gathered cycle; ``t_close`` is the time of the message that closed it (None: flush)."""
+    def _solve(self, cycle: list) -> list[Message]:
+        """Fix of one closed cycle of (t, beacon, range, t_emit)."""
         p: OlsParams = self.params  # type: ignore[assignment]
-        names = list(self._cycle)
-        times = np.array([self._cycle[n][0] for n in names])
-        ranges = np.array([self._cycle[n][1] for n in names])
-        B = np.array([self.beacon_positions[n] for n in names])
-        self._cycle = {}
         self.counters["cycles"] += 1
-        last = self._last
-        assert last is not None
+        self.counters["split_cycles"] = self.schedule.splits
+        names = [c[1] for c in cycle]
+        times = np.array([c[0] for c in cycle])
+        ranges = np.array([c[2] for c in cycle])
+        B = np.array([self.beacon_positions[n] for n in names])
         t_end = float(times.max())
-        t_ref = {"mean": float(times.mean()), "last": t_end,
-                 "close": t_end if t_close is None else max(t_close, t_end)}[p.stamp]
-        t_pos = float(times.mean()) if p.age else t_ref        # the time the fix's position is of
-        v, Pv = np.zeros(3), None
-        if p.motion_compensation:
-            fit = self._velocity(float(times.mean()))
-            if fit is not None:
-                v, Pv = fit
-                B = B - v * (times - t_pos)[:, None]             # ranges referred to t_pos
+        t_m = float(times.sum()) / len(times)
+        t_fix, age = t_m, 0.0
+        v, Pv, start = None, None, None
+        if len(names) >= self.min_beacons and p.motion_compensation:
+            v, Pv, t_fix, start = self._velocity(t_m)
+            age = t_fix - t_m
+            dt = times - t_m
+            B = B - dt[:, None] * v
+            # the velocity at t_fix bridges the age too (the position model's p - v age), so it is exact there
+        elif len(names) >= self.min_beacons and len(names) > 1:
+            # not compensated: the receiver moved at an unknown velocity (sd prior_speed_sd) between the
+            # ranges; their offsets from t_m carry that as correlated range errors (an honest covariance)
+            Pv = np.diag([p.prior_speed_sd ** 2] * 2 + [p.prior_speed_sd ** 2 if p.dim == 3 else 0.0])
         try:
             if len(names) < self.min_beacons:
                 raise NoFix("too_few_beacons", f"{len(names)} beacon(s) {names}, need {self.min_beacons}")
@@ -370,53 +316,58 @@ class OlsTrilateration(Solver):
                 B, ranges, dim=p.dim, z=p.z, z_sd=p.z_sd, sigma=p.range_sd, reference=p.reference,
                 qr_condition=p.qr_condition, degenerate_condition=p.degenerate_condition,
                 refine=p.refine_iterations, consistency_probability=p.consistency_probability,
-                consistency_sd=p.consistency_sd, max_outliers=p.max_outliers)
+                max_outliers=p.max_outliers, min_beacons=self.min_beacons,
+                offsets=None if Pv is None else times - t_m, velocity_cov=Pv,
+                accel_sd=p.accel_sd if Pv is not None else 0.0, solve_height=p.solve_height,
+                inflate_misfit=p.inflate_misfit, start=start if p.refine_iterations else None)
         except NoFix as exc:
             self.counters[exc.reason] += 1
-            self.events.append(Event(t_end, "no_fix", last.sensor, str(exc)))
+            self.events.append(Event(t_end, "no_fix", self._sensor, str(exc)))
             return []
         for j in info["rejected"]:
             self.counters["outliers_removed"] += 1
-            self.events.append(Event(float(times[j]), "rejected", last.sensor,
+            self.events.append(Event(float(times[j]), "rejected", self._sensor,
                                      f"range to {names[j]} ({ranges[j]:.3f} m) inconsistent with the others; "
                                      f"fix from {len(info['used'])} beacons"))
         self.counters["fixes"] += 1
         self.counters["qr"] += info["method"].startswith("qr")
-        used_t = times[info["used"]]
-        t_bar = float(used_t.sum()) / len(used_t)
-        if p.motion_compensation:
-            # the velocity track takes the fix at the mean range time (not extrapolated: no feedback loop)
-            self._track.append((t_bar, pos + v * (t_bar - t_pos), cov))
-        if Pv is not None:                # velocity error and unmodelled acceleration over the mean offset
-            tau = abs(t_bar - t_pos)
-            acc = p.accel_sd * tau * (0.5 * tau + 0.5 * p.velocity_span)
-            cov = cov + tau**2 * Pv + np.diag([acc**2, acc**2, acc**2 if p.dim == 3 else 0.0])
-        if p.motion_compensation:
-            t = t_ref
-        else:
-            used = times[info["used"]]
-            t = float(used.mean()) if p.stamp == "mean" else float(used.max())
         values = pack_fix(pos, cov)
-        if p.age:
-            values += (t - t_pos,)
-        return [Message(t, last.sensor, values, last.line)]
+        if age > 0.0:
+            values += (age,)
+        self.last_fix = (t_m, pos, cov, info)
+        return [Message(t_fix, self._sensor, values, self._line)]
 
-    def _velocity(self, t: float) -> tuple[np.ndarray, np.ndarray] | None:
-        """Least-squares velocity (3,) (m/s) of the fixes of the last ``velocity_span`` s and its covariance
-        (3, 3) (the fixes taken as independent, with their mean covariance), or None."""
+    def _velocity(self, t: float) -> tuple[np.ndarray, np.ndarray, float, np.ndarray | None]:
+        """From the filter's belief predicted to ``t``: the velocity (3,) (m/s, navigation frame), its
+        covariance (3, 3) with the unmodelled part, the belief's time (>= t) and the receiver position it
+        predicts at ``t`` (p + C_b^n r, m: where Gauss-Newton starts, in the basin of the filter's estimate
+        rather than a mirror image of the beacons' geometry); without a belief v = 0 and no start."""
         p: OlsParams = self.params  # type: ignore[assignment]
-        self._track = [f for f in self._track if t - f[0] <= p.velocity_span]
-        if len(self._track) < 2:
-            return None
-        tt = np.array([f[0] for f in self._track])
-        X = np.array([f[1] for f in self._track])
-        tc = tt - tt.sum() / len(tt)
-        if not tc.any():
-            return None
-        tc2 = float(tc @ tc)
-        v = (tc @ X) / tc2                  # = tc @ (X - mean X) / tc2, since sum(tc) = 0
-        Pv = sum(f[2] for f in self._track) / (len(self._track) * tc2)
-        if p.dim == 2:
-            v[2] = 0.0
-            Pv[2, :] = Pv[:, 2] = 0.0
-        return (v, Pv) if math.sqrt(float(v @ v)) <= p.max_speed else None
+        belief = self._belief_at(t) if self._belief_at is not None else None
+        extra = np.diag([p.velocity_sd ** 2] * 3)
+        if belief is None or self._v is None:
+            return np.zeros(3), np.diag([p.prior_speed_sd ** 2] * 3), t, None
+        sl = self._v
+        n = sl.stop - sl.start
+        x = belief.x
+        v = np.zeros(3)
+        v[:n] = x[sl]
+        Pv = extra
+        if belief.S is not None and belief.P is None:
+            Sv = belief.S[sl]
+            Pv[:n, :n] += Sv @ Sv.T
+        else:
+            Pv[:n, :n] += belief.P[sl, sl]  # type: ignore[index]
+        t_b = max(float(belief.t), t)
+        start = None
+        if self._p is not None:
+            ps = self._p
+            start = np.full(3, p.z)
+            start[:ps.stop - ps.start] = x[ps]
+            if self._q is not None:
+                start = start + _rotate(x[self._q], self._arm)
+            start = start - v * (t_b - t)                 # back to t (inputs past t already integrated)
+            if p.dim == 2:
+                start[2] = p.z
+        self.counters["compensated"] += 1
+        return v, Pv, t_b, start

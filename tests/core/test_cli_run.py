@@ -114,16 +114,18 @@ def test_config_without_recording_needs_input(tmp_path, capsys):
 
 
 def test_internal_error_mid_run_says_how_far_it_got(tmp_path, monkeypatch, capsys):
-    from fusion_plugins.measurement.range import RangeModel
+    """A bug in the filter itself ends the run (exit 1) saying how far it got; what was computed is kept.
+    (A plugin failing on one message is that message's problem: tests/core/test_clock.py.)"""
+    from fusion_plugins.filters.ukf import UnscentedKalmanFilter
 
-    original = RangeModel.observe
+    original = UnscentedKalmanFilter.update
 
-    def broken(self, message):
-        if message.t > 30.0:
+    def broken(self, belief, *args, **kwargs):
+        if belief.t > 30.0:
             raise RuntimeError("plugin bug")
-        return original(self, message)
+        return original(self, belief, *args, **kwargs)
 
-    monkeypatch.setattr(RangeModel, "observe", broken)
+    monkeypatch.setattr(UnscentedKalmanFilter, "update", broken)
     out_csv = tmp_path / "est.csv"
     assert main(["run", str(CONFIG), "-q", "--output", str(out_csv)]) == 1
     err = capsys.readouterr().err

@@ -1,5 +1,4 @@
-"""Additions for the ABPS/INS system (issue 5): a fix with an age (ols_trilateration ``age`` + the position
-model's ``p - v age``), the INS hold noise over an IMU gap, the pivoted-Cholesky row square root."""
+"""Additions for the ABPS/INS system (issue 5): a fix with an age (the position model's ``p - v age``), the INS hold noise over an IMU gap, the pivoted-Cholesky row square root."""
 from __future__ import annotations
 
 import numpy as np
@@ -32,33 +31,6 @@ def test_fix_with_age_is_predicted_through_the_velocity():
     pv = Position(PositionParams(), BuildContext(layout=StateLayout.parse("p:3")))
     with pytest.raises(MalformedMessage, match="velocity"):
         pv.observe(Message(3.0, "abps", pack_fix(np.zeros(3), cov) + (0.1,)))
-
-
-def test_ols_age_refers_the_fix_to_the_mean_range_time():
-    beacons = {f"B{i + 1}": b for i, b in enumerate(MINE)}
-    with pytest.raises(ConfigError, match="stamp: close"):
-        OlsTrilateration(OlsParams(age=True, motion_compensation=True), BuildContext(beacons=beacons))
-    s = OlsTrilateration(OlsParams(z=-0.75, motion_compensation=True, stamp="close", age=True, accel_sd=0.0),
-                         BuildContext(beacons=beacons, sensor="abps"))
-    v = np.array([0.8, -0.1, 0.0])
-    fixes = []
-    for c in range(12):
-        for j, n in enumerate(["B1", "B2", "B3", "B4"]):
-            t = 0.4 * c + 0.05 * j
-            x = np.array([4.0, 1.0, -0.75]) + v * t
-            for f in s.feed(Message(t, "abps", (n, float(np.linalg.norm(MINE[j] - x))))):
-                fixes.append((t, f))
-    assert len(fixes) == 12
-    for t_close, f in fixes:
-        assert f.t == t_close and len(f.values) == 10
-        age = f.values[9]
-        assert age == pytest.approx(0.075)                       # mean of 0, 0.05, 0.10, 0.15 before 0.15
-        pos = unpack_fix(f.values[:9])[0]
-        truth = np.array([4.0, 1.0, -0.75]) + v * (f.t - age)   # the position at the mean range time
-        err = np.linalg.norm(pos[:2] - truth[:2])
-        if t_close > 2.5:                                        # once the track holds compensated fixes only
-            assert err < 1e-3
-    assert err < 1e-5                                            # the velocity track converges
 
 
 def test_ins_hold_noise_grows_only_past_hold_after():

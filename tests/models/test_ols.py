@@ -168,51 +168,46 @@ def test_registered():
 
 
 def test_feed_gathers_cycles_and_emits_fixes():
-    s = solver(z=-0.1, beacons=["B1", "B2", "B3", "B4", "B5"])
+    s = solver(z=-0.1, beacons=["B1", "B2", "B3", "B4", "B5"], firing_period=0.4)
     x = np.array([10.0, 1.5, -0.1])
     msgs = cycle_msgs(x, 0.0, ["B1", "B2", "B3", "B4", "B5"])
     outs = [o for m in msgs for o in s.feed(m)]
     assert len(outs) == 1 and s.counters["fixes"] == 1          # closed at once: every expected beacon heard
     fix = outs[0]
     assert fix.sensor == "abps" and len(fix.values) == 9
-    assert fix.t == pytest.approx(0.04)                          # mean time of the ranges used
+    assert fix.t == pytest.approx(0.04)                          # mean time of the ranges
     pos, cov = unpack_fix(fix.values)
     np.testing.assert_allclose(pos, x, atol=1e-9)
     assert cov[2, 2] == pytest.approx(0.1**2) and np.all(np.linalg.eigvalsh(cov) > 0)
-    # a repeated beacon closes the cycle; the last, incomplete one comes out of flush()
-    s = solver(z=-0.1, stamp="last")
+    # a beacon twice within one firing period breaks the schedule: the cycle is split there; the last,
+    # incomplete one comes out of flush()
+    s = solver(z=-0.1, firing_period=0.4, beacons=["B2", "B3", "B4", "B5"])
+    assert len([o for m in cycle_msgs(x, 0.0, ["B2", "B3", "B4", "B5"]) for o in s.feed(m)]) == 1
     outs = [o for m in cycle_msgs(x, 1.0, ["B2", "B3", "B4", "B2", "B3", "B4"]) for o in s.feed(m)]
-    assert len(outs) == 1 and outs[0].t == pytest.approx(1.04)
+    assert len(outs) == 1 and outs[0].t == pytest.approx(1.02)
     outs = s.flush()
-    assert len(outs) == 1 and s.counters["fixes"] == 2 and s.flush() == []
-
-
-def test_window_closes_a_cycle():
-    s = solver(z=-0.1, window=0.1)
-    x = np.array([10.0, 1.5, -0.1])
-    msgs = cycle_msgs(x, 0.0, ["B1", "B2", "B3", "B4"], spacing=0.03) + cycle_msgs(x, 0.5, ["B1"])
-    outs = [o for m in msgs for o in s.feed(m)]
-    assert len(outs) == 1 and s.counters["cycles"] == 1          # B4 at 0.09 still in, B1 at 0.5 closes
+    assert len(outs) == 1 and s.counters["fixes"] == 3 and s.flush() == []
+    assert s.schedule.splits == 1
 
 
 def test_no_fix_reasons_are_counted_with_events():
-    s = solver(z=-0.1, window=0.1)
+    s = solver(z=-0.1, firing_period=0.4)
     x = np.array([10.0, 1.5, -0.1])
     outs = [o for m in cycle_msgs(x, 0.0, ["B1", "B2"]) + cycle_msgs(x, 1.0, ["B3"]) for o in s.feed(m)]
     assert outs == [] and s.counters["too_few_beacons"] == 1
     assert s.events[-1].kind == "no_fix" and "too_few_beacons" in s.events[-1].detail
     line = {"A": np.array([0.0, 0.0, -1.0]), "B": np.array([10.0, 0.0, -1.0]), "C": np.array([20.0, 0.0, -1.0])}
-    s2 = OlsTrilateration(OlsParams(), BuildContext(beacons=line, sensor="abps"))
+    s2 = OlsTrilateration(OlsParams(firing_period=0.4), BuildContext(beacons=line, sensor="abps"))
     for n, b in line.items():
         assert s2.feed(Message(0.0, "abps", (n, float(np.linalg.norm(b - x))))) == []
     assert s2.counters["degenerate"] == 1 and s2.events[-1].kind == "no_fix"
-    s3 = solver(z=-0.1)                                          # 3 beacons, one 1 m off: refused
+    s3 = solver(z=-0.1, firing_period=0.4)                       # 3 beacons, one 1 m off: refused
     outs = [o for m in cycle_msgs(x, 0.0, ["B1", "B2", "B3"], bump={"B2": 1.0}) for o in s3.feed(m)] + s3.flush()
     assert outs == [] and s3.counters["inconsistent"] == 1
 
 
 def test_outlier_dropped_in_a_redundant_cycle():
-    s = solver(z=-0.1)
+    s = solver(z=-0.1, firing_period=0.4)
     x = np.array([14.0, 1.0, -0.1])
     msgs = cycle_msgs(x, 0.0, ["B1", "B2", "B3", "B4", "B5", "B6"], bump={"B4": 1.5})
     outs = [o for m in msgs for o in s.feed(m)]
@@ -232,59 +227,3 @@ def test_bad_messages():
         solver(beacons=["B1", "X"])
     with pytest.raises(ConfigError, match="min_beacons"):
         solver(dim=3, min_beacons=3)
-
-
-def test_motion_compensation_refers_ranges_to_the_fix_time():
-    """Constant velocity 1 m/s, beacons ranged 50 ms apart: uncompensated fixes are off by centimetres;
-    with the velocity of the previous fixes the later fixes (at the last range time) converge to exact
-    (noise-free; the first two are uncompensated and bias the first velocities)."""
-    v = np.array([1.0, 0.2, 0.0])
-    names = ["B2", "B3", "B4", "B5"]
-
-    def run(**kw):
-        s = solver(z=-0.1, beacons=names, **kw)
-        errs = []
-        for c in range(16):
-            t0 = 0.4 * c
-            for j, n in enumerate(names):
-                t = t0 + 0.05 * j
-                x = np.array([8.0, 1.0, -0.1]) + v * t
-                for fix in s.feed(Message(t, "abps", (n, float(np.linalg.norm(MINE[int(n[1:]) - 1] - x))))):
-                    x_fix = np.array([8.0, 1.0, -0.1]) + v * fix.t
-                    errs.append(np.linalg.norm(unpack_fix(fix.values)[0][:2] - x_fix[:2]))
-        return np.array(errs), s
-
-    errs, s = run(consistency_probability=None)
-    assert len(errs) == 16 and errs.min() > 0.02
-    errs, s = run(motion_compensation=True, stamp="last")
-    assert len(errs) == 16 and s.counters["fixes"] == 16
-    assert errs[2:].max() < 0.01 and errs[-1] < 1e-4
-
-
-def test_stamp_close_refers_the_fix_to_the_closing_message():
-    """stamp: close gives the fix at the time of the message that closed the cycle (when the scheduler
-    applies it), extrapolated with the fitted velocity; its covariance grows with the extrapolation."""
-    from fusion.api import ConfigError
-
-    with pytest.raises(ConfigError, match="motion_compensation"):
-        solver(stamp="close")
-    v = np.array([0.8, -0.1, 0.0])
-    s = solver(z=-0.1, motion_compensation=True, stamp="close", accel_sd=0.0)
-    s_last = solver(z=-0.1, motion_compensation=True, stamp="last", accel_sd=0.0)
-    names = ["B2", "B3", "B4"]                                   # B5 is never heard: cycles close on a repeat
-    fixes, fixes_last = [], []
-    for c in range(16):
-        for j, n in enumerate(names):
-            t = 0.4 * c + 0.05 * j
-            x = np.array([8.0, 1.0, -0.1]) + v * t
-            msg = Message(t, "abps", (n, float(np.linalg.norm(MINE[int(n[1:]) - 1] - x))))
-            fixes += [(t, f) for f in s.feed(msg)]
-            fixes_last += s_last.feed(msg)
-    assert len(fixes) == 15
-    for t_msg, f in fixes:
-        assert f.t == t_msg                                      # the closing message's time
-    errs = [np.linalg.norm(unpack_fix(f.values)[0][:2] - (np.array([8.0, 1.0]) + v[:2] * f.t)) for _, f in fixes]
-    assert max(errs[8:]) < 1e-3 and errs[-1] < 1e-4
-    sd_close = np.sqrt(unpack_fix(fixes[-1][1].values)[1][0, 0])
-    sd_last = np.sqrt(unpack_fix(fixes_last[-1].values)[1][0, 0])
-    assert sd_close > sd_last
