@@ -6,6 +6,8 @@ from fusion import hookimpl
 def fusion_register_components(registry):
     from fusion_plugins.process.pv import ConstantVelocity
     from fusion_plugins.process.ins import Ins
+    from fusion_plugins.process.firing_clock import FiringClock
 
     registry.add(ConstantVelocity)
     registry.add(Ins)
+    registry.add(FiringClock)
