@@ -71,18 +71,23 @@ class ArrivalTime(MeasurementModel):
 
     def observe(self, message: Message) -> Observation | None:
         if len(message.values) == 9:
-            return self._fix(message)
+            if self._fix_model is None:
+                from fusion_plugins.measurement.position import Position
+                self._fix_model = Position(None, self.context)
+            return fix_observation(message, self._fix_model)
         label, arrival = parse_arrival(message, self._known)
         return Observation(message.t, np.array([arrival]), self._bind(label))
 
-    def _fix(self, message: Message) -> Observation:
-        from fusion_plugins.measurement.position import Position
-        from fusion_plugins.solvers.ols_trilateration import unpack_fix
 
-        try:
-            pos, cov = unpack_fix(message.values)
-        except (TypeError, ValueError):
-            raise MalformedMessage(f"arrival_time: a fix needs 9 numbers, got {message.values!r}") from None
-        if self._fix_model is None:
-            self._fix_model = Position(None, self.context)
-        return Observation(message.t, pos, self._fix_model, cov)
+def fix_observation(message: Message, model: MeasurementModel) -> Observation:
+    """A ``tdoa_geometric`` fix message (``x y z cxx cxy cxz cyy cyz czz``) as a position Observation with
+    its own covariance, predicted by ``model`` (a ``position`` model of the state)."""
+    from fusion_plugins.solvers.ols_trilateration import unpack_fix
+
+    try:
+        pos, cov = unpack_fix(message.values)
+    except (TypeError, ValueError):
+        raise MalformedMessage(f"a position fix needs 9 numbers, got {message.values!r}") from None
+    if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(cov))):
+        raise MalformedMessage(f"a position fix must be finite, got {message.values!r}")
+    return Observation(message.t, pos, model, cov)

@@ -13,13 +13,21 @@ Over n firings the transition is Phi^n (t advances by n T) and the noise the sum
 
     Q_n[p] = n Q_p,  Q_n[T, T] = n q_T,  Q_n[t, T] = q_T n (n - 1) / 2,
     Q_n[t, t] = q_T (n - 1) n (2n - 1) / 6 + n q_t
+
+With ``attitude_sd_deg`` the state gains the attitude ``q:4`` (quaternion, body-to-navigation), held
+constant up to a random walk of that many degrees per firing about each body axis (the process of
+``static_orientation``, sec. 5.2): one pose filter for position and orientation (``direction`` with
+``arrival: true`` measures both from each pulse).
 """
 from __future__ import annotations
 
 import numpy as np
 from pydantic import Field, field_validator
 
+from fusion import quaternion as quat
 from fusion.api import Block, Params, ProcessModel, StateLayout
+
+from .static_orientation import attitude_noise
 
 
 class FiringClock(ProcessModel):
@@ -36,6 +44,10 @@ class FiringClock(ProcessModel):
         position_sd: float | list[float] = Field(0.005, description="m per firing, per axis (1 or 3 values)")
         period_sd: float = Field(1e-7, ge=0.0, description="s per firing: drift of the period T")
         clock_sd: float = Field(0.0, ge=0.0, description="s per firing: noise on the firing time t (paper: 0)")
+        attitude_sd_deg: float | None = Field(None, ge=0.0, description="add the attitude q:4 with a random "
+                                              "walk of this many deg per firing about each axis (None: no "
+                                              "attitude)")
+        norm_sd: float = Field(1e-3, gt=0.0, description="with attitude: sd along q itself per firing")
 
         @field_validator("position_sd")
         @classmethod
@@ -48,7 +60,13 @@ class FiringClock(ProcessModel):
     def __init__(self, params=None, context=None):
         super().__init__(params, context)
         p = self.params
-        self.layout = StateLayout([Block("p", 3), Block("T", 1), Block("t", 1)])
+        blocks = [Block("p", 3), Block("T", 1), Block("t", 1)]
+        self.attitude = p.attitude_sd_deg is not None
+        if self.attitude:
+            blocks.append(Block("q", 4, "quaternion"))
+            self._qa = np.deg2rad(p.attitude_sd_deg) ** 2
+        self.layout = StateLayout(blocks)
+        self.n = self.layout.n
         self._qp = np.broadcast_to(np.asarray(p.position_sd, float) ** 2, (3,)).copy()
         self._qT = p.period_sd ** 2
         self._qt = p.clock_sd ** 2
@@ -65,15 +83,24 @@ class FiringClock(ProcessModel):
         return out
 
     def jacobian(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
-        F = np.eye(5)
+        F = np.eye(self.n)
         F[4, 3] = float(self.firings(x, dt))      # Phi^n (n held: T moves n only at a rounding boundary)
         return F
 
     def Q(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
         n = float(self.firings(x, dt))
-        Q = np.zeros((5, 5))
+        Q = np.zeros((self.n, self.n))
         Q[0, 0], Q[1, 1], Q[2, 2] = n * self._qp
         Q[3, 3] = n * self._qT
         Q[3, 4] = Q[4, 3] = self._qT * n * (n - 1) / 2
         Q[4, 4] = self._qT * (n - 1) * n * (2 * n - 1) / 6 + n * self._qt
+        if self.attitude:
+            Q[5:, 5:] = attitude_noise(np.asarray(x, float)[5:9], n * self._qa, n * self.params.norm_sd ** 2)
         return Q
+
+    def normalize(self, x: np.ndarray) -> np.ndarray:
+        if not self.attitude:
+            return x
+        out = np.array(x, dtype=float, copy=True)
+        out[..., 5:9] = quat.normalize(out[..., 5:9])
+        return out
