@@ -150,6 +150,8 @@ class Direction(MeasurementModel):
             from fusion_plugins.measurement.arrival_time import fix_observation
             from fusion_plugins.measurement.position import Position
             return fix_observation(message, Position(None, self.context))
+        if len(message.values) == 14 and self._p is not None:     # an orientation_geometric pose fix
+            return self._pose_fix(message)
         label, arrival = parse_arrival(message, self._known)
         if len(message.values) != 3:
             raise MalformedMessage("direction expects 'beacon arrival receiver'")
@@ -162,6 +164,46 @@ class Direction(MeasurementModel):
         n = self.normals[int(rec) - 1]
         z = np.r_[arrival, n] if self._t is not None else n.copy()
         return Observation(message.t, z, self._bind(label), self.R)
+
+
+    def _pose_fix(self, message: Message) -> Observation:
+        from fusion_plugins.measurement.arrival_time import fix_observation
+        from fusion_plugins.process.static_orientation import attitude_noise
+
+        base = self
+        pos = fix_observation(Message(message.t, message.sensor, message.values[:9], message.line), self)
+        try:
+            q = quat.normalize(np.array(message.values[9:13], float))
+            sd = float(message.values[13])
+        except (TypeError, ValueError):
+            raise MalformedMessage(f"a pose fix needs 14 numbers, got {message.values!r}") from None
+        if not (np.all(np.isfinite(q)) and np.isfinite(sd) and sd > 0):
+            raise MalformedMessage(f"a pose fix must be finite with sd > 0, got {message.values!r}")
+        R = np.zeros((7, 7))
+        R[:3, :3] = pos.R
+        R[3:, 3:] = attitude_noise(q, sd ** 2, 1e-6)
+        return Observation(message.t, np.r_[pos.z, q], PoseFix(base), R)
+
+
+class PoseFix(MeasurementModel):
+    """z = [p, q] (7,): a pose fix of the state (position m, attitude quaternion); the residual takes the
+    fix's quaternion in the estimate's hemisphere (q and -q are one attitude). Bound by
+    :meth:`Direction.observe` to a 14-value fix message; not a registry component."""
+
+    name = "pose fix"
+    dim = 7
+
+    def __init__(self, base: Direction):
+        super().__init__(base.params, base.context)
+        self._p, self._q = base._p, base._q
+        self._n = base.context.layout.n
+
+    def h(self, x: np.ndarray) -> np.ndarray:
+        return np.concatenate([x[..., self._p], quat.normalize(x[..., self._q])], axis=-1)
+
+    def residual(self, z: np.ndarray, z_hat: np.ndarray) -> np.ndarray:
+        s = np.where(np.einsum("...i,...i->...", z[..., 3:], z_hat[..., 3:]) < 0, -1.0, 1.0)[..., None]
+        return np.concatenate([z[..., :3] - z_hat[..., :3], s * z[..., 3:] - z_hat[..., 3:]], axis=-1)
 
 
 @lru_cache(maxsize=4)

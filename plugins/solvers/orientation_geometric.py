@@ -16,7 +16,7 @@ the smaller of the two sines is maximised), since two parallel vectors define no
 from __future__ import annotations
 
 from itertools import combinations
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 import numpy as np
 from pydantic import Field
@@ -93,6 +93,12 @@ class OrientationParams(Params):
     beacons: list[str] | None = Field(None, description="beacons in firing order (default: all)")
     position: tuple[float, float, float] | None = Field(None, description="known robot position (m); "
                                                         "default: the geometric TDOA fix of the same cycle")
+    arrival_sd: float = Field(2.0e-4, gt=0, description="arrival-time sd (s), for the position covariance")
+    attitude_sd_deg: float = Field(15.0, gt=0, description="sd per axis (deg) attached to an initialising "
+                                   "attitude fix (paper: mean error 15 deg)")
+    output: Literal["fix", "initialise"] = Field("fix", description="fix: an attitude fix per cycle; "
+                                                 "initialise: the first pose fix only (x y z, position "
+                                                 "covariance, qw qx qy qz), then every arrival passed through")
 
 
 class OrientationGeometric(Solver):
@@ -102,7 +108,11 @@ class OrientationGeometric(Solver):
     gives the robot position (the TDOA fix of the cycle, or ``position``), the unit vectors to the beacons,
     and with the receivers' normals (truncated icosahedron, body frame) the attitude by
     :func:`orientation_fix`. Output: ``Message(t, sensor, (qw, qx, qy, qz, x, y, z))``: the attitude
-    (quaternion body-to-navigation) and the position used (m), stamped at the cycle's last arrival. No fix:
+    (quaternion body-to-navigation) and the position used (m), stamped at the cycle's last arrival. With
+    ``output: initialise`` only the first cycle's pose fix is emitted, as ``x y z cxx cxy cxz cyy cyz czz qw qx
+    qy qz sd`` (14 values: position, its covariance, attitude, its sd per axis in rad), then each arrival is passed through unchanged:
+    the ``direction`` model observes that fix as a pose (its first update sets position and attitude from a
+    wide initial belief). No fix:
     ``counters`` counts the reason and ``events`` gets a ``no_fix`` Event."""
 
     name: ClassVar[str] = "orientation_geometric"
@@ -125,8 +135,11 @@ class OrientationGeometric(Solver):
         self.events: list[Event] = []
         self._cycle: dict[str, tuple[float, int, Message]] = {}
         self._previous = None
+        self._initialised = False
 
     def feed(self, message: Message) -> list[Message]:
+        if self._initialised:
+            return [message]
         label, arrival = parse_arrival(message, self.beacon_positions)
         if len(message.values) != 3:
             raise MalformedMessage("orientation_geometric expects 'beacon arrival receiver'")
@@ -155,10 +168,11 @@ class OrientationGeometric(Solver):
         self.counters["cycles"] += 1
         try:
             if p.position is not None:
-                r = np.asarray(p.position, float)
+                r, cov = np.asarray(p.position, float), np.eye(3) * 1e-6
             else:
                 start = self._previous if self._previous is not None else B.mean(axis=0)
-                r, _, _ = tdoa_fix(B, a, np.rint((a - a[0]) / p.period_s), p.period_s, p.speed_of_sound, start)
+                r, cov, _ = tdoa_fix(B, a, np.rint((a - a[0]) / p.period_s), p.period_s, p.speed_of_sound,
+                                     start, p.arrival_sd)
                 self._previous = r
             dirs = (B - r) / np.linalg.norm(B - r, axis=1, keepdims=True)
             C = orientation_fix(self.normals[[cycle[n][1] - 1 for n in names]], dirs)
@@ -168,5 +182,10 @@ class OrientationGeometric(Solver):
             self.events.append(Event(float(a[-1]), "no_fix", last.sensor, f"orientation_geometric: {exc}"))
             return []
         self.counters["fixes"] += 1
-        return [Message(float(a[-1]), last.sensor, tuple(quat.from_matrix(C).tolist()) + tuple(r.tolist()),
-                        last.line)]
+        q = tuple(quat.from_matrix(C).tolist())
+        if p.output == "initialise":
+            from .ols_trilateration import pack_fix
+            self._initialised = True
+            return [Message(float(a[-1]), last.sensor, pack_fix(r, cov) + q + (float(np.deg2rad(p.attitude_sd_deg)),),
+                            last.line)]
+        return [Message(float(a[-1]), last.sensor, q + tuple(r.tolist()), last.line)]
