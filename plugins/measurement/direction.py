@@ -12,6 +12,13 @@ normal (half the 41.8 deg spacing). Modelled as white noise of sd ``sd_deg`` per
 the RMS of that discretisation (:func:`discretisation_sd`: 10.2 deg per axis for this array), though in
 truth the error is deterministic for a fixed attitude (the paper's caveat: a static filter grows
 over-confident; the random-walk process noise keeps it honest).
+
+``cell`` (not in the paper) adds what the closest receiver says exactly: the direction is inside that
+receiver's cell, the spherical polygon where its normal n_r is the closest, i.e. ``m_C . u >= 0`` for
+every other receiver C with ``m_C = unit(n_r - n_C)`` (the great circles bisecting r and its neighbours).
+One more component, ``h_cell = min(0, min_C m_C . u)`` with z = 0: zero (and no information) inside the
+cell, the angular distance to the violated edge outside, so a prediction outside the cell is pulled onto its
+edge. Its residual is clipped (Huber) at ``cell_clip_sigma`` sd so a far prediction is pulled, not gated out.
 """
 from __future__ import annotations
 
@@ -50,7 +57,8 @@ def discretisation_sd(normals: np.ndarray, samples: int = 20000) -> float:
 class Direction(MeasurementModel):
     """Direction of beacon i in the body frame from the closest receiver (paper 003 eq. 19): z (3,) unit
     vector (body FRD); with ``arrival: true`` z = [arrival time (s), direction (3)] (eqs. 11 and 19 in one
-    update of a pose filter, state ``p T t q`` of ``firing_clock`` with ``attitude_sd_deg``).
+    update of a pose filter, state ``p T t q`` of ``firing_clock`` with ``attitude_sd_deg``); with ``cell``
+    one more component, the cell constraint (module docstring), z = 0.
 
     The state needs the attitude block ``q``; the position comes from the block ``p`` when the state has
     one, else from ``position`` (m, a known or separately estimated position: :meth:`at` binds another).
@@ -73,11 +81,17 @@ class Direction(MeasurementModel):
         position: tuple[float, float, float] | None = Field(None, description="robot position (m) when the "
                                                              "state has no position block")
         beacons: list[str] | None = Field(None, description="beacons (default: all config beacons)")
+        cell: bool = Field(False, description="also the constraint that the direction is inside the receiver's "
+                           "cell: one component, min(0, min_C m_C . direction), 0 inside (not in the paper)")
+        cell_sd_deg: float = Field(1.0, gt=0.0, description="sd (deg) of the cell constraint")
+        cell_clip_sigma: float = Field(2.0, gt=0.0, description="the cell residual is clipped to this many of "
+                                       "its sd (Huber): a prediction far outside is pulled in, not gated out")
         position_from_direction: bool = Field(False, description="let the directions update the position "
                                               "too (dh/dp in the Jacobian); False: the position estimate "
                                               "only feeds the direction model")
 
-    def __init__(self, params=None, context=None, bound: str | None = None, position=None):
+    def __init__(self, params=None, context=None, bound: str | None = None, position=None,
+                 receiver: int | None = None):
         super().__init__(params, context)
         p, ctx = self.params, self.context
         lay = ctx.layout
@@ -105,17 +119,25 @@ class Direction(MeasurementModel):
             raise ConfigError(f"direction: unknown, 2-D or no beacon(s) {bad}; the config defines "
                               f"{sorted(ctx.beacons)}")
         self._known = tuple(names)
-        self.dim = 4 if p.arrival else 3
         self.sd = np.deg2rad(p.sd_deg) if p.sd_deg is not None else _default_sd(p.receivers, self.normals)
-        self.R = np.diag(([p.arrival_sd ** 2] if p.arrival else []) + [self.sd ** 2] * 3)
+        self.receiver = receiver
+        self._M = None
+        if p.cell and receiver is not None:      # inward unit normals of the cell's bisecting great circles
+            M = self.normals[receiver - 1] - np.delete(self.normals, receiver - 1, axis=0)
+            self._M = M / np.linalg.norm(M, axis=1, keepdims=True)
+        self.dim = (4 if p.arrival else 3) + (self._M is not None)
+        self.R = np.diag(([p.arrival_sd ** 2] if p.arrival else []) + [self.sd ** 2] * 3
+                         + ([np.deg2rad(p.cell_sd_deg) ** 2] if self._M is not None else []))
+        self._clip = p.cell_clip_sigma * np.deg2rad(p.cell_sd_deg)
         self.bound = bound
         if bound is not None:
             self._b = np.asarray(ctx.beacons[bound], float)
-        self._bind = lru_cache(maxsize=64)(lambda name: Direction(self.params, self.context, name, self.position))
+        self._bind = lru_cache(maxsize=1024)(lambda name, receiver=None: Direction(
+            self.params, self.context, name, self.position, receiver))
 
     def at(self, position) -> "Direction":
         """This model with the robot at ``position`` (3,) m (for a state without a position block)."""
-        return Direction(self.params, self.context, self.bound, position)
+        return Direction(self.params, self.context, self.bound, position, self.receiver)
 
     def _los(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         p = x[..., self._p] if self._p is not None else self.position
@@ -127,19 +149,35 @@ class Direction(MeasurementModel):
         u, r = self._los(x)
         q = x[..., self._q] * _FLIP                                 # conj(q): C_n^b
         dirs = quat.rotate(q, np.broadcast_to(u, q.shape[:-1] + (3,)))
-        if self._t is None:
-            return dirs
-        return np.concatenate([x[..., self._t, None] + r / self.params.speed_of_sound, dirs], axis=-1)
+        parts = [dirs]
+        if self._t is not None:
+            parts.insert(0, x[..., self._t, None] + r / self.params.speed_of_sound)
+        if self._M is not None:
+            parts.append(np.minimum(0.0, (dirs @ self._M.T).min(axis=-1, keepdims=True)))
+        return np.concatenate(parts, axis=-1) if len(parts) > 1 else dirs
+
+    def residual(self, z: np.ndarray, z_hat: np.ndarray) -> np.ndarray:
+        """z - z_hat; the cell component clipped to +-cell_clip_sigma of its sd."""
+        r = z - z_hat
+        if self._M is not None:
+            r = np.array(r, dtype=float, copy=True)
+            r[..., -1] = np.clip(r[..., -1], -self._clip, self._clip)
+        return r
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         u, r = self._los(x)
         qc = x[self._q] * _FLIP
         H = np.zeros((self.dim, x.shape[-1]))
-        k = self.dim - 3
-        H[k:, self._q] = quat.rotate_jacobian(qc, u) * _FLIP             # d(C(q*) u)/dq
+        k = 1 if self._t is not None else 0
+        H[k:k + 3, self._q] = quat.rotate_jacobian(qc, u) * _FLIP             # d(C(q*) u)/dq
         if self._p is not None and self.params.position_from_direction:
             C = quat.to_matrix(qc)
-            H[k:, self._p] = -C @ (np.eye(3) - np.outer(u, u)) / max(float(r[0]), 1e-12)
+            H[k:k + 3, self._p] = -C @ (np.eye(3) - np.outer(u, u)) / max(float(r[0]), 1e-12)
+        if self._M is not None:
+            dirs = quat.rotate(qc, u)
+            v = self._M @ dirs
+            j = int(np.argmin(v))
+            H[-1] = self._M[j] @ H[k:k + 3] if v[j] < 0.0 else 0.0
         if self._t is not None:
             H[0, self._p] = -u / self.params.speed_of_sound
             H[0, self._t] = 1.0
@@ -152,18 +190,26 @@ class Direction(MeasurementModel):
             return fix_observation(message, Position(None, self.context))
         if len(message.values) == 14 and self._p is not None:     # an orientation_geometric pose fix
             return self._pose_fix(message)
-        label, arrival = parse_arrival(message, self._known)
-        if len(message.values) != 3:
+        vals = message.values
+        if len(vals) != 3:
             raise MalformedMessage("direction expects 'beacon arrival receiver'")
-        try:
-            rec = float(message.values[2])
-        except (TypeError, ValueError):
-            raise MalformedMessage(f"receiver is not a number: {message.values[2]!r}") from None
-        if rec != int(rec) or not 1 <= rec <= len(self.normals):
-            raise MalformedMessage(f"receiver must be 1-{len(self.normals)}, got {message.values[2]!r}")
-        n = self.normals[int(rec) - 1]
+        label, arrival = parse_arrival(message, self._known)
+        rec = self._receiver(vals[2])
+        n = self.normals[rec - 1]
         z = np.r_[arrival, n] if self._t is not None else n.copy()
-        return Observation(message.t, z, self._bind(label), self.R)
+        if not self.params.cell:
+            return Observation(message.t, z, self._bind(label), self.R)
+        model = self._bind(label, rec)
+        return Observation(message.t, np.r_[z, 0.0], model, model.R)
+
+    def _receiver(self, v) -> int:
+        try:
+            rec = float(v)
+        except (TypeError, ValueError):
+            raise MalformedMessage(f"receiver is not a number: {v!r}") from None
+        if rec != int(rec) or not 1 <= rec <= len(self.normals):
+            raise MalformedMessage(f"receiver must be 1-{len(self.normals)}, got {v!r}")
+        return int(rec)
 
 
     def _pose_fix(self, message: Message) -> Observation:

@@ -166,3 +166,24 @@ def test_firing_clock_with_attitude():
     Q = proc.Q(proc.normalize(x), None, 0.225)
     assert np.all(np.linalg.eigvalsh(Q[5:, 5:]) > 0)
     assert testing.check_process_jacobian(proc, x, None, 0.23) < 1e-6
+
+
+def test_cell_constraint():
+    """Zero inside the receiver's cell (exactly where that receiver is the closest), negative outside: the
+    signed distance (sine) to the violated bisecting great circle; Jacobian by finite differences outside."""
+    from fusion_plugins.measurement.direction import _normals
+    N = _normals("truncated_icosahedron")
+    proc = testing.build("process", "static_orientation", {})
+    model = _direction(proc.layout, position=[1.2, 0.9, 1.4], cell=True)
+    obs = model.observe(Message(1.0, "us", ("B2", 1.0, 14.0)))
+    assert obs.z.shape == (4,) and obs.z[3] == 0.0 and obs.R.shape == (4, 4)
+    Q = Rotation.random(2000, random_state=5).as_quat(scalar_first=True)
+    hc = obs.model.h(Q)[:, 3]
+    dirs = obs.model.h(Q)[:, :3]
+    closest = np.argmax(dirs @ N.T, axis=1) + 1
+    assert np.all((hc == 0.0) == (closest == 14)) and np.all(hc <= 0.0)
+    j = int(np.flatnonzero(hc < -0.05)[0])
+    assert testing.check_measurement_jacobian(obs.model, Q[j]) < 1e-6
+    # clipped residual: a prediction far outside is pulled by at most cell_clip_sigma sd
+    r = obs.model.residual(obs.z, obs.model.h(Q[j]))
+    assert r[3] == pytest.approx(2.0 * np.deg2rad(1.0))
