@@ -99,10 +99,12 @@ def read_log(path: str) -> Log:
 
 def echoes(log: Log, beacons: dict[str, np.ndarray], c: float = 340.0, min_extra_m: float = 0.15) -> np.ndarray:
     """Boolean (k,): arrivals later than the direct path by more than ``min_extra_m`` (the simulator's
-    echoes have 0.3-3 m of extra path; 0.15 m is 2.2 sd of the 0.2 ms noise): from the truth lines."""
+    echoes have 0.3-3 m of extra path; 0.15 m is 2.2 sd of the 0.2 ms noise), from the truth lines: the
+    firing times are the distinct values of truth ``t_fire`` (truth is sampled faster than the firings),
+    the pulse's firing the latest one before its arrival."""
+    fires = np.unique(log.truth["t_fire"])
+    fire = fires[np.searchsorted(fires, log.arrival, side="right") - 1]
     p, _ = log.truth_at(log.t)
-    fire = np.interp(log.t, log.truth_t, log.truth["t_fire"])
-    # the truth's t_fire at the arrival is the latest firing; the pulse is that firing's
     d = np.linalg.norm(p - np.array([beacons[b] for b in log.beacon]), axis=1)
     return (log.arrival - fire - d / c) * c > min_extra_m
 

@@ -16,6 +16,7 @@ from pydantic import Field
 
 from fusion.api import ConfigError, MalformedMessage, MeasurementModel, Message, Observation, Params
 
+from fusion_plugins.solvers.initial_fix import SIZES, observe_initial
 from fusion_plugins.solvers.tdoa_geometric import parse_arrival
 
 
@@ -23,10 +24,9 @@ class ArrivalTime(MeasurementModel):
     """Arrival time (s, receiver clock) of a pulse from a named beacon (paper 003 eq. 11).
 
     Messages: ``beacon arrival [receiver]`` (the ``arrival_time`` simulator's fields); z = arrival (s).
-    The state needs blocks ``p`` (3) and ``t`` (firing time, s). A message of nine numbers is a position
-    fix ``x y z cxx cxy cxz cyy cyz czz`` from ``tdoa_geometric`` (``output: initialise``): it is observed
-    as a position with its own covariance, so ``initial.from_sensor`` can take the filter's initial
-    position from the geometric solver. Params: ``speed_of_sound`` c (m/s), ``beacons`` (default all)."""
+    The state needs blocks ``p`` (3) and ``t`` (firing time, s). The initial state fix of ``tdoa_geometric``
+    (``output: initialise``: position and firing time with their covariance,
+    :mod:`fusion_plugins.solvers.initial_fix`) is observed as such, the filter's first update. Params: ``speed_of_sound`` c (m/s), ``beacons`` (default all)."""
 
     name = "arrival_time"
     dim = 1
@@ -56,7 +56,6 @@ class ArrivalTime(MeasurementModel):
         if bound is not None:
             self._b = np.asarray(ctx.beacons[bound], float)
         self._bind = lru_cache(maxsize=64)(lambda name: ArrivalTime(self.params, self.context, name))
-        self._fix_model = None
 
     def h(self, x: np.ndarray) -> np.ndarray:
         d = x[..., self._p] - self._b
@@ -70,24 +69,7 @@ class ArrivalTime(MeasurementModel):
         return H
 
     def observe(self, message: Message) -> Observation | None:
-        if len(message.values) == 9:
-            if self._fix_model is None:
-                from fusion_plugins.measurement.position import Position
-                self._fix_model = Position(None, self.context)
-            return fix_observation(message, self._fix_model)
+        if len(message.values) in SIZES:          # the initial state fix of tdoa_geometric (initialise)
+            return observe_initial(message, self.context)
         label, arrival = parse_arrival(message, self._known)
         return Observation(message.t, np.array([arrival]), self._bind(label))
-
-
-def fix_observation(message: Message, model: MeasurementModel) -> Observation:
-    """A ``tdoa_geometric`` fix message (``x y z cxx cxy cxz cyy cyz czz``) as a position Observation with
-    its own covariance, predicted by ``model`` (a ``position`` model of the state)."""
-    from fusion_plugins.solvers.ols_trilateration import unpack_fix
-
-    try:
-        pos, cov = unpack_fix(message.values)
-    except (TypeError, ValueError):
-        raise MalformedMessage(f"a position fix needs 9 numbers, got {message.values!r}") from None
-    if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(cov))):
-        raise MalformedMessage(f"a position fix must be finite, got {message.values!r}")
-    return Observation(message.t, pos, model, cov)

@@ -31,6 +31,7 @@ from pydantic import Field
 from fusion import quaternion as quat
 from fusion.api import ConfigError, MalformedMessage, MeasurementModel, Message, Observation, Params
 
+from fusion_plugins.solvers.initial_fix import SIZES, observe_initial
 from fusion_plugins.solvers.tdoa_geometric import parse_arrival
 
 _FLIP = np.array([1.0, -1.0, -1.0, -1.0])
@@ -62,8 +63,8 @@ class Direction(MeasurementModel):
 
     The state needs the attitude block ``q``; the position comes from the block ``p`` when the state has
     one, else from ``position`` (m, a known or separately estimated position: :meth:`at` binds another).
-    Messages: ``beacon arrival receiver`` (or a ``tdoa_geometric`` fix, observed as a position, as
-    ``arrival_time`` does, for ``initial.from_sensor``). R is attached to each observation: ``sd_deg`` (rad^2 after
+    Messages: ``beacon arrival receiver``, or (with ``arrival: true``) the initial state fix of a geometric
+    solver (:mod:`fusion_plugins.solvers.initial_fix`). R is attached to each observation: ``sd_deg`` (rad^2 after
     conversion, default the receivers' discretisation) per direction component, ``arrival_sd`` (s) for the
     arrival time; a ``noise`` in the config is not used.
     """
@@ -184,12 +185,8 @@ class Direction(MeasurementModel):
         return H
 
     def observe(self, message: Message) -> Observation | None:
-        if len(message.values) == 9 and self._p is not None:      # a tdoa_geometric fix (initialiser)
-            from fusion_plugins.measurement.arrival_time import fix_observation
-            from fusion_plugins.measurement.position import Position
-            return fix_observation(message, Position(None, self.context))
-        if len(message.values) == 14 and self._p is not None:     # an orientation_geometric pose fix
-            return self._pose_fix(message)
+        if len(message.values) in SIZES and self._t is not None:     # a geometric initialiser's state fix
+            return observe_initial(message, self.context)
         vals = message.values
         if len(vals) != 3:
             raise MalformedMessage("direction expects 'beacon arrival receiver'")
@@ -210,46 +207,6 @@ class Direction(MeasurementModel):
         if rec != int(rec) or not 1 <= rec <= len(self.normals):
             raise MalformedMessage(f"receiver must be 1-{len(self.normals)}, got {v!r}")
         return int(rec)
-
-
-    def _pose_fix(self, message: Message) -> Observation:
-        from fusion_plugins.measurement.arrival_time import fix_observation
-        from fusion_plugins.process.static_orientation import attitude_noise
-
-        base = self
-        pos = fix_observation(Message(message.t, message.sensor, message.values[:9], message.line), self)
-        try:
-            q = quat.normalize(np.array(message.values[9:13], float))
-            sd = float(message.values[13])
-        except (TypeError, ValueError):
-            raise MalformedMessage(f"a pose fix needs 14 numbers, got {message.values!r}") from None
-        if not (np.all(np.isfinite(q)) and np.isfinite(sd) and sd > 0):
-            raise MalformedMessage(f"a pose fix must be finite with sd > 0, got {message.values!r}")
-        R = np.zeros((7, 7))
-        R[:3, :3] = pos.R
-        R[3:, 3:] = attitude_noise(q, sd ** 2, 1e-6)
-        return Observation(message.t, np.r_[pos.z, q], PoseFix(base), R)
-
-
-class PoseFix(MeasurementModel):
-    """z = [p, q] (7,): a pose fix of the state (position m, attitude quaternion); the residual takes the
-    fix's quaternion in the estimate's hemisphere (q and -q are one attitude). Bound by
-    :meth:`Direction.observe` to a 14-value fix message; not a registry component."""
-
-    name = "pose fix"
-    dim = 7
-
-    def __init__(self, base: Direction):
-        super().__init__(base.params, base.context)
-        self._p, self._q = base._p, base._q
-        self._n = base.context.layout.n
-
-    def h(self, x: np.ndarray) -> np.ndarray:
-        return np.concatenate([x[..., self._p], quat.normalize(x[..., self._q])], axis=-1)
-
-    def residual(self, z: np.ndarray, z_hat: np.ndarray) -> np.ndarray:
-        s = np.where(np.einsum("...i,...i->...", z[..., 3:], z_hat[..., 3:]) < 0, -1.0, 1.0)[..., None]
-        return np.concatenate([z[..., :3] - z_hat[..., :3], s * z[..., 3:] - z_hat[..., 3:]], axis=-1)
 
 
 @lru_cache(maxsize=4)

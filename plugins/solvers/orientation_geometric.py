@@ -24,7 +24,7 @@ from pydantic import Field
 from fusion import quaternion as quat
 from fusion.api import BuildContext, ConfigError, Event, MalformedMessage, Message, Params, Solver
 
-from .tdoa_geometric import NoFix, parse_arrival, tdoa_fix
+from .tdoa_geometric import AgreeingFixes, NoFix, parse_arrival, tdoa_fix
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -99,6 +99,8 @@ class OrientationParams(Params):
     output: Literal["fix", "initialise"] = Field("fix", description="fix: an attitude fix per cycle; "
                                                  "initialise: the first pose fix only (x y z, position "
                                                  "covariance, qw qx qy qz), then every arrival passed through")
+    initialise_agree: int = Field(2, ge=1, description="initialise: only once this many consecutive TDOA "
+                                  "fixes agree (chi-square, 99.9 %): one echo cannot place the filter")
 
 
 class OrientationGeometric(Solver):
@@ -109,10 +111,10 @@ class OrientationGeometric(Solver):
     and with the receivers' normals (truncated icosahedron, body frame) the attitude by
     :func:`orientation_fix`. Output: ``Message(t, sensor, (qw, qx, qy, qz, x, y, z))``: the attitude
     (quaternion body-to-navigation) and the position used (m), stamped at the cycle's last arrival. With
-    ``output: initialise`` only the first cycle's pose fix is emitted, as ``x y z cxx cxy cxz cyy cyz czz qw qx
-    qy qz sd`` (14 values: position, its covariance, attitude, its sd per axis in rad), then each arrival is passed through unchanged:
-    the ``direction`` model observes that fix as a pose (its first update sets position and attitude from a
-    wide initial belief). No fix:
+    ``output: initialise`` only one initial state fix is emitted, once ``initialise_agree`` consecutive TDOA fixes
+    agree (their mean, the time of the last firing and the attitude of the last cycle:
+    :mod:`fusion_plugins.solvers.initial_fix`), then each arrival is passed through unchanged; the
+    ``direction`` model observes that fix as the first update of a pose filter from a wide initial belief. No fix:
     ``counters`` counts the reason and ``events`` gets a ``no_fix`` Event."""
 
     name: ClassVar[str] = "orientation_geometric"
@@ -136,6 +138,7 @@ class OrientationGeometric(Solver):
         self._cycle: dict[str, tuple[float, int, Message]] = {}
         self._previous = None
         self._initialised = False
+        self._agree = AgreeingFixes(p.initialise_agree)
 
     def feed(self, message: Message) -> list[Message]:
         if self._initialised:
@@ -179,13 +182,19 @@ class OrientationGeometric(Solver):
         except NoFix as exc:
             self.counters[exc.reason] += 1
             self._previous = None
+            self._agree.reset()
             self.events.append(Event(float(a[-1]), "no_fix", last.sensor, f"orientation_geometric: {exc}"))
             return []
         self.counters["fixes"] += 1
         q = tuple(quat.from_matrix(C).tolist())
         if p.output == "initialise":
-            from .ols_trilateration import pack_fix
+            from .initial_fix import pack_initial
+            agreed = self._agree.add(r, cov)
+            if agreed is None:
+                return []
+            r, cov = agreed
             self._initialised = True
-            return [Message(float(a[-1]), last.sensor, pack_fix(r, cov) + q + (float(np.deg2rad(p.attitude_sd_deg)),),
-                            last.line)]
+            return [Message(float(a[-1]), last.sensor, pack_initial(
+                r, cov, B[-1], float(a[-1]), p.speed_of_sound, p.arrival_sd, np.array(q),
+                float(np.deg2rad(p.attitude_sd_deg))), last.line)]
         return [Message(float(a[-1]), last.sensor, q + tuple(r.tolist()), last.line)]

@@ -135,6 +135,35 @@ def tdoa_fix(beacons: np.ndarray, arrivals: np.ndarray, firings: np.ndarray, per
     return r, 0.5 * (cov + cov.T), it
 
 
+class AgreeingFixes:
+    """Consecutive fixes that agree: ``add(position, cov)`` returns the mean of the last ``n`` fixes (and its
+    covariance, the mean covariance / n) once each agrees with the one before within the chi-square test
+    ``d^T (C1 + C2)^-1 d <= chi2.ppf(probability, 3)``, else None. With four beacons an echo moves a fix
+    by tens of cm and nothing in the cycle shows it; two fixes in a row that agree are very unlikely to both
+    carry one (an initialiser must not start a filter, confidently, in the wrong place)."""
+
+    def __init__(self, n: int, probability: float = 0.999):
+        from fusion.chisquare import chi2
+
+        self.n = n
+        self.threshold = float(chi2.ppf(probability, 3))
+        self.run: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def add(self, pos: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        if self.run:
+            d = pos - self.run[-1][0]
+            if float(d @ np.linalg.solve(cov + self.run[-1][1], d)) > self.threshold:
+                self.run = []
+        self.run.append((pos, cov))
+        if len(self.run) < self.n:
+            return None
+        run = self.run[-self.n:]
+        return (np.mean([p for p, _ in run], axis=0), np.mean([c for _, c in run], axis=0) / self.n)
+
+    def reset(self) -> None:
+        self.run = []
+
+
 class TdoaParams(Params):
     """YAML parameters of ``tdoa_geometric`` (m, s)."""
 
@@ -151,9 +180,13 @@ class TdoaParams(Params):
     degenerate_tol: float = Field(1e-9, gt=0, description="relative triple product (or 1/condition) below "
                                   "which the geometry is degenerate")
     output: Literal["fix", "initialise"] = Field("fix", description="fix: one position fix (x y z and the "
-                                                 "upper triangle of its covariance) per cycle; initialise: the "
-                                                 "first fix only, then every arrival passed through unchanged "
-                                                 "(for initial.from_sensor of an arrival_time filter)")
+                                                 "upper triangle of its covariance) per cycle; initialise: one "
+                                                 "initial state fix (position and firing time), then every "
+                                                 "arrival passed through unchanged (the arrival_time model "
+                                                 "observes the fix as the filter's first update)")
+    initialise_agree: int = Field(2, ge=1, description="initialise: the fix is the mean of this many "
+                                  "consecutive fixes that agree (chi-square, 99.9 %), so one echo cannot "
+                                  "place the filter")
 
 
 class TdoaGeometric(Solver):
@@ -168,6 +201,9 @@ class TdoaGeometric(Solver):
     format of the ``position`` model (its covariance as R). No fix: ``counters`` counts the reason
     (``too_few_beacons``, ``degenerate``, ``no_convergence``) and ``events`` gets a ``no_fix`` Event.
     With four beacons there is no redundancy: an echo shifts the fix and cannot be detected here (paper).
+    ``output: initialise`` emits one initial state fix (position, the time of the last firing, their
+    covariance: :mod:`fusion_plugins.solvers.initial_fix`), from the mean of the first ``initialise_agree``
+    consecutive fixes that agree with each other (:class:`AgreeingFixes`), then passes every arrival through.
     """
 
     name: ClassVar[str] = "tdoa_geometric"
@@ -193,6 +229,7 @@ class TdoaGeometric(Solver):
         self._cycle: dict[str, tuple[float, Message]] = {}
         self._previous: np.ndarray | None = None
         self._initialised = False
+        self._agree = AgreeingFixes(p.initialise_agree)
 
     def feed(self, message: Message) -> list[Message]:
         """Take one ``beacon arrival [receiver]`` message; return the fix of a cycle that closed (or, after
@@ -231,15 +268,22 @@ class TdoaGeometric(Solver):
         except NoFix as exc:
             self.counters[exc.reason] += 1
             self._previous = None
+            self._agree.reset()
             self.events.append(Event(float(a[-1]), "no_fix", last.sensor, f"tdoa_geometric: {exc}"))
             return []
         self.counters["fixes"] += 1
         self.counters["iterations"] += it
         self._previous = pos
-        fix = Message(float(a[-1]), last.sensor, pack_fix(pos, cov), last.line)
         if p.output == "initialise":
+            agreed = self._agree.add(pos, cov)
+            if agreed is None:
+                return []
+            from .initial_fix import pack_initial
             self._initialised = True
-        return [fix]
+            pos, cov = agreed
+            return [Message(float(a[-1]), last.sensor, pack_initial(
+                pos, cov, self.beacon_positions[names[-1]], float(a[-1]), p.speed_of_sound, p.arrival_sd), last.line)]
+        return [Message(float(a[-1]), last.sensor, pack_fix(pos, cov), last.line)]
 
 
 def parse_arrival(message: Message, known: Sequence[str]) -> tuple[str, float]:

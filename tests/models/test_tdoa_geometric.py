@@ -130,7 +130,23 @@ def test_solver_counts_missing_beacons_and_initialise_mode():
     s = _solver(output="initialise")
     msgs = _messages(r, 3)
     out = [m for msg in msgs for m in s.feed(msg)]
-    assert len(out[0].values) == 9 and out[1:] == msgs[4:]        # the first fix, then the arrivals
+    assert len(out[0].values) == 14 and out[1:] == msgs[8:]       # one fix (two cycles agree), then the arrivals
+
+
+def test_initialiser_is_not_placed_by_an_echo():
+    """An echo (1 m of extra path) in the first cycle: that fix disagrees with the next; the initial fix is
+    the mean of the first two that agree, near the truth."""
+    r = np.array([1.2, 1.1, 1.3])
+    msgs = _messages(r, 4)
+    b, a, rec = msgs[1].values
+    msgs[1] = Message(a + 1.0 / C, "us", (b, a + 1.0 / C, rec))
+    s = _solver(output="initialise", initialise_agree=2)
+    out = [m for msg in msgs for m in s.feed(msg)]
+    pos, _ = unpack_fix(out[0].values)
+    assert np.abs(pos - r).max() < 1e-6 and out[0].t == msgs[11].t
+    s1 = _solver(output="initialise", initialise_agree=1)      # without the agreement: placed by the echo
+    pos1, _ = unpack_fix([m for msg in msgs for m in s1.feed(msg)][0].values)
+    assert np.linalg.norm(pos1 - r) > 0.2
 
 
 def test_solver_bad_input():
@@ -141,3 +157,26 @@ def test_solver_bad_input():
         s.feed(Message(1.0, "us", ("B1", "x", 3.0)))
     with pytest.raises(ConfigError, match="at least 4 beacons"):
         _solver(beacons=["B1", "B2", "B3"])
+
+
+def test_initial_state_fix_carries_the_firing_time():
+    """The initial fix: position, and t = the last firing's time (exact on exact arrivals), observed by
+    arrival_time as a linear fix of p and t whose covariance holds the p-t correlation of t = a - d / c."""
+    from fusion_plugins.solvers.initial_fix import observe_initial
+    r = np.array([1.2, 1.1, 1.3])
+    msgs = _messages(r, 2, t0=0.137)
+    s = _solver(output="initialise")
+    out = [m for msg in msgs for m in s.feed(msg)]
+    v = np.array(out[0].values)
+    assert np.abs(v[:3] - r).max() < 1e-8
+    assert v[9] == pytest.approx(0.137 + 7 * T, abs=1e-10)            # the 8th firing (B4 of cycle 2)
+    proc = testing.build("process", "firing_clock", {})
+    ctx = BuildContext(layout=proc.layout, beacons={f"B{i + 1}": b for i, b in enumerate(LAB)})
+    obs = observe_initial(out[0], ctx)
+    x = np.r_[r, T, v[9]]
+    assert obs.z.shape == (4,) and np.allclose(obs.model.h(x), obs.z, atol=1e-8)
+    u = (r - LAB[3]) / np.linalg.norm(r - LAB[3])
+    assert np.allclose(obs.R[:3, 3], -obs.R[:3, :3] @ u / C)          # cov(p, t) = -C u / c
+    assert np.all(np.linalg.eigvalsh(obs.R) > 0)
+    with pytest.raises(MalformedMessage):
+        observe_initial(Message(1.0, "us", tuple(v[:13].tolist()) + ("x",)), ctx)
