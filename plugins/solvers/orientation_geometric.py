@@ -143,15 +143,12 @@ class OrientationGeometric(Solver):
     def feed(self, message: Message) -> list[Message]:
         if self._initialised:
             return [message]
-        label, arrival = parse_arrival(message, self.beacon_positions)
-        if len(message.values) != 3:
-            raise MalformedMessage("orientation_geometric expects 'beacon arrival receiver'")
         try:
-            rec = int(float(message.values[2]))
-        except (TypeError, ValueError):
-            raise MalformedMessage(f"receiver is not a number: {message.values[2]!r}") from None
-        if not 1 <= rec <= len(self.normals):
-            raise MalformedMessage(f"receiver must be 1-{len(self.normals)}, got {rec}")
+            label, arrival, rec = self._parse(message)
+        except MalformedMessage as exc:    # counted and reported, not raised: the run goes on
+            self.counters["malformed"] = self.counters.get("malformed", 0) + 1
+            self.events.append(Event(message.t, "malformed", message.sensor, f"line {message.line}: {exc}"))
+            return []
         out: list[Message] = []
         if self._cycle and (label in self._cycle or arrival - min(a for a, _, _ in self._cycle.values())
                             >= len(self.beacon_positions) * self.params.period_s):  # type: ignore[attr-defined]
@@ -160,6 +157,18 @@ class OrientationGeometric(Solver):
         if len(self._cycle) == len(self.beacon_positions):
             out += self._close()
         return out
+
+    def _parse(self, message: Message) -> tuple[str, float, int]:
+        label, arrival = parse_arrival(message, self.beacon_positions)
+        if len(message.values) != 3:
+            raise MalformedMessage("orientation_geometric expects 'beacon arrival receiver'")
+        try:
+            rec = float(message.values[2])
+        except (TypeError, ValueError):
+            raise MalformedMessage(f"receiver is not a number: {message.values[2]!r}") from None
+        if rec != int(rec) or not 1 <= rec <= len(self.normals):
+            raise MalformedMessage(f"receiver must be 1-{len(self.normals)}, got {message.values[2]!r}")
+        return label, arrival, int(rec)
 
     def _close(self) -> list[Message]:
         p: OrientationParams = self.params  # type: ignore[assignment]

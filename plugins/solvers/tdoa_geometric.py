@@ -237,7 +237,10 @@ class TdoaGeometric(Solver):
         p: TdoaParams = self.params  # type: ignore[assignment]
         if p.output == "initialise" and self._initialised:
             return [message]
-        label, arrival = parse_arrival(message, self.beacon_positions)
+        try:
+            label, arrival = parse_arrival(message, self.beacon_positions)
+        except MalformedMessage as exc:
+            return self._malformed(message, exc)
         out: list[Message] = []
         if self._cycle:
             t_first = min(a for a, _ in self._cycle.values())
@@ -247,6 +250,13 @@ class TdoaGeometric(Solver):
         if len(self._cycle) == len(self.beacon_positions):
             out += self._close()
         return out
+
+    def _malformed(self, message: Message, exc: Exception) -> list[Message]:
+        """A bad message is counted (``counters['malformed']``) and reported as an event, not raised: the
+        run goes on (a raise from a preprocessor would stop it)."""
+        self.counters["malformed"] = self.counters.get("malformed", 0) + 1
+        self.events.append(Event(message.t, "malformed", message.sensor, f"line {message.line}: {exc}"))
+        return []
 
     def flush(self) -> list[Message]:
         """The last, incomplete cycle (end of input): a fix only if it has enough beacons."""

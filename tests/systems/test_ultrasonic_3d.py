@@ -57,3 +57,19 @@ def test_pose_config_on_its_recording(tmp_path):
     s = _cli(tmp_path, POSE)
     assert s["errors"]["position_rmse_m"] < 0.08
     assert s["errors"]["attitude_rmse_deg"] < 15.0
+
+
+@pytest.mark.parametrize("config", [IEKF, POSE], ids=["iekf", "pose"])
+def test_hostile_lines_are_counted_not_fatal(tmp_path, config):
+    """Bad numbers, unknown beacons, NaN, a receiver out of range, short lines: each one clear event, the run
+    goes on (exit 0), before and after the filter starts."""
+    good = [ln for ln in (ROOT / "recordings" / "ultrasonic_3d_walk.log").read_text().splitlines()[:200]]
+    bad = ["0.30,us,B2,abc,11", "0.31,us,B9,0.31,11", "0.32,us,B3,nan,4", "0.33,us,B3,0.33,0", "0.34,us,B4",
+           "0.35,us,B4,0.35,2.5"]
+    head = [ln for ln in good if ln.startswith("#")]
+    body = [ln for ln in good if not ln.startswith("#")]
+    log = tmp_path / "hostile.log"
+    late = [b.replace("0.3", "30.3", 1) for b in bad]
+    log.write_text("\n".join(head + bad + body[:150] + late + body[150:]) + "\n")
+    s = _cli(tmp_path, config, "--input", str(log))
+    assert s["sensors"]["us"]["used"] > 20
