@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Paper 003, the 3-D ultrasonic localiser, reproduced: regenerates docs/results/ultrasonic_3d.md.
 
-    python experiments/ultrasonic_3d.py                   # Tables I-III, 10 + 5 seeds (~6 min, 1 process)
+    python experiments/ultrasonic_3d.py                   # Tables I-III, 10 + 4 seeds (~10 min, 1 process)
     python experiments/ultrasonic_3d.py --quick           # 3 + 2 seeds, 3000 firings (a look, ~1 min)
     python experiments/ultrasonic_3d.py --out /tmp/u.md
 
@@ -261,7 +261,7 @@ IEKF alone {np.mean([w['iekf_position_rmse'] for w in walks]) * 1000:.0f} mm) an
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--static-seeds", type=int, default=10)
-    ap.add_argument("--walk-seeds", type=int, default=5)
+    ap.add_argument("--walk-seeds", type=int, default=4)
     ap.add_argument("--firings", type=int, default=10000)
     ap.add_argument("--quick", action="store_true", help="3 static seeds, 2 walks of 3000 firings")
     ap.add_argument("--out", default=str(uc.ROOT / "docs" / "results" / "ultrasonic_3d.md"))

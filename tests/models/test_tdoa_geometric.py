@@ -151,10 +151,11 @@ def test_initialiser_is_not_placed_by_an_echo():
 
 def test_solver_bad_input():
     s = _solver()
-    with pytest.raises(MalformedMessage, match="unknown beacon"):
-        s.feed(Message(1.0, "us", ("B9", 1.0, 3.0)))
-    with pytest.raises(MalformedMessage, match="not a number"):
-        s.feed(Message(1.0, "us", ("B1", "x", 3.0)))
+    assert s.feed(Message(1.0, "us", ("B9", 1.0, 3.0), 7)) == []      # counted and reported, not raised
+    assert s.feed(Message(1.0, "us", ("B1", "x", 3.0), 8)) == []
+    assert s.counters["malformed"] == 2
+    assert [e.kind for e in s.events] == ["malformed"] * 2
+    assert "line 7: unknown beacon" in s.events[0].detail and "not a number" in s.events[1].detail
     with pytest.raises(ConfigError, match="at least 4 beacons"):
         _solver(beacons=["B1", "B2", "B3"])
 
