@@ -99,8 +99,8 @@ class OrientationParams(Params):
     output: Literal["fix", "initialise"] = Field("fix", description="fix: an attitude fix per cycle; "
                                                  "initialise: the first pose fix only (x y z, position "
                                                  "covariance, qw qx qy qz), then every arrival passed through")
-    initialise_agree: int = Field(2, ge=1, description="initialise: only once this many consecutive TDOA "
-                                  "fixes agree (chi-square, 99.9 %): one echo cannot place the filter")
+    initialise_agree: int = Field(3, ge=1, description="initialise: only once this many consecutive TDOA "
+                                  "fixes agree (chi-square, 99 %): echoes cannot place the filter")
 
 
 class OrientationGeometric(Solver):

@@ -139,10 +139,10 @@ class AgreeingFixes:
     """Consecutive fixes that agree: ``add(position, cov)`` returns the mean of the last ``n`` fixes (and its
     covariance, the mean covariance / n) once each agrees with the one before within the chi-square test
     ``d^T (C1 + C2)^-1 d <= chi2.ppf(probability, 3)``, else None. With four beacons an echo moves a fix
-    by tens of cm and nothing in the cycle shows it; two fixes in a row that agree are very unlikely to both
+    by tens of cm and nothing in the cycle shows it; three fixes in a row that agree are very unlikely to all
     carry one (an initialiser must not start a filter, confidently, in the wrong place)."""
 
-    def __init__(self, n: int, probability: float = 0.999):
+    def __init__(self, n: int, probability: float = 0.99):
         from fusion.chisquare import chi2
 
         self.n = n
@@ -184,8 +184,8 @@ class TdoaParams(Params):
                                                  "initial state fix (position and firing time), then every "
                                                  "arrival passed through unchanged (the arrival_time model "
                                                  "observes the fix as the filter's first update)")
-    initialise_agree: int = Field(2, ge=1, description="initialise: the fix is the mean of this many "
-                                  "consecutive fixes that agree (chi-square, 99.9 %), so one echo cannot "
+    initialise_agree: int = Field(3, ge=1, description="initialise: the fix is the mean of this many "
+                                  "consecutive fixes that agree (chi-square, 99 %), so echoes cannot "
                                   "place the filter")
 
 

@@ -128,9 +128,9 @@ def test_solver_counts_missing_beacons_and_initialise_mode():
     assert len(out) == 2 and s.counters["too_few_beacons"] == 1
     assert any(e.kind == "no_fix" and "too_few_beacons" in e.detail for e in s.events)
     s = _solver(output="initialise")
-    msgs = _messages(r, 3)
+    msgs = _messages(r, 5)
     out = [m for msg in msgs for m in s.feed(msg)]
-    assert len(out[0].values) == 14 and out[1:] == msgs[8:]       # one fix (two cycles agree), then the arrivals
+    assert len(out[0].values) == 14 and out[1:] == msgs[12:]      # one fix (three cycles agree), then the arrivals
 
 
 def test_initialiser_is_not_placed_by_an_echo():
@@ -165,12 +165,12 @@ def test_initial_state_fix_carries_the_firing_time():
     arrival_time as a linear fix of p and t whose covariance holds the p-t correlation of t = a - d / c."""
     from fusion_plugins.solvers.initial_fix import observe_initial
     r = np.array([1.2, 1.1, 1.3])
-    msgs = _messages(r, 2, t0=0.137)
+    msgs = _messages(r, 3, t0=0.137)
     s = _solver(output="initialise")
     out = [m for msg in msgs for m in s.feed(msg)]
     v = np.array(out[0].values)
     assert np.abs(v[:3] - r).max() < 1e-8
-    assert v[9] == pytest.approx(0.137 + 7 * T, abs=1e-10)            # the 8th firing (B4 of cycle 2)
+    assert v[9] == pytest.approx(0.137 + 11 * T, abs=1e-10)           # the 12th firing (B4 of cycle 3)
     proc = testing.build("process", "firing_clock", {})
     ctx = BuildContext(layout=proc.layout, beacons={f"B{i + 1}": b for i, b in enumerate(LAB)})
     obs = observe_initial(out[0], ctx)
