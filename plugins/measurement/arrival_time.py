@@ -14,7 +14,7 @@ from functools import lru_cache
 import numpy as np
 from pydantic import Field
 
-from fusion.api import ConfigError, MalformedMessage, MeasurementModel, Message, Observation, Params
+from fusion.api import ConfigError, MeasurementModel, Message, Observation, Params
 
 from fusion_plugins.solvers.initial_fix import SIZES, observe_initial
 from fusion_plugins.solvers.tdoa_geometric import parse_arrival
