@@ -181,6 +181,8 @@ def page(rows, walks, args, wall: float) -> str:
     step_pose = np.mean([w["pose_us"] for w in walks])
     step_or = np.mean([w["filter_us"] for w in walks])
     ge, ke = np.array(a12["geo_err"]), np.array(a12["kf_err"])
+    sds = [max(r["kf_sd"]) * 1000 for runs in rows for r in runs]
+    sd_typ = f"{np.median(sds):.1f} mm (median of the largest axis; at most {max(sds):.1f} mm, far from the beacons)"
     import numpy as _np
     return f"""# The 3-D ultrasonic localiser (paper 003): Tables I-III reproduced
 
@@ -191,6 +193,22 @@ project's simulator (`fusion.simulate`, scenarios `ultrasonic_3d_static` / `ultr
 seed and the overrides below) and replayed through the shipped configs and solvers; the shipped recordings
 are not used. Paper: Kleeman, *A three dimensional localiser for autonomous robot vehicles* (the project's
 paper 003, issue 14).
+
+## In short
+
+* **Position (Tables I-II).** The IEKF on single arrival times, with its 2-sigma gate, is closer to the
+  measured position than the mean of the geometric fixes in {a12['kf_closer']} of {a12['runs']} static runs
+  (mean error {ke.mean():.1f} mm against {ge.mean():.1f} mm), with a filter sd of {sd_typ}. The geometric
+  mean is ruined by echoes, which four beacons cannot reveal; the gate rejects them.
+* **Orientation (Table III).** The geometric algorithm is the paper's: {a3['geometric']['mean']:.2f} deg mean
+  and {a3['geometric']['max']:.1f} deg maximum against 15.0 and 29.7. The paper's filter gives
+  {a3['filter']['mean']:.2f} / {a3['filter']['max']:.1f} deg against 9.34 / 21.1 (the maximum
+  {'within' if a3['filter']['max'] <= 21.1 else 'above'} the paper's). The pose filter of
+  `configs/ultrasonic_3d_pose.yaml`, which adds the constraint that each direction lies in its receiver's
+  cell, gives {a3['pose']['mean']:.2f} deg mean ({min(a3['pose']['means']):.2f}-{max(a3['pose']['means']):.2f}
+  over the walks) with a consistent covariance.
+* **Speed.** One step of the position IEKF takes {step_iekf / 1000:.2f} ms here against the paper's 230 ms
+  on a 16 MHz 80286.
 
 ## The system
 
