@@ -6,6 +6,10 @@ from fusion import hookimpl
 def fusion_register_components(registry):
     from fusion_plugins.measurement.range import RangeModel
     from fusion_plugins.measurement.position import Position
+    from fusion_plugins.measurement.arrival_time import ArrivalTime
+    from fusion_plugins.measurement.direction import Direction
 
     registry.add(RangeModel)
     registry.add(Position)
+    registry.add(ArrivalTime)
+    registry.add(Direction)

@@ -1,0 +1,106 @@
+"""Process ``firing_clock``: position random walk and the beacons' firing clock (paper 003 eqs. 9-10).
+
+State ``p:3 T:1 t:1``: the robot position (m, the beacons' frame), the inter-firing period T (s) and the
+time t (s, receiver clock) of the latest beacon firing. One step is one firing (eq. 10)::
+
+    x(n+1) = Phi x(n) + w(n+1),   Phi = I except Phi[t, T] = 1  (t advances by T)
+    w = [w_x w_y w_z w_T 0],      Q = diag(sd_x^2, sd_y^2, sd_z^2, sd_T^2, sd_t^2)   (sd_t = 0: the paper)
+
+The scheduler predicts over elapsed time: between two arrivals dt = T + (d_j - d_i) / c, so the number of
+firings in between is ``n = round(dt / T)`` (1 normally, 2 after a missed pulse, 0 for the first update).
+That holds while the largest difference of beacon distances is below c T / 2 (38 m at 340 m/s, 225 ms).
+Over n firings the transition is Phi^n (t advances by n T) and the noise the sum of n steps:
+
+    Q_n[p] = n Q_p,  Q_n[T, T] = n q_T,  Q_n[t, T] = q_T n (n - 1) / 2,
+    Q_n[t, t] = q_T (n - 1) n (2n - 1) / 6 + n q_t
+
+With ``attitude_sd_deg`` the state gains the attitude ``q:4`` (quaternion, body-to-navigation), held
+constant up to a random walk of that many degrees per firing about each body axis (the process of
+``static_orientation``, sec. 5.2): one pose filter for position and orientation (``direction`` with
+``arrival: true`` measures both from each pulse).
+"""
+from __future__ import annotations
+
+import numpy as np
+from pydantic import Field, field_validator
+
+from fusion import quaternion as quat
+from fusion.api import Block, Params, ProcessModel, StateLayout
+
+from .static_orientation import attitude_noise
+
+
+class FiringClock(ProcessModel):
+    """Position random walk + firing clock of paper 003 (eq. 10); state ``p:3 T:1 t:1`` (m, s, s).
+
+    Params: ``position_sd``: random-walk sd per firing (m, one value or one per axis: "of the same order as
+    the maximum movement anticipated in each axis in one time step"); ``period_sd``: drift of T per firing
+    (s; temperature of the beacon electronics, the receiver's time base); ``clock_sd``: jitter of the firing
+    time itself per firing (s; 0 in the paper)."""
+
+    name = "firing_clock"
+
+    class Params(Params):
+        position_sd: float | list[float] = Field(0.005, description="m per firing, per axis (1 or 3 values)")
+        period_sd: float = Field(1e-7, ge=0.0, description="s per firing: drift of the period T")
+        clock_sd: float = Field(0.0, ge=0.0, description="s per firing: noise on the firing time t (paper: 0)")
+        attitude_sd_deg: float | None = Field(None, ge=0.0, description="add the attitude q:4 with a random "
+                                              "walk of this many deg per firing about each axis (None: no "
+                                              "attitude)")
+        norm_sd: float = Field(1e-3, gt=0.0, description="with attitude: sd along q itself per firing")
+
+        @field_validator("position_sd")
+        @classmethod
+        def _three(cls, v):
+            s = np.atleast_1d(np.asarray(v, float))
+            if s.size not in (1, 3) or np.any(s < 0) or not np.all(np.isfinite(s)):
+                raise ValueError(f"position_sd needs 1 or 3 finite values >= 0, got {v}")
+            return v
+
+    def __init__(self, params=None, context=None):
+        super().__init__(params, context)
+        p = self.params
+        blocks = [Block("p", 3), Block("T", 1), Block("t", 1)]
+        self.attitude = p.attitude_sd_deg is not None
+        if self.attitude:
+            blocks.append(Block("q", 4, "quaternion"))
+            self._qa = np.deg2rad(p.attitude_sd_deg) ** 2
+        self.layout = StateLayout(blocks)
+        self.n = self.layout.n
+        self._qp = np.broadcast_to(np.asarray(p.position_sd, float) ** 2, (3,)).copy()
+        self._qT = p.period_sd ** 2
+        self._qt = p.clock_sd ** 2
+
+    @staticmethod
+    def firings(x: np.ndarray, dt: float) -> np.ndarray:
+        """Firings n (...,) between two arrivals dt s apart for states x (..., 5): round(dt / T), >= 0."""
+        T = np.maximum(np.asarray(x, float)[..., 3], 1e-9)
+        return np.maximum(np.rint(dt / T), 0.0)
+
+    def f(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        out = np.array(x, dtype=float, copy=True)
+        out[..., 4] += self.firings(x, dt) * out[..., 3]
+        return out
+
+    def jacobian(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        F = np.eye(self.n)
+        F[4, 3] = float(self.firings(x, dt))      # Phi^n (n held: T moves n only at a rounding boundary)
+        return F
+
+    def Q(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        n = float(self.firings(x, dt))
+        Q = np.zeros((self.n, self.n))
+        Q[0, 0], Q[1, 1], Q[2, 2] = n * self._qp
+        Q[3, 3] = n * self._qT
+        Q[3, 4] = Q[4, 3] = self._qT * n * (n - 1) / 2
+        Q[4, 4] = self._qT * (n - 1) * n * (2 * n - 1) / 6 + n * self._qt
+        if self.attitude:
+            Q[5:, 5:] = attitude_noise(np.asarray(x, float)[5:9], n * self._qa, n * self.params.norm_sd ** 2)
+        return Q
+
+    def normalize(self, x: np.ndarray) -> np.ndarray:
+        if not self.attitude:
+            return x
+        out = np.array(x, dtype=float, copy=True)
+        out[..., 5:9] = quat.normalize(out[..., 5:9])
+        return out

@@ -1,0 +1,313 @@
+"""Solver ``tdoa_geometric``: a 3-D position fix from one cycle of beacon arrival times (paper 003 sec. 4.1,
+eqs. 1-8).
+
+Beacons fire in turn, one every T seconds (eq. 1: ``t_i = (i - 1) T + t_g + d_i / c``, t_g unknown).
+Differences to a reference beacon remove t_g: the measured distance differences are
+
+.. math::
+    \\Delta_{i} = d_i - d_1 = c\\,(t_i - t_1) - c\\,(n_i - n_1)\\,T
+
+(n_i the firing count of beacon i's pulse). Starting from a guess r, the algorithm moves by
+:math:`\\delta r` until the modelled differences match: the gradient of the field
+:math:`d_{1i}(r) = d_i - d_1` is :math:`u_i - u_1` (eq. 3, u_i the unit vector from beacon i to the
+robot), a first-order move changes :math:`d_{1i}` by :math:`\\delta r \\cdot \\nabla d_{1i}` (eq. 5), and in
+the biorthogonal basis of the three gradients (eq. 4) the move is (eqs. 6-8)
+
+.. math::
+    \\delta r = \\frac{\\delta d_{12} (\\nabla d_{13} \\times \\nabla d_{14}) + \\delta d_{13}
+    (\\nabla d_{14} \\times \\nabla d_{12}) + \\delta d_{14} (\\nabla d_{12} \\times \\nabla d_{13})}
+    {\\nabla d_{12} \\cdot (\\nabla d_{13} \\times \\nabla d_{14})}
+
+i.e. Newton's method on the three hyperboloids (3-4 iterations from a rough start). With more than four
+beacons the move is the generalised least-squares one, ``dr = (G^T W G)^-1 G^T W dd`` with G the gradient
+rows and W^-1 = I + 1 1^T the correlation of differences to one common reference (equal arrival noise);
+for four beacons it is eq. 8 exactly. The fix covariance maps the arrival-time noise through the same
+linearisation (eq. 8 "allows the error in position to be estimated"): ``(c sigma)^2 (G^T W G)^-1``.
+"""
+from __future__ import annotations
+
+from typing import ClassVar, Literal, Sequence
+
+import numpy as np
+from pydantic import Field
+from scipy.linalg import cho_factor, cho_solve
+
+from fusion.api import BuildContext, ConfigError, Event, MalformedMessage, Message, Params, Solver
+
+from .ols_trilateration import pack_fix
+
+REASONS = ("too_few_beacons", "degenerate", "no_convergence")
+
+
+class NoFix(ValueError):
+    """No fix from these arrivals; ``reason`` is one of :data:`REASONS`."""
+
+    def __init__(self, reason: str, detail: str):
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+
+
+def distance_differences(arrivals: np.ndarray, firings: np.ndarray, period: float, c: float) -> np.ndarray:
+    """Measured ``d_i - d_1`` (m), i = 2..k, from arrival times (k,) (s), firing counts (k,) and T (s)."""
+    a = np.asarray(arrivals, float)
+    n = np.asarray(firings, float)
+    return c * (a[1:] - a[0]) - c * period * (n[1:] - n[0])
+
+
+def _gradients(r: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distances d (k,) from beacons B (k, 3) to r, and the gradients u_i - u_1 (k-1, 3) (eq. 3)."""
+    diff = r - B
+    d = np.sqrt(np.einsum("kd,kd->k", diff, diff))
+    u = diff / np.maximum(d, 1e-12)[:, None]
+    return d, u[1:] - u[0]
+
+
+def biorthogonal_step(G: np.ndarray, dd: np.ndarray, degenerate_tol: float = 1e-9) -> np.ndarray:
+    """Eq. 8: the move dr (3,) with ``G dr = dd`` for the three gradient rows G (3, 3), written in the
+    biorthogonal basis of the gradients. Raises NoFix('degenerate') when the triple product
+    ``g1 . (g2 x g3)`` is below ``degenerate_tol`` times the product of the gradients' lengths."""
+    g1, g2, g3 = G
+    c23, c31, c12 = np.cross(g2, g3), np.cross(g3, g1), np.cross(g1, g2)
+    triple = float(g1 @ c23)
+    scale = float(np.linalg.norm(g1) * np.linalg.norm(g2) * np.linalg.norm(g3))
+    if not np.isfinite(triple) or abs(triple) <= degenerate_tol * max(scale, 1e-300):
+        raise NoFix("degenerate", f"gradients nearly coplanar (|g1.(g2 x g3)| = {abs(triple):.3g})")
+    return (dd[0] * c23 + dd[1] * c31 + dd[2] * c12) / triple
+
+
+def _gls_normal(G: np.ndarray) -> np.ndarray:
+    """G^T W G with W = (I + 1 1^T)^-1 = I - 1 1^T / (1 + m) (Sherman-Morrison, m = rows of G)."""
+    s = G.sum(axis=0)
+    return G.T @ G - np.outer(s, s) / (1.0 + G.shape[0])
+
+
+def _gls_step(G: np.ndarray, dd: np.ndarray, degenerate_condition: float) -> np.ndarray:
+    N = _gls_normal(G)
+    w = np.linalg.eigvalsh(N)
+    if not np.all(np.isfinite(w)) or w[0] <= w[-1] / degenerate_condition:
+        raise NoFix("degenerate", f"cond(G^T W G) = {w[-1] / max(w[0], 1e-300):.3g}")
+    rhs = G.T @ dd - G.sum(axis=0) * dd.sum() / (1.0 + G.shape[0])
+    return cho_solve(cho_factor(N, lower=True), rhs)
+
+
+def tdoa_fix(beacons: np.ndarray, arrivals: np.ndarray, firings: np.ndarray, period: float, c: float,
+             start: np.ndarray, sigma: float = 2e-4, max_iterations: int = 10, tolerance: float = 1e-9,
+             degenerate_tol: float = 1e-9, max_step: float = 100.0) -> tuple[np.ndarray, np.ndarray, int]:
+    """One geometric fix (paper 003 eqs. 1-8).
+
+    :param beacons: (k, 3) positions (m), k >= 4, the first one the reference.
+    :param arrivals: (k,) arrival times (s); ``firings``: (k,) firing counts of the pulses (integers).
+    :param period: the inter-firing period T (s); ``c``: speed of sound (m/s).
+    :param start: (3,) initial guess (m).
+    :param sigma: arrival-time noise sd (s), for the covariance.
+    :returns: position (3,) m, covariance (3, 3) m^2, iterations used.
+    :raises NoFix: ``too_few_beacons``, ``degenerate`` (coplanar gradients, GLS condition above
+        1/degenerate_tol), ``no_convergence`` (step above ``tolerance`` after ``max_iterations``, a step
+        longer than ``max_step`` m, or a non-finite value).
+    """
+    B = np.asarray(beacons, float)
+    k = B.shape[0]
+    if k < 4:
+        raise NoFix("too_few_beacons", f"{k} beacon(s), need 4 for a 3-D fix")
+    meas = distance_differences(arrivals, firings, period, c)
+    if not np.all(np.isfinite(meas)):
+        raise NoFix("no_convergence", "non-finite arrival times")
+    r = np.asarray(start, float).copy()
+    for it in range(1, max_iterations + 1):
+        d, G = _gradients(r, B)
+        dd = meas - (d[1:] - d[0])                      # errors in the differences of distance
+        step = (biorthogonal_step(G, dd, degenerate_tol) if k == 4
+                else _gls_step(G, dd, 1.0 / degenerate_tol))
+        size = float(np.sqrt(step @ step))
+        if not np.isfinite(size) or size > max_step:
+            raise NoFix("no_convergence", f"iteration {it}: step of {size:.3g} m")
+        r = r + step
+        if size <= tolerance:
+            break
+    else:
+        raise NoFix("no_convergence", f"step still {size:.3g} m after {max_iterations} iterations")
+    _, G = _gradients(r, B)
+    N = _gls_normal(G)
+    try:
+        cov = (c * sigma) ** 2 * cho_solve(cho_factor(N, lower=True), np.eye(3))
+    except np.linalg.LinAlgError:
+        raise NoFix("degenerate", "singular geometry at the fix") from None
+    return r, 0.5 * (cov + cov.T), it
+
+
+class AgreeingFixes:
+    """Consecutive fixes that agree: ``add(position, cov)`` returns the mean of the last ``n`` fixes (and its
+    covariance, the mean covariance / n) once each agrees with the one before within the chi-square test
+    ``d^T (C1 + C2)^-1 d <= chi2.ppf(probability, 3)``, else None. With four beacons an echo moves a fix
+    by tens of cm and nothing in the cycle shows it; three fixes in a row that agree are very unlikely to all
+    carry one (an initialiser must not start a filter, confidently, in the wrong place)."""
+
+    def __init__(self, n: int, probability: float = 0.99):
+        from fusion.chisquare import chi2
+
+        self.n = n
+        self.threshold = float(chi2.ppf(probability, 3))
+        self.run: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def add(self, pos: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        if self.run:
+            d = pos - self.run[-1][0]
+            if float(d @ np.linalg.solve(cov + self.run[-1][1], d)) > self.threshold:
+                self.run = []
+        self.run.append((pos, cov))
+        if len(self.run) < self.n:
+            return None
+        run = self.run[-self.n:]
+        return (np.mean([p for p, _ in run], axis=0), np.mean([c for _, c in run], axis=0) / self.n)
+
+    def reset(self) -> None:
+        self.run = []
+
+
+class TdoaParams(Params):
+    """YAML parameters of ``tdoa_geometric`` (m, s)."""
+
+    period_s: float = Field(0.225, gt=0, description="inter-firing period T (s), known (paper 003: 225 ms)")
+    speed_of_sound: float = Field(340.0, gt=0, description="c (m/s)")
+    arrival_sd: float = Field(2.0e-4, gt=0, description="arrival-time noise sd (s), for the fix covariance")
+    beacons: list[str] | None = Field(None, description="beacons in firing order (default: all config beacons)")
+    start: tuple[float, float, float] | None = Field(None, description="initial guess (m; default: the "
+                                                     "beacons' centroid)")
+    warm_start: bool = Field(True, description="start each fix from the previous one (the start above "
+                             "after a failure)")
+    max_iterations: int = Field(10, ge=1, description="iterations at most (the paper needs 3-4)")
+    tolerance: float = Field(1e-9, gt=0, description="converged when the step is below this (m)")
+    degenerate_tol: float = Field(1e-9, gt=0, description="relative triple product (or 1/condition) below "
+                                  "which the geometry is degenerate")
+    output: Literal["fix", "initialise"] = Field("fix", description="fix: one position fix (x y z and the "
+                                                 "upper triangle of its covariance) per cycle; initialise: one "
+                                                 "initial state fix (position and firing time), then every "
+                                                 "arrival passed through unchanged (the arrival_time model "
+                                                 "observes the fix as the filter's first update)")
+    initialise_agree: int = Field(3, ge=1, description="initialise: the fix is the mean of this many "
+                                  "consecutive fixes that agree (chi-square, 99 %), so echoes cannot "
+                                  "place the filter")
+
+
+class TdoaGeometric(Solver):
+    """Geometric TDOA position fixes (paper 003 sec. 4.1, eqs. 1-8) as a sensor preprocessor.
+
+    Input: ``beacon arrival [receiver]`` messages (arrival time in s). A cycle gathers one arrival per
+    beacon; it closes when every beacon of ``beacons`` has reported (the fix is stamped at the last
+    arrival), when a beacon repeats or when an arrival comes a full cycle (k T) after the first. The firing
+    counts come from the arrival times, ``n_i - n_1 = round((t_i - t_1) / T)``, so a missed pulse only
+    removes its beacon. A cycle with four or more beacons gives a fix by :func:`tdoa_fix` from the previous
+    fix (``warm_start``) or ``start``: ``Message(t, sensor, (x, y, z, cxx, cxy, cxz, cyy, cyz, czz))``, the
+    format of the ``position`` model (its covariance as R). No fix: ``counters`` counts the reason
+    (``too_few_beacons``, ``degenerate``, ``no_convergence``) and ``events`` gets a ``no_fix`` Event.
+    With four beacons there is no redundancy: an echo shifts the fix and cannot be detected here (paper).
+    ``output: initialise`` emits one initial state fix (position, the time of the last firing, their
+    covariance: :mod:`fusion_plugins.solvers.initial_fix`), from the mean of the first ``initialise_agree``
+    consecutive fixes that agree with each other (:class:`AgreeingFixes`), then passes every arrival through.
+    """
+
+    name: ClassVar[str] = "tdoa_geometric"
+    Params: ClassVar[type[Params]] = TdoaParams
+
+    def __init__(self, params: TdoaParams | None = None, context: BuildContext | None = None):
+        super().__init__(params, context)
+        p: TdoaParams = self.params  # type: ignore[assignment]
+        names = p.beacons if p.beacons is not None else list(self.context.beacons)
+        unknown = [b for b in names if b not in self.context.beacons]
+        if unknown:
+            raise ConfigError(f"tdoa_geometric: unknown beacon(s) {unknown}; the config defines "
+                              f"{sorted(self.context.beacons)}")
+        if len(names) < 4:
+            raise ConfigError(f"tdoa_geometric: needs at least 4 beacons for a 3-D fix, got {names}")
+        self.beacon_positions = {n: np.asarray(self.context.beacons[n], float) for n in names}
+        if any(b.shape != (3,) for b in self.beacon_positions.values()):
+            raise ConfigError("tdoa_geometric: beacons need 3 coordinates (x y z, m)")
+        self.start = (np.asarray(p.start, float) if p.start is not None
+                      else np.mean(list(self.beacon_positions.values()), axis=0))
+        self.counters: dict[str, int] = {"cycles": 0, "fixes": 0, "iterations": 0, **{r: 0 for r in REASONS}}
+        self.events: list[Event] = []
+        self._cycle: dict[str, tuple[float, Message]] = {}
+        self._previous: np.ndarray | None = None
+        self._initialised = False
+        self._agree = AgreeingFixes(p.initialise_agree)
+
+    def feed(self, message: Message) -> list[Message]:
+        """Take one ``beacon arrival [receiver]`` message; return the fix of a cycle that closed (or, after
+        the first fix with ``output: initialise``, the message itself)."""
+        p: TdoaParams = self.params  # type: ignore[assignment]
+        if p.output == "initialise" and self._initialised:
+            return [message]
+        try:
+            label, arrival = parse_arrival(message, self.beacon_positions)
+        except MalformedMessage as exc:
+            return self._malformed(message, exc)
+        out: list[Message] = []
+        if self._cycle:
+            t_first = min(a for a, _ in self._cycle.values())
+            if label in self._cycle or arrival - t_first >= len(self.beacon_positions) * p.period_s:
+                out += self._close()
+        self._cycle[label] = (arrival, message)
+        if len(self._cycle) == len(self.beacon_positions):
+            out += self._close()
+        return out
+
+    def _malformed(self, message: Message, exc: Exception) -> list[Message]:
+        """A bad message is counted (``counters['malformed']``) and reported as an event, not raised: the
+        run goes on (a raise from a preprocessor would stop it)."""
+        self.counters["malformed"] = self.counters.get("malformed", 0) + 1
+        self.events.append(Event(message.t, "malformed", message.sensor, f"line {message.line}: {exc}"))
+        return []
+
+    def flush(self) -> list[Message]:
+        """The last, incomplete cycle (end of input): a fix only if it has enough beacons."""
+        return self._close() if self._cycle and not self._initialised else []
+
+    def _close(self) -> list[Message]:
+        p: TdoaParams = self.params  # type: ignore[assignment]
+        cycle, self._cycle = self._cycle, {}
+        names = sorted(cycle, key=lambda n: cycle[n][0])
+        a = np.array([cycle[n][0] for n in names])
+        last = cycle[names[-1]][1]
+        self.counters["cycles"] += 1
+        firings = np.rint((a - a[0]) / p.period_s)
+        start = self._previous if (p.warm_start and self._previous is not None) else self.start
+        try:
+            pos, cov, it = tdoa_fix(np.array([self.beacon_positions[n] for n in names]), a, firings,
+                                    p.period_s, p.speed_of_sound, start, p.arrival_sd, p.max_iterations,
+                                    p.tolerance, p.degenerate_tol)
+        except NoFix as exc:
+            self.counters[exc.reason] += 1
+            self._previous = None
+            self._agree.reset()
+            self.events.append(Event(float(a[-1]), "no_fix", last.sensor, f"tdoa_geometric: {exc}"))
+            return []
+        self.counters["fixes"] += 1
+        self.counters["iterations"] += it
+        self._previous = pos
+        if p.output == "initialise":
+            agreed = self._agree.add(pos, cov)
+            if agreed is None:
+                return []
+            from .initial_fix import pack_initial
+            self._initialised = True
+            pos, cov = agreed
+            return [Message(float(a[-1]), last.sensor, pack_initial(
+                pos, cov, self.beacon_positions[names[-1]], float(a[-1]), p.speed_of_sound, p.arrival_sd), last.line)]
+        return [Message(float(a[-1]), last.sensor, pack_fix(pos, cov), last.line)]
+
+
+def parse_arrival(message: Message, known: Sequence[str]) -> tuple[str, float]:
+    """(beacon, arrival time s) of a ``beacon arrival [receiver]`` message; MalformedMessage when bad."""
+    vals = message.values
+    if len(vals) not in (2, 3):
+        raise MalformedMessage(f"expected 'beacon arrival [receiver]', got {len(vals)} values")
+    label = vals[0]
+    if not isinstance(label, str) or label not in known:
+        raise MalformedMessage(f"unknown beacon {label!r} (known: {', '.join(known)})")
+    try:
+        arrival = float(vals[1])
+    except (TypeError, ValueError):
+        raise MalformedMessage(f"arrival time of {label} is not a number: {vals[1]!r}") from None
+    if not np.isfinite(arrival):
+        raise MalformedMessage(f"arrival time of {label} must be finite, got {arrival}")
+    return label, arrival

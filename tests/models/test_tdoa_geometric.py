@@ -1,0 +1,183 @@
+"""tdoa_geometric (paper 003 eqs. 1-8): exact on noise-free arrivals from several starts, eq. 8 against a
+linear solve, GLS with more than four beacons, the fix covariance against Monte-Carlo scatter, and the
+counted reasons for no fix."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fusion import testing
+from fusion.api import BuildContext, ConfigError, MalformedMessage, Message
+from fusion_plugins.solvers.ols_trilateration import unpack_fix
+from fusion_plugins.solvers.tdoa_geometric import NoFix, biorthogonal_step, tdoa_fix
+
+C, T = 340.0, 0.225
+LAB = np.array([[0, 0, 0], [2.6, 0, 0], [0, 2.6, 0], [0, 0, 2.6]], float)   # paper 003 fig. 1
+
+
+def _arrivals(r, B, t0=0.137, sigma=0.0, rng=None, firings=None):
+    n = np.arange(len(B)) if firings is None else np.asarray(firings)
+    a = t0 + n * T + np.linalg.norm(r - B, axis=1) / C
+    if sigma:
+        a = a + rng.normal(0.0, sigma, a.shape)
+    return a, n
+
+
+@pytest.mark.parametrize("seed", range(5))
+@pytest.mark.parametrize("start", [None, (2.0, 2.0, 2.0), (0.5, 2.4, 0.5), (0.1, 0.1, 0.1), (1.0, 0.2, 2.2)])
+def test_exact_on_noise_free_arrivals(seed, start):
+    r = np.random.default_rng(seed).uniform(0.5, 2.5, 3)
+    a, n = _arrivals(r, LAB)
+    s = LAB.mean(axis=0) if start is None else np.array(start)
+    pos, cov, it = tdoa_fix(LAB, a, n, T, C, s, tolerance=1e-12)
+    assert np.abs(pos - r).max() < 1e-9
+    assert it <= 10
+
+
+def test_three_or_four_iterations_from_a_nearby_start():
+    """The paper: 3 or 4 iterations for convergence (at the mm level, from the previous fix)."""
+    r = np.array([1.21, 1.15, 1.36])
+    a, n = _arrivals(r, LAB)
+    _, _, it = tdoa_fix(LAB, a, n, T, C, r + 0.05, tolerance=1e-4)
+    assert it <= 4
+
+
+def test_biorthogonal_step_is_the_linear_solve():
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        G, dd = rng.normal(size=(3, 3)), rng.normal(size=3)
+        assert np.allclose(biorthogonal_step(G, dd), np.linalg.solve(G, dd), rtol=1e-10, atol=1e-12)
+
+
+def test_more_beacons_by_least_squares():
+    B = np.vstack([LAB, [[2.6, 2.6, 0.0], [2.6, 0.0, 2.6]]])
+    r = np.array([1.7, 0.9, 1.2])
+    a, n = _arrivals(r, B, firings=[0, 1, 2, 3, 4, 6])     # a missed firing (5) in between
+    pos, _, _ = tdoa_fix(B, a, n, T, C, B.mean(axis=0), tolerance=1e-12)
+    assert np.abs(pos - r).max() < 1e-9
+
+
+@pytest.mark.parametrize("B", [LAB, np.vstack([LAB, [[2.6, 2.6, 2.6], [2.6, 2.6, 0.0]]])], ids=["4", "6"])
+def test_fix_covariance_matches_monte_carlo(B):
+    """Eq. 8 maps arrival-time errors to the position: the reported covariance is the scatter of fixes."""
+    rng = np.random.default_rng(7)
+    r, sigma, N = np.array([1.2, 1.4, 0.9]), 1e-5, 2000     # small noise: the linearisation holds
+    fixes = []
+    for _ in range(N):
+        a, n = _arrivals(r, B, sigma=sigma, rng=rng)
+        fixes.append(tdoa_fix(B, a, n, T, C, r, sigma=sigma)[0])
+    S = np.cov(np.array(fixes).T)
+    _, cov, _ = tdoa_fix(B, _arrivals(r, B)[0], np.arange(len(B)), T, C, r, sigma=sigma)
+    # each variance within ~4 standard errors of a sample variance (sqrt(2/N) = 3.2 %)
+    assert np.allclose(np.diag(S), np.diag(cov), rtol=0.13)
+    assert np.abs(S - cov).max() < 0.13 * np.diag(cov).max()
+
+
+def test_degenerate_geometry_gives_no_fix():
+    """Beacons in one plane and the robot in it: every u_i lies in the plane, the gradients are coplanar."""
+    B = np.array([[0, 0, 0], [2.6, 0, 0], [0, 2.6, 0], [2.6, 2.6, 0]], float)
+    r = np.array([1.0, 1.3, 0.0])
+    a, n = _arrivals(r, B)
+    with pytest.raises(NoFix) as err:
+        tdoa_fix(B, a, n, T, C, r)
+    assert err.value.reason == "degenerate"
+
+
+def test_non_convergence_gives_no_fix():
+    r = np.array([1.21, 1.15, 1.36])
+    a, n = _arrivals(r, LAB)
+    with pytest.raises(NoFix) as err:
+        tdoa_fix(LAB, a, n, T, C, (2.0, 0.2, 0.2), max_iterations=1)
+    assert err.value.reason == "no_convergence"
+    with pytest.raises(NoFix):
+        tdoa_fix(LAB[:3], a[:3], n[:3], T, C, r)
+
+
+# --------------------------------------------------------------------------- the preprocessor
+def _solver(**params):
+    ctx = BuildContext(beacons={f"B{i + 1}": b for i, b in enumerate(LAB)}, sensor="us")
+    return testing.build("solver", "tdoa_geometric", params, ctx)
+
+
+def _messages(r, cycles, t0=0.137, drop=()):
+    out, k = [], 0
+    for _ in range(cycles):
+        for i, b in enumerate(LAB):
+            a = t0 + k * T + np.linalg.norm(r - b) / C
+            if k not in drop:
+                out.append(Message(a, "us", (f"B{i + 1}", a, 11.0)))
+            k += 1
+    return out
+
+
+def test_solver_one_fix_per_cycle_with_covariance():
+    r = np.array([0.59, 1.14, 0.9])
+    s = _solver()
+    fixes = [m for msg in _messages(r, 5) for m in s.feed(msg)]
+    assert len(fixes) == 5 and s.counters["fixes"] == 5
+    for f in fixes:
+        pos, cov = unpack_fix(f.values)
+        assert np.abs(pos - r).max() < 1e-8
+        assert np.all(np.linalg.eigvalsh(cov) > 0)
+
+
+def test_solver_counts_missing_beacons_and_initialise_mode():
+    r = np.array([1.2, 1.1, 1.3])
+    s = _solver()
+    out = [m for msg in _messages(r, 3, drop={5}) for m in s.feed(msg)] + s.flush()
+    assert len(out) == 2 and s.counters["too_few_beacons"] == 1
+    assert any(e.kind == "no_fix" and "too_few_beacons" in e.detail for e in s.events)
+    s = _solver(output="initialise")
+    msgs = _messages(r, 5)
+    out = [m for msg in msgs for m in s.feed(msg)]
+    assert len(out[0].values) == 14 and out[1:] == msgs[12:]      # one fix (three cycles agree), then the arrivals
+
+
+def test_initialiser_is_not_placed_by_an_echo():
+    """An echo (1 m of extra path) in the first cycle: that fix disagrees with the next; the initial fix is
+    the mean of the first two that agree, near the truth."""
+    r = np.array([1.2, 1.1, 1.3])
+    msgs = _messages(r, 4)
+    b, a, rec = msgs[1].values
+    msgs[1] = Message(a + 1.0 / C, "us", (b, a + 1.0 / C, rec))
+    s = _solver(output="initialise", initialise_agree=2)
+    out = [m for msg in msgs for m in s.feed(msg)]
+    pos, _ = unpack_fix(out[0].values)
+    assert np.abs(pos - r).max() < 1e-6 and out[0].t == msgs[11].t
+    s1 = _solver(output="initialise", initialise_agree=1)      # without the agreement: placed by the echo
+    pos1, _ = unpack_fix([m for msg in msgs for m in s1.feed(msg)][0].values)
+    assert np.linalg.norm(pos1 - r) > 0.2
+
+
+def test_solver_bad_input():
+    s = _solver()
+    assert s.feed(Message(1.0, "us", ("B9", 1.0, 3.0), 7)) == []      # counted and reported, not raised
+    assert s.feed(Message(1.0, "us", ("B1", "x", 3.0), 8)) == []
+    assert s.counters["malformed"] == 2
+    assert [e.kind for e in s.events] == ["malformed"] * 2
+    assert "line 7: unknown beacon" in s.events[0].detail and "not a number" in s.events[1].detail
+    with pytest.raises(ConfigError, match="at least 4 beacons"):
+        _solver(beacons=["B1", "B2", "B3"])
+
+
+def test_initial_state_fix_carries_the_firing_time():
+    """The initial fix: position, and t = the last firing's time (exact on exact arrivals), observed by
+    arrival_time as a linear fix of p and t whose covariance holds the p-t correlation of t = a - d / c."""
+    from fusion_plugins.solvers.initial_fix import observe_initial
+    r = np.array([1.2, 1.1, 1.3])
+    msgs = _messages(r, 3, t0=0.137)
+    s = _solver(output="initialise")
+    out = [m for msg in msgs for m in s.feed(msg)]
+    v = np.array(out[0].values)
+    assert np.abs(v[:3] - r).max() < 1e-8
+    assert v[9] == pytest.approx(0.137 + 11 * T, abs=1e-10)           # the 12th firing (B4 of cycle 3)
+    proc = testing.build("process", "firing_clock", {})
+    ctx = BuildContext(layout=proc.layout, beacons={f"B{i + 1}": b for i, b in enumerate(LAB)})
+    obs = observe_initial(out[0], ctx)
+    x = np.r_[r, T, v[9]]
+    assert obs.z.shape == (4,) and np.allclose(obs.model.h(x), obs.z, atol=1e-8)
+    u = (r - LAB[3]) / np.linalg.norm(r - LAB[3])
+    assert np.allclose(obs.R[:3, 3], -obs.R[:3, :3] @ u / C)          # cov(p, t) = -C u / c
+    assert np.all(np.linalg.eigvalsh(obs.R) > 0)
+    with pytest.raises(MalformedMessage):
+        observe_initial(Message(1.0, "us", tuple(v[:13].tolist()) + ("x",)), ctx)
