@@ -112,12 +112,12 @@ def echoes(log: Log, beacons: dict[str, np.ndarray], c: float = 340.0, min_extra
 # --------------------------------------------------------------------------- running systems
 def run_system(system, path: str) -> dict[str, Any]:
     """Replay ``system`` over the log at ``path``: {"summary", "t", "x", "sd"} (estimates at each update).
-    (The one place that calls the run loop: fusion.pipeline.run after the run-loop rewrite.)"""
-    from fusion.commands.run import replay, summarize
+    (The one place that calls the run loop, fusion.pipeline.run.)"""
+    from fusion import pipeline
 
-    res = replay(system, path)
-    summary = summarize(system, path, res)
-    est = [e for e in res["estimates"] if e.reason == "update"]
+    kept = pipeline.Collect()
+    summary = pipeline.run(system, path, [kept]).summary
+    est = [e for e in kept.estimates if e.reason == "update"]
     return {"summary": summary, "t": np.array([e.t for e in est]), "x": np.array([e.belief.x for e in est]),
             "sd": np.array([e.belief.sd for e in est]), "system": system}
 
