@@ -289,7 +289,7 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
         if s.recovery is not None:
             if s.role != "measurement":
                 raise ConfigError(f"{where}.recovery: only a measurement sensor can recover the filter")
-            for i, b in enumerate(s.recovery.blocks):
+            for i, b in enumerate([*s.recovery.blocks, *s.recovery.also_inflate]):
                 if b not in layout:
                     bad = doc.where([*loc, "recovery", "blocks", i]) if doc else f"{where}.recovery.blocks"
                     raise ConfigError(f"{bad}: state has no block {b!r}; blocks are {[x.name for x in layout.blocks]}")

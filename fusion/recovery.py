@@ -15,7 +15,9 @@ streak is used to recover, then fused:
 
 - ``action: reset``: the listed blocks are re-initialised from the measurement, for a sensor that
   measures them directly (a position fix: the block ``p`` from ``z``, through the model's lever arm when
-  it has ``position_from``), with the measurement's covariance and no correlation to the rest;
+  it has ``position_from``; a 2-D fix resets the first two elements), with the measurement's covariance
+  and no correlation to the rest;
+  ``also_inflate`` lists blocks that drifted with them (a velocity) whose sd grow by ``inflate``;
 - ``action: inflate``: the covariance of the listed blocks is scaled so their standard deviations grow by
   ``inflate`` (their correlations kept), and the measurement is fused as usual.
 
@@ -46,6 +48,8 @@ class RecoverySpec(BaseModel):
     action: Literal["reset", "inflate"] = "reset"
     blocks: list[str] = Field(default_factory=lambda: ["p"], description="state blocks to reset or inflate")
     inflate: float = Field(10.0, gt=1.0, allow_inf_nan=False, description="action inflate: sd factor")
+    also_inflate: list[str] = Field(default_factory=list, description="action reset: blocks whose sd grow by "
+                                    "``inflate`` as well (what drifted with the reset ones, e.g. v)")
 
 
 class LockoutWatch:
@@ -76,21 +80,27 @@ def recover(spec: RecoverySpec, belief: Belief, layout, obs, R: np.ndarray, filt
     x = np.array(belief.x, dtype=float)
     P = np.array(belief.cov, dtype=float)
     idx = np.concatenate([np.arange(layout[b].start, layout[b].stop) for b in spec.blocks])
-    if spec.action == "inflate":
+    def inflate(P: np.ndarray, blocks: list[str]) -> np.ndarray:
         d = np.ones(x.size)
-        d[idx] = spec.inflate
-        P = d[:, None] * P * d[None, :]
+        for b in blocks:
+            d[layout[b]] = spec.inflate
+        return d[:, None] * P * d[None, :]
+
+    if spec.action == "inflate":
+        P = inflate(P, spec.blocks)
         detail = f"{sensor} locked out; sd of {', '.join(spec.blocks)} inflated {spec.inflate:g}x"
     else:
+        if spec.also_inflate:
+            P = inflate(P, spec.also_inflate)
         to_state = getattr(obs.model, "position_from", None)
         z = np.asarray(obs.z, dtype=float)
         value = to_state(z, x) if to_state is not None else z
-        if value.size < idx.size:
-            raise ValueError(f"recovery of {spec.blocks} needs {idx.size} values, the {sensor} measurement has {value.size}")
+        idx = idx[: value.size]  # a horizontal fix resets the horizontal elements only
         x[idx] = value[: idx.size]
         Rb = np.asarray(obs.R if obs.R is not None else R, dtype=float)[: idx.size, : idx.size]
         P[idx, :] = 0.0
         P[:, idx] = 0.0
         P[np.ix_(idx, idx)] = Rb
-        detail = f"{sensor} locked out; {', '.join(spec.blocks)} re-initialised from its measurement"
+        detail = f"{sensor} locked out; {', '.join(spec.blocks)} re-initialised from its measurement" + (
+            f", sd of {', '.join(spec.also_inflate)} inflated {spec.inflate:g}x" if spec.also_inflate else "")
     return filt.initial_belief(belief.t, x, 0.5 * (P + P.T)), Event(belief.t, "reset", sensor, detail)

@@ -122,8 +122,7 @@ def test_accuracy_bar_with_noise(route):
 
 @pytest.mark.parametrize("cycles", [
     1,
-    pytest.param(3, marks=pytest.mark.xfail(strict=True, reason="lock-out recovery is issue 10: the third biased "
-                                            "fix passes the gate (NIS 14.5 < 16.3) and every later fix is refused")),
+    3,   # the third biased fix passes the gate (NIS 14.5 < 16.3): the config's lock-out recovery re-sets p
 ])
 def test_biased_cycles_do_not_lock_the_filter_out(route, tmp_path, cycles):
     """Finding 5's precondition (the recovery itself is issue 10's): cycles whose ranges are all from a
