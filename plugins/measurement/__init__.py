@@ -7,5 +7,10 @@ def fusion_register_components(registry):
     from fusion_plugins.measurement.range import RangeModel
     from fusion_plugins.measurement.position import Position
 
+    from fusion_plugins.measurement.gps import Gps
+    from fusion_plugins.measurement.magnetometer import Magnetometer
+
     registry.add(RangeModel)
     registry.add(Position)
+    registry.add(Gps)
+    registry.add(Magnetometer)
