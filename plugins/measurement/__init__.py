@@ -9,8 +9,12 @@ def fusion_register_components(registry):
 
     from fusion_plugins.measurement.gps import Gps
     from fusion_plugins.measurement.magnetometer import Magnetometer
+    from fusion_plugins.measurement.attitude import Attitude
+    from fusion_plugins.measurement.quat_norm import QuatNorm
 
     registry.add(RangeModel)
     registry.add(Position)
     registry.add(Gps)
     registry.add(Magnetometer)
+    registry.add(Attitude)
+    registry.add(QuatNorm)

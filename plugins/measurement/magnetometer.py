@@ -1,7 +1,7 @@
 """Measurement ``magnetometer``: the Earth's field seen in the body frame, ``h = C_n^b(q) m_n`` (paper 002 sec. 2.3)."""
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import ClassVar, Literal, Sequence
 
 import numpy as np
 from pydantic import Field, model_validator
@@ -48,6 +48,11 @@ class MagnetometerParams(FieldParams):
 
     direction_only: bool = Field(False, description="measure the unit vector m_b / |m_b| (insensitive to the "
                                  "intensity; noise sd then in rad)")
+    align: Literal["improved_triad", "triad", "none"] = Field(
+        "improved_triad", description="initial alignment over the static start (initial.align_s) from the mean "
+        "field and the mean specific force (solvers.triad); none: the attitude is left to the process")
+    align_accel_sd: float = Field(0.01, gt=0, description="sd (m/s^2) of the static mean specific force beyond "
+                                  "the state's accelerometer-bias uncertainty (vibration, residual tilt)")
 
 
 _FLIP = np.array([1.0, -1.0, -1.0, -1.0])
@@ -89,6 +94,53 @@ class Magnetometer(MeasurementModel):
         H = np.zeros((3, self.n))
         H[:, self._q] = quat.rotate_jacobian(q * _FLIP, self.m_n) * _FLIP
         return H
+
+    def align_state(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray,
+                    observations: Sequence[Observation], R: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Initial attitude by TRIAD / Improved TRIAD (paper 002 sec. 3.1, fusion.api.AlignsState) from the
+        mean field of the static start and the mean specific force ``u_mean[:3]`` (corrected by the state's
+        ``ba`` / ``sa`` when it has them): body gravity ``g_b = -f_b``, reference ``g_n = [0, 0, g]``.
+
+        Covariance (solvers.triad.attitude_covariance): the accelerometer side is the state's bias
+        covariance plus ``align_accel_sd^2``, the magnetometer side the sensor's R itself (its calibration
+        residual does not average away over a static start); the q block of P0 becomes G P_theta G^T and
+        its correlation with ``ba`` (a bias tilts the levelled attitude) G J1 P_ba."""
+        from fusion_plugins.measurement.attitude import covariance_in_state, error_to_quaternion
+        from fusion_plugins.solvers.triad import attitude_covariance, solve
+
+        method = self.params.align  # type: ignore[attr-defined]
+        if method == "none" or not observations:
+            return x0, P0
+        layout = self.context.layout
+        x0 = np.array(x0, dtype=float, copy=True)
+        P0 = np.array(P0, dtype=float, copy=True)
+        f = np.asarray(u_mean, dtype=float)[:3].copy()
+        ba = layout["ba"] if "ba" in layout else None  # type: ignore[operator]
+        if ba is not None:
+            f -= x0[ba]
+        if "sa" in layout:  # type: ignore[operator]
+            f /= x0[layout["sa"]]  # type: ignore[index]
+        b1 = -f
+        b2 = np.mean([o.z for o in observations], axis=0)
+        S1 = np.eye(3) * self.params.align_accel_sd ** 2  # type: ignore[attr-defined]
+        if ba is not None:
+            S1 = S1 + P0[ba, ba]
+        S2 = R if R is not None else np.eye(3) * (1e-2 * np.linalg.norm(b2)) ** 2
+        g_n = np.array([0.0, 0.0, np.linalg.norm(b1)])
+        s1 = float(np.sqrt(np.trace(S1) / 3)) / np.linalg.norm(b1)
+        s2 = float(np.sqrt(np.trace(S2) / 3)) / np.linalg.norm(b2)
+        C = solve(method, b1, b2, g_n, self.m_n, s1, s2)
+        P_theta, J1 = attitude_covariance(method, b1, b2, g_n, self.m_n, S1, S2, C)
+        q = quat.from_matrix(C)
+        x0[self._q] = q
+        P0[self._q, :] = 0.0
+        P0[:, self._q] = 0.0
+        P0[self._q, self._q] = covariance_in_state(q, P_theta)
+        if ba is not None:
+            cross = error_to_quaternion(q) @ J1 @ P0[ba, ba]
+            P0[self._q, ba] = cross
+            P0[ba, self._q] = cross.T
+        return x0, P0
 
     def observe(self, message: Message) -> Observation | None:
         """Observation of a sample ``mx my mz`` (FRD)."""

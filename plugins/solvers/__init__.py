@@ -5,5 +5,7 @@ from fusion import hookimpl
 @hookimpl
 def fusion_register_components(registry):
     from fusion_plugins.solvers.ols_trilateration import OlsTrilateration
+    from fusion_plugins.solvers.triad import TriadSolver
 
     registry.add(OlsTrilateration)
+    registry.add(TriadSolver)
