@@ -22,6 +22,8 @@ from __future__ import annotations
 
 from typing import ClassVar
 
+import math
+
 import numpy as np
 
 from fusion.api import BuildContext, Message, Params, ProcessModel, StateLayout
@@ -59,6 +61,16 @@ class InsStates(ProcessModel):
         self.g, self.g_n = self.core.g, self.core.g_n
         self.counters = self.core.counters
         self._var_s = np.concatenate([_var(p.accel_scale_rw), _var(p.gyro_scale_rw)])
+        # Fast path for one point (the EKF): the paper's Euler step without eta, Earth rate or anisotropic
+        # noise, in scalar arithmetic with f, F and Q computed once per (x, u, dt) (the EKF asks for all
+        # three). The same numbers as the general path to rounding (tests/models/test_ins_states.py).
+        c = self.core
+        self._fast = (p.integration == "euler" and p.eta == 0.0 and c.w_ie is None
+                      and c._qc_diag is not None)
+        self._hold = p.hold_after if p.hold_after is not None else math.inf   # a longer step: general path
+        self._cache_key: tuple | None = None
+        self._cache: tuple = ()
+        self._Qc: dict[float, np.ndarray] = {}
 
     # ------------------------------------------------------------------ mapping to the 16-state model
     def _core(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -75,6 +87,8 @@ class InsStates(ProcessModel):
         """Propagate states x (..., n) over dt (s) with the IMU sample u (6,): eq. 8 (+ eqs. 12-13)."""
         if u is None:
             raise ValueError("process 'ins' needs the IMU sample u = [ax ay az gx gy gz]")
+        if self._fast and dt <= self._hold and np.ndim(x) == 1 and np.ndim(u) == 1:
+            return self._step(x, u, dt)[0].copy()
         x16, ue = self._core(x, u)
         y = self.core.f(x16, ue, dt)
         out = np.array(np.broadcast_to(x, y.shape[:-1] + (self.layout.n,)), dtype=float)
@@ -105,6 +119,8 @@ class InsStates(ProcessModel):
         """Analytic F = df/dx (n, n) at x (n,), from the 16-state F by the chain rule (module docstring)."""
         if u is None:
             raise ValueError("process 'ins' needs the IMU sample u = [ax ay az gx gy gz]")
+        if self._fast and dt <= self._hold:
+            return self._step(x, u, dt)[1].copy()
         x = np.asarray(x, dtype=float)
         x16, ue = self._core(x, u)
         F16 = self.core.jacobian(x16, ue, dt)
@@ -127,6 +143,8 @@ class InsStates(ProcessModel):
 
     def Q(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
         """Discrete process noise (n, n) over dt: the 16-state Q (ins.py) plus the scale random walks."""
+        if self._fast and dt <= self._hold and np.ndim(x) == 1:
+            return self._noise(np.asarray(x, dtype=float), dt)
         x16, ue = self._core(x, u if u is not None else np.zeros(6))
         return self._embed(self.core.Q(x16, ue, dt), dt)
 
@@ -136,6 +154,94 @@ class InsStates(ProcessModel):
         b = np.zeros(16)
         a[:10], b[:10] = np.asarray(x0, float)[:10], np.asarray(x1, float)[:10]
         return self._embed(self.core.Q_inputs(a, b, us, dts), float(np.sum(dts)))
+
+    # ------------------------------------------------------------------ the one-point fast path
+    def _step(self, x: np.ndarray, u: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """(f, F) of one state x (n,) for the Euler step (eq. 8 with ``p += v dt``, ins.py's ``euler``),
+        scalar arithmetic; cached for the last (x, u, dt)."""
+        x = np.asarray(x, dtype=float)
+        u = np.asarray(u, dtype=float)
+        key = (x.tobytes(), u.tobytes(), dt)
+        if key == self._cache_key:
+            return self._cache
+        n = self.layout.n
+        xl = x.tolist()
+        ul = u.tolist()
+        if n == 22:
+            a = [(ul[i] - xl[10 + i]) / xl[16 + i] for i in range(3)]      # eq. 11 solved for the input
+            w = [(ul[3 + i] - xl[13 + i]) / xl[19 + i] for i in range(3)]
+        else:
+            a, w = ul[:3], ul[3:]
+        q0, q1, q2, q3 = xl[6:10]
+        n2 = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
+        # C_b^n from q / |q| (paper 000 eq. 35 / |q|^2)
+        C = [[(q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3) / n2, 2 * (q1 * q2 - q0 * q3) / n2, 2 * (q1 * q3 + q0 * q2) / n2],
+             [2 * (q1 * q2 + q0 * q3) / n2, (q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3) / n2, 2 * (q2 * q3 - q0 * q1) / n2],
+             [2 * (q1 * q3 - q0 * q2) / n2, 2 * (q2 * q3 + q0 * q1) / n2, (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3) / n2]]
+        Ca = [C[r][0] * a[0] + C[r][1] * a[1] + C[r][2] * a[2] for r in range(3)]
+        h = [0.5 * dt * wi for wi in w]
+        s = math.sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2])
+        sinc = math.sin(s) / s if s > 1e-300 else 1.0
+        c3 = (s * math.cos(s) - math.sin(s)) / s ** 3 if s > 1e-4 else -1.0 / 3.0 + s * s / 30.0
+        p0, p1, p2, p3 = math.cos(s), sinc * h[0], sinc * h[1], sinc * h[2]        # dq, eqs. 43-49
+        y = x.copy()
+        g = self.g
+        for i in range(3):
+            y[i] = xl[i] + xl[3 + i] * dt                                       # r += v dt
+            y[3 + i] = xl[3 + i] + (Ca[i] + (g if i == 2 else 0.0)) * dt        # v += (C f + g) dt
+        y[6] = q0 * p0 - q1 * p1 - q2 * p2 - q3 * p3                           # q (x) dq
+        y[7] = q0 * p1 + q1 * p0 + q2 * p3 - q3 * p2
+        y[8] = q0 * p2 - q1 * p3 + q2 * p0 + q3 * p1
+        y[9] = q0 * p3 + q1 * p2 - q2 * p1 + q3 * p0
+        F = np.eye(n)
+        F[0, 3] = F[1, 4] = F[2, 5] = dt
+        # d(C a)/dq for the normalised C: (dR/dq a - 2 C a q^T) / |q|^2, R the homogeneous form
+        va = q1 * a[0] + q2 * a[1] + q3 * a[2]
+        qxa = [q2 * a[2] - q3 * a[1], q3 * a[0] - q1 * a[2], q1 * a[1] - q2 * a[0]]
+        qv = (q1, q2, q3)
+        ax_ = [[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]]
+        qq = (q0, q1, q2, q3)
+        for r in range(3):
+            dR = [2 * (q0 * a[r] + qxa[r])] + [2 * ((va if r == k else 0.0) + qv[r] * a[k] - a[r] * qv[k] - q0 * ax_[r][k])
+                                              for k in range(3)]
+            for k in range(4):
+                F[3 + r, 6 + k] = dt * (dR[k] - 2.0 * Ca[r] * qq[k]) / n2
+        F[6:10, 6:10] = ((p0, -p1, -p2, -p3), (p1, p0, p3, -p2), (p2, -p3, p0, p1), (p3, p2, -p1, p0))   # R(dq)
+        if n == 22:
+            # d dq / dw (4, 3), then d q_new / dw = L(q) d dq / dw
+            D = np.empty((4, 3))
+            D[0] = [-0.5 * sinc * hi * dt for hi in h]
+            for r in range(3):
+                D[1 + r] = [(0.5 * sinc * (1.0 if r == k else 0.0) + 0.5 * c3 * h[r] * h[k]) * dt for k in range(3)]
+            L = np.array(((q0, -q1, -q2, -q3), (q1, q0, -q3, q2), (q2, q3, q0, -q1), (q3, -q2, q1, q0)))
+            Ldw = L @ D
+            inv_sa = 1.0 / x[16:19]
+            inv_sw = 1.0 / x[19:22]
+            Cm = np.array(C) * -dt
+            F[3:6, 10:13] = Cm * inv_sa                                          # df/dba = -C / sa dt
+            F[3:6, 16:19] = Cm * (np.array(a) * inv_sa)                          # df/dsa = -C a / sa dt
+            F[6:10, 13:16] = -Ldw * inv_sw
+            F[6:10, 19:22] = -Ldw * (np.array(w) * inv_sw)
+        self._cache_key, self._cache = key, (y, F)
+        return y, F
+
+    def _noise(self, x: np.ndarray, dt: float) -> np.ndarray:
+        """Q (n, n) of the fast path: the attitude-independent blocks cached per dt, the q block
+        ``N_w^2 dt / 4 (|q|^2 I - q q^T)`` plus ``quat_norm_variance`` along q (as ins.py's Q)."""
+        base = self._Qc.get(dt)
+        if base is None:
+            base = self._embed(self.core.Q(np.r_[np.zeros(6), 1.0, np.zeros(9)], None, dt), dt)
+            base[6:10, 6:10] = 0.0
+            if len(self._Qc) > 8:
+                self._Qc.clear()
+            self._Qc[dt] = base
+        Qm = base.copy()
+        q = x[6:10]
+        qq = np.outer(q, q)
+        n2 = float(q @ q)
+        Qm[6:10, 6:10] = (np.eye(4) * n2 - qq) * (self.core._var_w[0] * dt / 4.0) + \
+            qq * (self.params.quat_norm_variance / n2)  # type: ignore[attr-defined]
+        return Qm
 
     # ------------------------------------------------------------------ initial alignment
     def align(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

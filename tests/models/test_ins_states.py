@@ -132,3 +132,22 @@ def test_align_with_scale_and_bias_levels_exactly():
     np.testing.assert_array_equal(P, np.eye(22))
     x10, _ = make(states=10).align(np.r_[np.zeros(6), 1, 0, 0, 0], np.eye(10), np.r_[f, bw])
     assert quat.angle_between(x10[6:10], quat.from_euler(0.1, -0.05, 0.0)) < 1e-12
+
+
+@pytest.mark.parametrize("states", [10, 22])
+def test_one_point_fast_path_equals_the_general_path(states):
+    """The EKF's scalar fast path (f, F, Q for one state) gives the general path's numbers to rounding,
+    and a step longer than hold_after goes the general way (hold noise)."""
+    rng = np.random.default_rng(7)
+    kw = {"accel_scale_rw": 1e-4, "gyro_scale_rw": 2e-4} if states == 22 else {}
+    fast = make(states=states, quat_norm_variance=1e-12, hold_after=0.03, **kw)
+    slow = make(states=states, quat_norm_variance=1e-12, hold_after=0.03, **kw)
+    slow._fast = False
+    assert fast._fast
+    for dt in (0.02, 0.02, 0.01, 0.5):
+        x = random_state(rng, states)
+        x[6:10] *= 1.02                                       # a non-unit mean quaternion too
+        u = imu(rng)
+        np.testing.assert_allclose(fast.f(x, u, dt), slow.f(x, u, dt), atol=1e-14)
+        np.testing.assert_allclose(fast.jacobian(x, u, dt), slow.jacobian(x, u, dt), atol=1e-14)
+        np.testing.assert_allclose(fast.Q(x, u, dt), slow.Q(x, u, dt), atol=1e-18)
