@@ -51,6 +51,8 @@ class MagnetometerParams(FieldParams):
     align: Literal["improved_triad", "triad", "none"] = Field(
         "improved_triad", description="initial alignment over the static start (initial.align_s) from the mean "
         "field and the mean specific force (solvers.triad); none: the attitude is left to the process")
+    updates: bool = Field(True, description="fuse the samples after the static start (false: the magnetometer "
+                          "only aligns, as 'without magnetometer' in paper 002 sec. 5)")
     align_accel_sd: float = Field(0.01, gt=0, description="sd (m/s^2) of the static mean specific force beyond "
                                   "the state's accelerometer-bias uncertainty (vibration, residual tilt)")
 
@@ -82,6 +84,7 @@ class Magnetometer(MeasurementModel):
         m = self.params.field()  # type: ignore[attr-defined]
         self.direction_only = bool(self.params.direction_only)  # type: ignore[attr-defined]
         self.m_n = m / np.linalg.norm(m) if self.direction_only else m
+        self._aligned = False      # set by align_state: the static start is over
 
     def h(self, x: np.ndarray) -> np.ndarray:
         """Predicted field (..., 3) in the body frame for states x (..., n)."""
@@ -109,6 +112,7 @@ class Magnetometer(MeasurementModel):
         from fusion_plugins.solvers.triad import attitude_covariance, solve
 
         method = self.params.align  # type: ignore[attr-defined]
+        self._aligned = True
         if method == "none" or not observations:
             return x0, P0
         layout = self.context.layout
@@ -143,7 +147,9 @@ class Magnetometer(MeasurementModel):
         return x0, P0
 
     def observe(self, message: Message) -> Observation | None:
-        """Observation of a sample ``mx my mz`` (FRD)."""
+        """Observation of a sample ``mx my mz`` (FRD); None after the static start with ``updates: false``."""
+        if self._aligned and not self.params.updates:  # type: ignore[attr-defined]
+            return None
         z = message.floats()
         if z.shape != (3,) or not np.all(np.isfinite(z)):
             raise MalformedMessage(f"magnetometer expects 3 finite values (mx my mz), got {message.values!r}")
