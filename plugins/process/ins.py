@@ -131,6 +131,10 @@ class Ins(ProcessModel):
 
     A run of samples in one step (the filters' ``predict_inputs``): :meth:`f_inputs` (exact, vectorised
     over the samples) and :meth:`Q_inputs` (the noise of the interval through the error dynamics).
+
+    ``states: 10`` (``[p v q]``) or ``states: 22`` (plus accelerometer and gyro scale factors ``sa``,
+    ``sw``, random walks ``accel_scale_rw``, ``gyro_scale_rw``: paper 002 eqs. 8, 11-13) build
+    ``ins_states.InsStates``, which drives this model with the corrected input ``(u - b) / s``.
     """
 
     name: ClassVar[str] = "ins"
