@@ -202,10 +202,12 @@ class Scheduler:
             yield from self._inputs([msg])
             return
         users = self._input_users.get(msg.sensor)
-        if users:
+        if users or (self.belief is None and msg.sensor in self._aligners):
+            # integrate the inputs up to this message first: a UsesInput component reads the latest sample,
+            # and an aligning sensor's message must know whether the static start is over
             if self._pending:
                 yield from self._flush_inputs(until=msg.t if self.belief is not None else None)
-            for c in users:
+            for c in users or ():
                 c.take_input(self._last_input_t, self._last_u)
         try:
             decoded = sensor.decoder.decode(msg)
