@@ -95,3 +95,14 @@ def test_quat_norm_runs_after_every_prediction_and_restores_the_norm(tmp_path):
     q = r["scheduler"].belief.x[6:10]
     assert abs(np.linalg.norm(q) - 1.0) < 1e-3
     assert s["sensors"]["qn"]["used"] == s["steps"]["predict"] > 90
+
+
+def test_magnetometer_updates_false_only_aligns(tmp_path):
+    q_true = quat.from_euler(0.0, 0.0, -1.0)
+    write_log(tmp_path / "u.log", lambda t: q_true)
+    mag = {**MAG_VECTOR, "model": {**MAG_VECTOR["model"], "updates": False}}
+    system = config(tmp_path / "u.yaml", mag)
+    r, s = _run(system, tmp_path / "u.log")
+    assert quat.angle_between(r["scheduler"].belief.x[6:10], q_true) < 1e-6
+    n_static = sum(1 for k in range(19) if k / 6 < 1.0 - 1e-9)    # the samples before the filter starts at 1 s
+    assert s["sensors"]["mag"]["used"] == n_static and s["steps"]["update"] == 0
