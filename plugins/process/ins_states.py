@@ -237,10 +237,12 @@ class InsStates(ProcessModel):
             self._Qc[dt] = base
         Qm = base.copy()
         q = x[6:10]
-        qq = np.outer(q, q)
         n2 = float(q @ q)
-        Qm[6:10, 6:10] = (np.eye(4) * n2 - qq) * (self.core._var_w[0] * dt / 4.0) + \
-            qq * (self.params.quat_norm_variance / n2)  # type: ignore[attr-defined]
+        kw = self.core._var_w[0] * dt / 4.0
+        blk = q[:, None] * q
+        blk *= self.params.quat_norm_variance / n2 - kw  # type: ignore[attr-defined]
+        blk.flat[::5] += n2 * kw
+        Qm[6:10, 6:10] = blk
         return Qm
 
     # ------------------------------------------------------------------ initial alignment
