@@ -153,9 +153,13 @@ def stats(res: dict, settle: float = 45.0) -> dict:
     # the paper's faults
     o["lost_fix_pos_max"] = window(res, "dp", 100.0, 103.0)
     o["before_lost_pos_median"] = window(res, "dp", 60.0, 99.0, np.median)
+    # a fair reference for a 3 s maximum: the mean of the 3 s maxima over 60-99 s
+    o["before_lost_pos_winmax"] = float(np.mean([window(res, "dp", a, a + 3.0) for a in np.arange(60.0, 97.0, 3.0)]))
     o["gap_pos_max"] = window(res, "dp", 180.0, 184.0)
-    o["gap_pos_after"] = window(res, "dp", 189.0, 195.0, np.median)
     o["before_gap_pos_median"] = window(res, "dp", 150.0, 179.0, np.median)
+    o["before_gap_pos_winmax"] = float(np.mean([window(res, "dp", a, a + 4.0) for a in np.arange(150.0, 176.0, 4.0)]))
+    for k, (a, b) in enumerate(((184.0, 190.0), (190.0, 200.0), (200.0, 215.0))):
+        o[f"gap_pos_after{k}"] = window(res, "dp", a, b, np.median)
     o["after_gap_att_max"] = np.degrees(window(res, "dth", 184.0, 194.0))
     o["disturbed_yaw_max"] = float(np.degrees(window(res, "dth", 230.0, 245.0)))
     o["att_max"] = float(np.degrees(np.max(np.linalg.norm(res["dth"][m], axis=1))))
@@ -360,11 +364,21 @@ def write_page(table, align, filters, seeds, wall) -> None:
     L.append("## The paper's claims\n")
     rows = table["shipped"]
     g = lambda k, rs=rows: [r[k] for r in rs]
-    L.append(f"- **A single lost fix (100 s)**: position error max in 100-103 s {fmt(g('lost_fix_pos_max'))} m against "
-             f"a median of {fmt(g('before_lost_pos_median'))} m over 60-99 s: no visible degradation.")
-    L.append(f"- **The 4 s gap (180-184 s)**: error max in the gap {fmt(g('gap_pos_max'))} m (median before "
-             f"{fmt(g('before_gap_pos_median'))} m), median 5-11 s after the fixes return {fmt(g('gap_pos_after'))} m: "
-             "the error grows while dead reckoning and recovers within a few fixes (figure gap.png).")
+    d_lost = np.array(g('lost_fix_pos_max')) - np.array(g('before_lost_pos_winmax'))
+    L.append(f"- **A single lost fix (100 s)**: position error max in 100-103 s {fmt(g('lost_fix_pos_max'))} m, against "
+             f"{fmt(g('before_lost_pos_winmax'))} m for the 3 s maxima over 60-99 s (median error there "
+             f"{fmt(g('before_lost_pos_median'))} m); paired difference {fmt(d_lost)} m, larger in "
+             f"{int(np.sum(d_lost > 0))} of {n} seeds: " + (
+                 "no degradation beyond the run's own fluctuation." if n < 2 or abs(np.mean(d_lost)) <
+                 2 * np.std(d_lost, ddof=1) / np.sqrt(n) else
+                 f"a degradation of {np.mean(d_lost):.2f} m on average (more than 2 standard errors), i.e. a visible "
+                 "but small effect against the GPS noise."))
+    L.append(f"- **The 4 s gap (180-184 s)**: error max in the gap {fmt(g('gap_pos_max'))} m against "
+             f"{fmt(g('before_gap_pos_winmax'))} m for the 4 s maxima over 150-179 s (median before "
+             f"{fmt(g('before_gap_pos_median'))} m); median error after the fixes return: "
+             f"{fmt(g('gap_pos_after0'))} m (0-6 s), {fmt(g('gap_pos_after1'))} m (6-16 s), "
+             f"{fmt(g('gap_pos_after2'))} m (16-31 s): the error grows while the INS dead-reckons and comes back to "
+             "its level within a few tens of seconds, as the position filter's memory of 1 Hz fixes (figure gap.png).")
     for name in ("paper", "paper, no magnetometer", "paper, no pseudo-obs.", "paper, neither"):
         rs = table[name]
         L.append(f"  - {name}: attitude error max in the 10 s after the gap {fmt(g('after_gap_att_max', rs))} deg, "
@@ -374,7 +388,11 @@ def write_page(table, align, filters, seeds, wall) -> None:
     ta, ti = np.array(align["triad"]), np.array(align["improved_triad"])
     L.append(f"- **TRIAD against Improved TRIAD for the alignment** (first estimate, {n} seeds): attitude error "
              f"{fmt(ta[:, 0], 3)} deg (TRIAD) and {fmt(ti[:, 0], 3)} deg (Improved TRIAD); the propagated sd "
-             f"{fmt(ta[:, 1], 3)} and {fmt(ti[:, 1], 3)} deg.")
+             f"{fmt(ta[:, 1], 3)} and {fmt(ti[:, 1], 3)} deg; Improved TRIAD better in "
+             f"{int(np.sum(ti[:, 0] < ta[:, 0]))} of {n} seeds (paired difference {fmt(ti[:, 0] - ta[:, 0], 3)} deg). "
+             "Gravity's static mean is far more accurate than the field's, so both anchor on it and differ little; "
+             "the propagated sd is larger than the errors because it carries the config's accelerometer-bias prior "
+             "(0.1 m/s^2 against the simulated 0.05).")
     L.append("")
     L.append("## Filters on the shipped recording\n")
     L.append("| filter | pos RMSE (m) | vel RMSE (m/s) | yaw (deg) | NEES | CPU (s) |")
@@ -392,9 +410,9 @@ def write_page(table, align, filters, seeds, wall) -> None:
              f"error it cannot represent makes the 16-state filter overconfident), and its accelerometer-bias RMS error "
              f"is {m(s16, 'ba'):.3f} against {m(sh, 'ba'):.3f} m/s^2 (the bias absorbs the scale error). Positions "
              f"({m(s16, 'pos'):.2f} against {m(sh, 'pos'):.2f} m) and attitudes differ little. Only excited axes "
-             f"are observable: the yaw-rate scale factor ends at {sw_err[2]:.4f} error (sd {sw_sd[2]:.4f}), the roll "
-             f"and pitch rate ones stay at their prior ({sw_err[0]:.4f}, {sw_err[1]:.4f}; sd {sw_sd[0]:.4f}, "
-             f"{sw_sd[1]:.4f}): a car barely rolls or pitches. That is PX4's and ArduPilot's reason for dropping "
+             f"are observable: the yaw-rate scale factor ends at {sw_err[2]:.4f} mean error (sd {sw_sd[2]:.4f}), the "
+             f"roll- and pitch-rate ones keep their prior sd ({sw_sd[0]:.4f}, {sw_sd[1]:.4f}; mean errors "
+             f"{sw_err[0]:.4f}, {sw_err[1]:.4f}, the size of the simulated 1 % errors): a car barely rolls or pitches. That is PX4's and ArduPilot's reason for dropping "
              "scale-factor states (not reliably observable on general trajectories); here they cost nothing and "
              "keep the filter consistent, but the numbers they converge to mean something only on excited axes.")
     pn, pm, pp, pb = (table[k] for k in ("paper", "paper, no magnetometer", "paper, no pseudo-obs.", "paper, neither"))
@@ -403,7 +421,12 @@ def write_page(table, align, filters, seeds, wall) -> None:
              f"{m(pn, 'yaw'):.2f} deg with it: yaw is observable only through GPS velocity in accelerations and "
              f"turns. The pseudo-observation changes little ({m(pp, 'yaw'):.2f} deg without it, magnetometer on): "
              "every measurement model here uses q / |q|, so a norm drift of ~1e-3 does not bias the attitude; "
-             "it matters to an implementation that uses q unnormalised (as the paper's ARM code may have).")
+             "it matters to an implementation that uses q unnormalised (as the paper's ARM code may have). Without the "
+             f"magnetometer it even costs a little here (yaw {m(pm, 'yaw'):.2f} against {m(pb, 'yaw'):.2f} deg, NEES "
+             f"{m(pm, 'nees'):.1f} against {m(pb, 'nees'):.1f}): the pseudo-update removes variance along q every 20 ms "
+             "while yaw is weakly observed, a case the paper's claim (attitude clearly worse without both) does not "
+             "separate from the magnetometer's. The paper's claim that attitude suffers most when GPS returns after "
+             "an absence holds for the magnetometer: see the attitude maxima after the gap above.")
     L.append(f"- **TRIAD attitude measurement** instead of the field vector: yaw {m(table['TRIAD measurement'], 'yaw'):.2f} deg, "
              f"NEES {m(table['TRIAD measurement'], 'nees'):.1f}: each fix takes the specific force for gravity (the car's "
              "accelerations and an uncorrected accelerometer bias enter as time-correlated errors, only partly covered "
@@ -415,8 +438,8 @@ def write_page(table, align, filters, seeds, wall) -> None:
              f"(against {m(sh, 'gps_rejected'):.0f}, the lost fix, with the gate): the ~10 uT field drags the yaw, "
              "the GPS fixes then fail their own gate and the filter can lose them for good (a gate lock-out; a "
              "reset after N rejections would be the next robustness step). With the chi-square gate on the "
-             f"magnetometer, {m(sh, 'mag_rejected'):.0f} samples a run are rejected (the 60 of the disturbed "
-             "segment and a few others): the robustness the paper reports.")
+             f"magnetometer, {m(sh, 'mag_rejected'):.0f} samples a run are rejected on average (the disturbed "
+             "segment has 60): the robustness the paper reports.")
     L.append("")
     L.append("## Figures\n")
     L.append("![route](imu_gps_mag/route.png)\n")
