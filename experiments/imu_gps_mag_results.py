@@ -305,7 +305,7 @@ def main(argv=None) -> int:
     wall = time.time() - t_start
     FIG.mkdir(parents=True, exist_ok=True)
     (FIG / "results.json").write_text(json.dumps({"table": table, "align": align, "filters": filters, "seeds": seeds,
-                                                  "wall_s": wall}, default=_jsonable, indent=1))
+                                                  "wall_s": wall}, default=_jsonable))
     d = json.loads((FIG / "results.json").read_text())
     write_page(d["table"], d["align"], d["filters"], seeds, wall)
     return 0
@@ -378,7 +378,8 @@ def write_page(table, align, filters, seeds, wall) -> None:
              f"{fmt(g('before_gap_pos_median'))} m); median error after the fixes return: "
              f"{fmt(g('gap_pos_after0'))} m (0-6 s), {fmt(g('gap_pos_after1'))} m (6-16 s), "
              f"{fmt(g('gap_pos_after2'))} m (16-31 s): the error grows while the INS dead-reckons and comes back to "
-             "its level within a few tens of seconds, as the position filter's memory of 1 Hz fixes (figure gap.png).")
+             "its level over the following tens of seconds (1 Hz fixes with metres of noise: the position filter's "
+             "memory is that long), not within one or two fixes (figure gap.png).")
     for name in ("paper", "paper, no magnetometer", "paper, no pseudo-obs.", "paper, neither"):
         rs = table[name]
         L.append(f"  - {name}: attitude error max in the 10 s after the gap {fmt(g('after_gap_att_max', rs))} deg, "
@@ -423,9 +424,9 @@ def write_page(table, align, filters, seeds, wall) -> None:
              "every measurement model here uses q / |q|, so a norm drift of ~1e-3 does not bias the attitude; "
              "it matters to an implementation that uses q unnormalised (as the paper's ARM code may have). Without the "
              f"magnetometer it even costs a little here (yaw {m(pm, 'yaw'):.2f} against {m(pb, 'yaw'):.2f} deg, NEES "
-             f"{m(pm, 'nees'):.1f} against {m(pb, 'nees'):.1f}): the pseudo-update removes variance along q every 20 ms "
-             "while yaw is weakly observed, a case the paper's claim (attitude clearly worse without both) does not "
-             "separate from the magnetometer's. The paper's claim that attitude suffers most when GPS returns after "
+             f"{m(pm, 'nees'):.1f} against {m(pb, 'nees'):.1f}; we have not isolated why: the update acts along q every "
+             "20 ms while yaw is weakly observed). The paper's claim (attitude clearly worse without both) is, in "
+             "this system, the magnetometer's alone. The paper's claim that attitude suffers most when GPS returns after "
              "an absence holds for the magnetometer: see the attitude maxima after the gap above.")
     L.append(f"- **TRIAD attitude measurement** instead of the field vector: yaw {m(table['TRIAD measurement'], 'yaw'):.2f} deg, "
              f"NEES {m(table['TRIAD measurement'], 'nees'):.1f}: each fix takes the specific force for gravity (the car's "
