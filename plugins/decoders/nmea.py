@@ -84,6 +84,14 @@ def _num(value: Any) -> float:
         return math.nan
 
 
+def _minutes_ok(field: str, degree_digits: int) -> bool:
+    """ddmm.mmm / dddmm.mmm with minutes below 60."""
+    try:
+        return 0.0 <= float(field[degree_digits:]) < 60.0
+    except ValueError:
+        return False
+
+
 class NmeaDecoder(Decoder):
     """NMEA GGA + RMC (+ VTG, GSA) via pynmea2, one local-NED fix per epoch; see the module docstring.
 
@@ -171,6 +179,9 @@ class NmeaDecoder(Decoder):
             lat, lon = float(gga.latitude), float(gga.longitude)
         except (TypeError, ValueError):
             raise MalformedMessage("nmea: GGA latitude/longitude not numbers") from None
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0) or not (
+                _minutes_ok(gga.lat, 2) and _minutes_ok(gga.lon, 3)):
+            raise MalformedMessage(f"nmea: GGA position out of range ({gga.lat} {gga.lat_dir}, {gga.lon} {gga.lon_dir})")
         sep = _num(gga.geo_sep)
         h = _num(gga.altitude) + (sep if math.isfinite(sep) else 0.0)   # ellipsoidal height
         vn = ve = math.nan

@@ -78,6 +78,13 @@ def test_bad_sentences_are_malformed(bad, why):
         dec(origin=ORIGIN).decode(msg(bad))
 
 
+@pytest.mark.parametrize("lat, lon", [("9507.038", "01131.000"), ("4867.038", "01131.000"), ("4807.038", "18131.000")])
+def test_position_out_of_range_is_malformed(lat, lon):
+    d = dec(origin=ORIGIN, epoch=["GGA"])
+    with pytest.raises(MalformedMessage, match="out of range"):
+        d.decode(msg(sentence(f"GPGGA,123519,{lat},N,{lon},E,1,08,0.9,545.4,M,46.9,M,,")))
+
+
 def test_lost_fix_is_rejected_once_per_epoch():
     d = dec(origin=ORIGIN)
     assert d.decode(msg(sentence("GPGGA,140140.00,,,,,0,00,99.9,,M,,M,,"))) is None
