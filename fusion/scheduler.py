@@ -87,13 +87,13 @@ class Scheduler:
         # Optional capabilities (fusion.api), detected once: models that align part of the state from their
         # static observations, components that read the input at their messages, after-predict pseudo-
         # measurements (these integrate inputs one by one, so the rule holds for every sample).
-        self._aligners: dict[str, list] = {n: [] for n, s in system.sensors.items()
+        self._aligners: dict[str, list] = {n: [] for n, s in self.sensors.items()
                                            if self._align_s and isinstance(s.model, AlignsState)}
         self._input_users = {n: [c for c in (s.preprocessor, s.model) if isinstance(c, UsesInput)]
-                             for n, s in system.sensors.items()}
+                             for n, s in self.sensors.items()}
         self._input_users = {n: c for n, c in self._input_users.items() if c}
         self._last_u: np.ndarray | None = None
-        self._pseudo = [s for s in system.sensors.values()
+        self._pseudo = [s for s in self.sensors.values()
                         if isinstance(s.model, PseudoMeasurement) and s.model.rule == "after_predict"]
         if self._pseudo:
             self._batch = False
