@@ -35,7 +35,6 @@ OUT = ROOT / "docs" / "results" / "imu_gps_mag.md"
 FIG = ROOT / "docs" / "results" / "imu_gps_mag"
 
 from fusion import quaternion as quat  # noqa: E402
-from fusion.commands.run import replay, summarize  # noqa: E402
 from fusion.config import SystemSpec, wire  # noqa: E402
 from fusion.metrics import Truth  # noqa: E402
 from fusion.simulate import simulate_file  # noqa: E402
@@ -78,8 +77,26 @@ def config_data(changes: dict) -> dict:
 
 
 def _run(system, log):
-    r = replay(system, log)
-    return r, summarize(system, log, r)
+    """(estimates, summary): the one place that runs a system (fusion.pipeline after the one-pipeline
+    merge, fusion.commands.run before it)."""
+    try:
+        from fusion.pipeline import Collect, run
+    except ImportError:
+        from fusion.commands.run import replay, summarize
+        r = replay(system, log)
+        return r["estimates"], summarize(system, log, r)
+    sink = Collect()
+    return sink.estimates, run(system, log, [sink]).summary
+
+
+def read_truth(log: Path) -> Truth:
+    """The recording's truth lines (read from the file, not from a run)."""
+    from fusion.api import Message
+    from fusion.logformat import ParsedStream, iter_messages
+    from fusion.sources.recording import open_lines
+    parsed = ParsedStream()
+    msgs = [m for m in iter_messages(open_lines(log), parsed) if isinstance(m, Message) and m.sensor == "truth"]
+    return Truth.from_messages(msgs, parsed.header.fields["truth"])
 
 
 def body_errors(q_true: np.ndarray, q_est: np.ndarray) -> np.ndarray:
@@ -96,14 +113,13 @@ def run_variant(changes: dict, log: Path, filter_name: str | None = None) -> dic
         data["filter"] = {"type": filter_name, "alpha": 0.5} if "ukf" in filter_name else filter_name
     system = wire(SystemSpec.model_validate(data), None, CONFIG)
     c0 = time.process_time()
-    r, s = _run(system, log)
+    est, s = _run(system, log)
     cpu = time.process_time() - c0
     lay = system.layout
-    est = r["estimates"]
     t = np.array([e.t for e in est])
     X = np.array([e.belief.x for e in est])
     P = np.array([e.belief.cov for e in est])
-    tr = Truth.from_messages(r["scheduler"].truth, r["parsed"].header.fields["truth"])
+    tr = read_truth(log)
     names = tr.names
     T = np.column_stack([np.interp(t, tr.t, tr.values[:, i]) for i in range(len(names))])
     col = {n: i for i, n in enumerate(names)}
