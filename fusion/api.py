@@ -18,8 +18,9 @@ __all__ = [
     "Block", "StateLayout", "Belief", "Message", "Observation", "UpdateResult", "Event",
     "Estimate", "Params", "BuildContext", "Component", "ProcessModel", "MeasurementModel",
     "Filter", "Gate", "Decoder", "Solver", "Source", "Sink", "Simulator", "FusionError",
-    "ConfigError", "InputError", "MalformedMessage", "RejectedMessage", "KINDS", "ReadsBelief",
+    "ConfigError", "InputError", "MalformedMessage", "RejectedMessage", "KINDS", "ReadsBelief", "ReportsInfo",
     "Importer", "ImportRequest", "Stream", "ImportedLog",
+    "AlignsState", "UsesInput", "PseudoMeasurement",
 ]
 
 from fusion.kinds import KINDS  # noqa: E402
@@ -411,6 +412,15 @@ class Solver(Component):
 
 
 @runtime_checkable
+class ReportsInfo(Protocol):
+    """Optional capability of a sensor's decoder, preprocessor or model: something the run's summary should
+    say, e.g. the ``nmea`` decoder's local NED origin and where it came from. ``info()`` is called once when
+    the run ends (on the run's own copy) and its dict written to ``summary["info"][sensor][kind]``."""
+
+    def info(self) -> dict[str, Any]: ...
+
+
+@runtime_checkable
 class ReadsBelief(Protocol):
     """Optional capability of a sensor preprocessor: it reads the filter's current predicted belief.
 
@@ -562,3 +572,41 @@ class Importer(Component):
         """Read ``path``; raise InputError (what and where) for a file that is not of this format or is
         damaged, ConfigError for a bad mapping or request."""
         raise NotImplementedError
+
+
+# --------------------------------------------------------------------------- optional capabilities
+# Detected once when the scheduler is built (isinstance on these runtime-checkable protocols), never in a
+# hot path.
+@runtime_checkable
+class AlignsState(Protocol):
+    """A measurement model that initialises part of the state from its observations over the static start
+    (``initial.align_s``), e.g. the attitude by TRIAD from the mean magnetometer sample and the mean
+    specific force. The scheduler gathers the sensor's observations until the filter starts (instead of
+    rejecting them) and calls this after the process model's own ``align``."""
+
+    def align_state(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray,
+                    observations: Sequence[Observation], R: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """(x0, P0) refined; ``u_mean`` the mean input over the static start, ``R`` the sensor's noise."""
+        ...
+
+
+@runtime_checkable
+class UsesInput(Protocol):
+    """A preprocessor or measurement model that needs the input at its messages' times (a TRIAD solver
+    needs the accelerometer's specific force with each magnetometer sample). Before each of the sensor's
+    messages the scheduler integrates the pending input samples up to the message and calls
+    ``take_input(t, u)`` with the latest input sample (t its time; u None before the first)."""
+
+    def take_input(self, t: float | None, u: np.ndarray | None) -> None: ...
+
+
+@runtime_checkable
+class PseudoMeasurement(Protocol):
+    """A measurement model applied on a rule instead of on messages: ``rule = "after_predict"`` makes the
+    scheduler update with ``pseudo_observation(belief)`` after every prediction (paper 002 eq. 9, the
+    quaternion-norm pseudo-observation). Input samples are then integrated one by one (no batching), so
+    the rule holds for every sample. The sensor's counters count the applications (``used``)."""
+
+    rule: str
+
+    def pseudo_observation(self, belief: Belief) -> Observation | None: ...

@@ -183,6 +183,17 @@ class RunStats:
                 out.setdefault(name or "?", dict.fromkeys(COUNTERS, 0))["malformed"] += n
         return out
 
+    def component_info(self) -> dict[str, dict[str, Any]]:
+        """``{sensor: {kind: info}}`` of the components that report something (fusion.api.ReportsInfo)."""
+        from fusion.api import ReportsInfo
+
+        out: dict[str, dict[str, Any]] = {}
+        for name, s in self.scheduler.sensors.items():
+            for comp in (s.decoder, s.preprocessor, s.model):
+                if comp is not None and isinstance(comp, ReportsInfo):
+                    out.setdefault(name, {})[comp.kind] = comp.info()
+        return out
+
     def ignored(self) -> dict[str, int]:
         """Messages of sensors the config does not have, by sensor name."""
         return dict(self.scheduler.unused)
@@ -221,6 +232,9 @@ class RunStats:
                 summary["agreement"] = {"with": "reference (the onboard estimator's output in the log); "
                                                 "an agreement, not an error", **agreement}
         summary["health"] = self.health()
+        info = self.component_info()
+        if info:
+            summary["info"] = info
         if sched.unused:
             summary["ignored_sensors"] = dict(sched.unused)
         if self.events:

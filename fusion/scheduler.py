@@ -30,7 +30,8 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from fusion.api import Belief, Estimate, Event, MalformedMessage, Message, ReadsBelief, RejectedMessage
+from fusion.api import (AlignsState, Belief, Estimate, Event, MalformedMessage, Message, PseudoMeasurement,
+                        ReadsBelief, RejectedMessage, UsesInput)
 from fusion.clock import ClockGuard
 from fusion.recovery import LockoutWatch, recover
 from fusion.config import SensorRuntime, System
@@ -116,6 +117,19 @@ class Scheduler:
         for sensor in self.sensors.values():
             if isinstance(sensor.preprocessor, ReadsBelief):
                 sensor.preprocessor.bind_belief(self._belief_at)
+        # Optional capabilities (fusion.api), detected once: models that align part of the state from their
+        # static observations, components that read the input at their messages, after-predict pseudo-
+        # measurements (these integrate inputs one by one, so the rule holds for every sample).
+        self._aligners: dict[str, list] = {n: [] for n, s in self.sensors.items()
+                                           if self._align_s and isinstance(s.model, AlignsState)}
+        self._input_users = {n: [c for c in (s.preprocessor, s.model) if isinstance(c, UsesInput)]
+                             for n, s in self.sensors.items()}
+        self._input_users = {n: c for n, c in self._input_users.items() if c}
+        self._last_u: np.ndarray | None = None
+        self._pseudo = [s for s in self.sensors.values()
+                        if isinstance(s.model, PseudoMeasurement) and s.model.rule == "after_predict"]
+        if self._pseudo:
+            self._batch = False
 
     # ------------------------------------------------------------------ public
     def run(self, messages: Iterable[Message | MalformedMessage]) -> Iterator[Estimate | Event]:
@@ -248,6 +262,14 @@ class Scheduler:
         if sensor.role == "input":
             yield from self._inputs([msg])
             return
+        users = self._input_users.get(msg.sensor)
+        if users or (self.belief is None and msg.sensor in self._aligners):
+            # integrate the inputs up to this message first: a UsesInput component reads the latest sample,
+            # and an aligning sensor's message must know whether the static start is over
+            if self._pending:
+                yield from self._flush_inputs(until=msg.t if self.belief is not None else None)
+            for c in users or ():
+                c.take_input(self._last_input_t, self._last_u)
         try:
             decoded = sensor.decoder.decode(msg)
             if decoded is None:
@@ -349,6 +371,22 @@ class Scheduler:
         self.belief = self.filter.predict(self.belief, self.process, self.u, dt)
         self.time_s["predict"] += time.perf_counter() - t0
         self.steps["predict"] += 1
+        if self._pseudo:
+            self._pseudo_updates()
+
+    def _pseudo_updates(self) -> None:
+        """The after-predict pseudo-measurements (fusion.api.PseudoMeasurement), in config order."""
+        for sensor in self._pseudo:
+            obs = sensor.model.pseudo_observation(self.belief)  # type: ignore[union-attr]
+            if obs is None:
+                continue
+            R = obs.R if obs.R is not None else sensor.R
+            result = self.filter.update(self.belief, obs.model, obs.z, R, sensor.gate)
+            if result.accepted:
+                self.belief = result.belief
+                sensor.counters["used"] += 1
+            else:
+                sensor.counters["rejected"] += 1
 
     def _inputs(self, msgs: list[Message], until: float | None = None) -> Iterator[Estimate | Event]:
         """Integrate input samples in order (the held sample propagates up to each new sample time);
@@ -372,6 +410,8 @@ class Scheduler:
                             f"(limit {sensor.max_gap} s); prediction held the last sample")
             self._last_input_t = msg.t
             good.append((msg.t, u))
+        if good:
+            self._last_u = good[-1][1]
         if self.belief is None:
             good = self._align(good, sensor)
         if not good:
@@ -416,8 +456,12 @@ class Scheduler:
                 sensor.counters["used"] += 1
                 continue
             if self._align_s and self._align_u:
-                self._x0, self._P0 = self.process.align(  # type: ignore[attr-defined]
-                    self._x0, self._P0, np.mean(self._align_u, axis=0))
+                u_mean = np.mean(self._align_u, axis=0)
+                self._x0, self._P0 = self.process.align(self._x0, self._P0, u_mean)  # type: ignore[attr-defined]
+                for name, observations in self._aligners.items():
+                    if observations:
+                        s = self.sensors[name]
+                        self._x0, self._P0 = s.model.align_state(self._x0, self._P0, u_mean, observations, s.R)  # type: ignore[union-attr]
             self._start(t)
             self.u = u
             sensor.counters["used"] += 1
@@ -442,6 +486,10 @@ class Scheduler:
             sensor.counters["used"] += 1
             if not (self._align_s or self.process.input_dim):
                 self._start(obs.t)
+            return
+        if self.belief is None and sensor.name in self._aligners:
+            self._aligners[sensor.name].append(obs)          # static observations for its align_state
+            sensor.counters["used"] += 1
             return
         if self.belief is None and (not self._have_fix or self.process.input_dim):
             sensor.counters["rejected"] += 1

@@ -9,7 +9,16 @@ def fusion_register_components(registry):
     from fusion_plugins.measurement.arrival_time import ArrivalTime
     from fusion_plugins.measurement.direction import Direction
 
+    from fusion_plugins.measurement.gps import Gps
+    from fusion_plugins.measurement.magnetometer import Magnetometer
+    from fusion_plugins.measurement.attitude import Attitude
+    from fusion_plugins.measurement.quat_norm import QuatNorm
+
     registry.add(RangeModel)
     registry.add(Position)
     registry.add(ArrivalTime)
     registry.add(Direction)
+    registry.add(Gps)
+    registry.add(Magnetometer)
+    registry.add(Attitude)
+    registry.add(QuatNorm)

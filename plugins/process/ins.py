@@ -65,11 +65,20 @@ class InsParams(Params):
     hold_rate_rw: float = Field(1.0, ge=0, description="rad/s^2/sqrt(Hz): the same for the angular rate")
     align_gyro_bias: bool = Field(True, description="initial alignment also takes the mean static gyro "
                                   "rate as the gyro bias")
+    states: Literal[10, 16, 22] = Field(16, description="state set (paper 002): 10 [p v q], 16 + biases "
+                                        "[ba bw], 22 + scale factors [sa sw] (eqs. 11-13); see ins_states.py")
+    accel_scale_rw: Density = Field(0.0, description="22 states: accelerometer scale-factor random walk "
+                                    "(1/s^0.5, eq. 13)")
+    gyro_scale_rw: Density = Field(0.0, description="22 states: gyro scale-factor random walk (1/s^0.5, eq. 13)")
+    renormalize: bool = Field(True, description="bring the mean quaternion back to unit norm after each "
+                              "step; false leaves the norm to eq. 50 (eta) or the quat_norm pseudo-observation")
 
     @model_validator(mode="after")
     def _earth_rate_needs_latitude(self) -> "InsParams":
         if self.earth_rate and self.latitude_deg is None:
             raise ValueError("earth_rate: true needs latitude_deg")
+        if self.states != 22 and (np.any(np.asarray(self.accel_scale_rw)) or np.any(np.asarray(self.gyro_scale_rw))):
+            raise ValueError("accel_scale_rw / gyro_scale_rw need states: 22 (the scale-factor states)")
         return self
 
 
@@ -122,6 +131,10 @@ class Ins(ProcessModel):
 
     A run of samples in one step (the filters' ``predict_inputs``): :meth:`f_inputs` (exact, vectorised
     over the samples) and :meth:`Q_inputs` (the noise of the interval through the error dynamics).
+
+    ``states: 10`` (``[p v q]``) or ``states: 22`` (plus accelerometer and gyro scale factors ``sa``,
+    ``sw``, random walks ``accel_scale_rw``, ``gyro_scale_rw``: paper 002 eqs. 8, 11-13) build
+    ``ins_states.InsStates``, which drives this model with the corrected input ``(u - b) / s``.
     """
 
     name: ClassVar[str] = "ins"
@@ -129,6 +142,14 @@ class Ins(ProcessModel):
     layout: StateLayout = StateLayout.parse("p:3 v:3 q:4:quaternion ba:3 bw:3")
     input_dim: int = 6
     linear: bool = False
+
+    def __new__(cls, params: InsParams | None = None, context: BuildContext | None = None):
+        """``states: 10`` or ``22`` build the paper-002 state sets (ins_states.InsStates, which drives this
+        16-state model underneath); 16 is this class as it is."""
+        if cls is Ins and params is not None and getattr(params, "states", 16) != 16:
+            from .ins_states import InsStates
+            return InsStates(params, context)
+        return super().__new__(cls)
 
     def __init__(self, params: InsParams | None = None, context: BuildContext | None = None):
         super().__init__(params, context)
@@ -248,7 +269,10 @@ class Ins(ProcessModel):
         return integrate_inputs(x, us, dts, self._g_col, self._trap)
 
     def normalize(self, x: np.ndarray) -> np.ndarray:
-        """Renormalise the quaternion block of states x (..., 16) to unit norm (a new array)."""
+        """Renormalise the quaternion block of states x (..., 16) to unit norm (a new array); with
+        ``renormalize: false``, x itself (the norm is left to eta or the quat_norm pseudo-observation)."""
+        if not self.params.renormalize:  # type: ignore[attr-defined]
+            return x
         x = np.array(x, dtype=float, copy=True)
         q = x[..., 6:10]
         if x.ndim == 1:

@@ -277,3 +277,16 @@ def test_reference_lines_give_an_agreement_section_not_errors(tmp_path):
     assert "agreement" in ag["with"] and ag["samples"] == base["errors"]["samples"]
     assert ag["element_rmse"]["px"] == pytest.approx(math.sqrt(base["errors"]["element_rmse"]["px"] ** 2 + 0.25), rel=0.05)
     assert "reference" not in s["sensors"] and "reference" not in s.get("ignored_sensors", {})
+
+
+def test_component_info_reaches_the_summary():
+    """fusion.api.ReportsInfo: the nmea decoder's NED origin (paper 002) is written to the summary."""
+    system = load_system(ROOT / "configs" / "imu_gps_mag_ekf.yaml")
+    lines = (ROOT / "recordings" / "car_gps_mag.log").read_text().splitlines(True)[:6000]  # the static start
+    s = pipeline.run(system, lines).summary
+    gps = s["info"]["gps"]["decoder"]
+    assert gps["origin_source"].startswith("mean of the fixes") and -90 <= gps["origin"]["lat_deg"] <= 90
+    assert "info" not in pipeline.run(load_system(EXAMPLE), LINES_EXAMPLE).summary
+
+
+LINES_EXAMPLE = (ROOT / "recordings" / "example_2d.log").read_text().splitlines(True)[:200]

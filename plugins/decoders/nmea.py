@@ -1,0 +1,222 @@
+"""Decoder ``nmea``: NMEA 0183 sentences (pynmea2) -> one local-NED GPS fix per epoch (paper 002 eqs. 5-6).
+
+A receiver sends several sentences per fix (GGA: position, fix quality, satellites, HDOP; RMC: status,
+speed and course over ground; optionally VTG: the same velocity; GSA: the dilutions of precision). This
+decoder checks each sentence's checksum, gathers one epoch's sentences (by their UTC time, sentences
+without a time joining the epoch being gathered) and, when the epoch's ``epoch`` sentences are all in,
+emits one message::
+
+    pn pe pd vn ve hdop vdop satellites quality averaged
+
+position in m (local NED about the origin), horizontal velocity in m/s (NED, from speed and course;
+``nan`` when the epoch has none), HDOP and VDOP (``nan`` when not sent), satellites used, GGA fix
+quality, and how many fixes were averaged into it (1, or N for the origin fix below). The ``gps``
+measurement model turns it into an observation.
+
+Geodetic to NED (eqs. 5-6): pymap3d (WGS84) converts latitude, longitude and ellipsoidal height
+(GGA altitude above the geoid + geoid separation) to NED about the origin, which is either given
+(``origin: {lat_deg, lon_deg, alt_m}``) or, as the paper does (sec. 3.1), the mean of the fixes of the
+static start: the valid fixes of the first ``origin_s`` seconds are averaged in ECEF, the mean becomes
+the origin, and one position fix at the origin (NED 0, ``averaged`` = N) is emitted at the end of the
+window (the filter's initial position, ``initial.from_sensor``). ``origin`` / ``origin_source`` /
+``info()`` tell which origin was used.
+
+Counted, never fused: a bad or missing checksum and a sentence pynmea2 cannot parse raise
+MalformedMessage (counted ``malformed``); an epoch without a valid fix (GGA quality 0, RMC status V, an
+empty position) raises RejectedMessage (counted ``rejected``), once per epoch. An epoch left incomplete
+when the next one starts is dropped and counted in ``counters['incomplete']``.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, ClassVar
+
+import numpy as np
+import pymap3d
+import pynmea2
+from pydantic import Field, field_validator
+
+from fusion.api import BuildContext, Decoder, MalformedMessage, Message, Params, RejectedMessage
+
+KNOT = 1852.0 / 3600.0   # m/s
+_KNOWN = ("GGA", "RMC", "VTG", "GSA")
+
+
+class OriginSpec(Params):
+    """A geodetic origin of the local NED frame (WGS84)."""
+
+    lat_deg: float = Field(..., ge=-90, le=90)
+    lon_deg: float = Field(..., ge=-180, le=360)
+    alt_m: float = Field(0.0, description="ellipsoidal height (m)")
+
+
+class NmeaParams(Params):
+    """YAML parameters of ``nmea``."""
+
+    origin: OriginSpec | None = Field(None, description="origin of the local NED frame; None: the mean of "
+                                      "the fixes of the first origin_s seconds (paper 002 sec. 3.1)")
+    origin_s: float = Field(0.0, ge=0, description="s of valid fixes averaged into the origin when none is "
+                            "given (the static start); 0: the first valid fix is the origin")
+    epoch: list[str] = Field(["GGA", "RMC"], min_length=1, description="sentences that make one epoch "
+                             "complete (the fix is emitted when all of them are in)")
+    min_quality: int = Field(1, ge=1, description="lowest GGA fix quality used (1 GPS, 2 DGPS, 4 RTK, ...)")
+    min_satellites: int = Field(4, ge=0, description="fewer satellites than this: the fix is rejected")
+
+    @field_validator("epoch")
+    @classmethod
+    def _known(cls, v: list[str]) -> list[str]:
+        v = [s.upper() for s in v]
+        bad = [s for s in v if s not in _KNOWN]
+        if bad:
+            raise ValueError(f"unknown sentence type(s) {bad}; known: {list(_KNOWN)}")
+        if "GGA" not in v:
+            raise ValueError("an epoch needs GGA (the only sentence with height, quality and HDOP)")
+        return v
+
+
+def _num(value: Any) -> float:
+    """A pynmea2 field as float (nan when empty or not a number)."""
+    if value is None or value == "":
+        return math.nan
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def _minutes_ok(field: str, degree_digits: int) -> bool:
+    """ddmm.mmm / dddmm.mmm with minutes below 60."""
+    try:
+        return 0.0 <= float(field[degree_digits:]) < 60.0
+    except ValueError:
+        return False
+
+
+class NmeaDecoder(Decoder):
+    """NMEA GGA + RMC (+ VTG, GSA) via pynmea2, one local-NED fix per epoch; see the module docstring.
+
+    The message's value is the raw sentence (``t,gps,$GPGGA,...*HH`` in the log format). Output
+    fields: ``pn pe pd vn ve hdop vdop satellites quality averaged`` (m, NED; m/s; -; -; -; -; -; count).
+    """
+
+    name: ClassVar[str] = "nmea"
+    Params: ClassVar[type[Params]] = NmeaParams
+    FIELDS: ClassVar[tuple[str, ...]] = ("pn", "pe", "pd", "vn", "ve", "hdop", "vdop", "satellites",
+                                         "quality", "averaged")
+
+    def __init__(self, params: NmeaParams | None = None, context: BuildContext | None = None):
+        super().__init__(params, context)
+        p: NmeaParams = self.params  # type: ignore[assignment]
+        self._need = frozenset(p.epoch)
+        self.origin: tuple[float, float, float] | None = None
+        self.origin_source = "config" if p.origin is not None else f"mean of the fixes of the first {p.origin_s:g} s"
+        if p.origin is not None:
+            self.origin = (p.origin.lat_deg, p.origin.lon_deg, p.origin.alt_m)
+        self._epoch: dict[str, Any] = {}
+        self._key: Any = None
+        self._avg: list[np.ndarray] = []      # ECEF of the fixes averaged into the origin
+        self._avg_t0: float | None = None
+        self.counters: dict[str, int] = {"epochs": 0, "invalid": 0, "incomplete": 0, "origin_fixes": 0}
+
+    # ------------------------------------------------------------------ public
+    def info(self) -> dict[str, Any]:
+        """The origin used (deg, deg, m) and where it came from, and the epoch counters."""
+        o = None if self.origin is None else {"lat_deg": self.origin[0], "lon_deg": self.origin[1], "alt_m": self.origin[2]}
+        return {"origin": o, "origin_source": self.origin_source, **self.counters}
+
+    def decode(self, message: Message) -> Message | None:
+        sentence = self._parse(message)
+        kind = sentence.sentence_type
+        if kind not in _KNOWN:
+            return None                      # GSV, GLL, ZDA, proprietary: nothing this decoder fuses
+        key = getattr(sentence, "timestamp", None) if kind in ("GGA", "RMC") else None
+        if key is not None and self._key is not None and key != self._key and self._epoch:
+            self.counters["incomplete"] += 1  # the previous epoch never completed
+            self._epoch = {}
+        if key is not None:
+            self._key = key
+        self._epoch[kind] = sentence
+        if not self._need <= self._epoch.keys():
+            return None
+        epoch, self._epoch = self._epoch, {}
+        self.counters["epochs"] += 1
+        return self._fix(message, epoch)
+
+    # ------------------------------------------------------------------ internals
+    @staticmethod
+    def _parse(message: Message):
+        if len(message.values) != 1 or not isinstance(message.values[0], str):
+            raise MalformedMessage(f"nmea: expected one NMEA sentence, got {message.values!r}")
+        text = message.values[0].strip()
+        if not text.startswith("$"):
+            raise MalformedMessage(f"nmea: not an NMEA sentence: {text[:40]!r}")
+        try:
+            return pynmea2.parse(text, check=True)
+        except pynmea2.ChecksumError as exc:
+            raise MalformedMessage(f"nmea: {exc.args[0]}") from None
+        except (pynmea2.ParseError, ValueError, TypeError, AttributeError) as exc:
+            raise MalformedMessage(f"nmea: cannot parse {text[:40]!r}: {exc.args[0] if exc.args else exc}") from None
+
+    def _fix(self, message: Message, epoch: dict[str, Any]) -> Message | None:
+        p: NmeaParams = self.params  # type: ignore[assignment]
+        gga = epoch["GGA"]
+        quality = int(_num(gga.gps_qual)) if math.isfinite(_num(gga.gps_qual)) else 0
+        sats = _num(gga.num_sats)
+        rmc = epoch.get("RMC")
+        why = None
+        if quality < p.min_quality:
+            why = f"GGA fix quality {quality}"
+        elif rmc is not None and rmc.status != "A":
+            why = f"RMC status {rmc.status!r}"
+        elif not gga.lat or not gga.lon or not math.isfinite(_num(gga.altitude)):
+            why = "GGA without a position"
+        elif math.isfinite(sats) and sats < p.min_satellites:
+            why = f"{sats:.0f} satellites (< {p.min_satellites})"
+        if why is not None:
+            self.counters["invalid"] += 1
+            raise RejectedMessage(f"nmea: no valid fix ({why})")
+        try:
+            lat, lon = float(gga.latitude), float(gga.longitude)
+        except (TypeError, ValueError):
+            raise MalformedMessage("nmea: GGA latitude/longitude not numbers") from None
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0) or not (
+                _minutes_ok(gga.lat, 2) and _minutes_ok(gga.lon, 3)):
+            raise MalformedMessage(f"nmea: GGA position out of range ({gga.lat} {gga.lat_dir}, {gga.lon} {gga.lon_dir})")
+        sep = _num(gga.geo_sep)
+        h = _num(gga.altitude) + (sep if math.isfinite(sep) else 0.0)   # ellipsoidal height
+        vn = ve = math.nan
+        vel = rmc if rmc is not None else None
+        if vel is not None and math.isfinite(_num(vel.spd_over_grnd)):
+            speed, course = _num(vel.spd_over_grnd) * KNOT, _num(vel.true_course)
+        elif "VTG" in epoch and math.isfinite(_num(epoch["VTG"].spd_over_grnd_kmph)):
+            speed, course = _num(epoch["VTG"].spd_over_grnd_kmph) / 3.6, _num(epoch["VTG"].true_track)
+        else:
+            speed, course = math.nan, math.nan
+        if math.isfinite(speed):
+            if not math.isfinite(course):
+                course = 0.0 if speed == 0.0 else math.nan
+            c = math.radians(course)
+            vn, ve = speed * math.cos(c), speed * math.sin(c)
+        hdop = _num(gga.horizontal_dil)
+        vdop = _num(epoch["GSA"].vdop) if "GSA" in epoch else math.nan
+        if "GSA" in epoch and math.isfinite(_num(epoch["GSA"].hdop)):
+            hdop = _num(epoch["GSA"].hdop)
+        averaged = 1.0
+        if self.origin is None:
+            ecef = np.array(pymap3d.geodetic2ecef(lat, lon, h), dtype=float)
+            if self._avg_t0 is None:
+                self._avg_t0 = message.t
+            self._avg.append(ecef)
+            self.counters["origin_fixes"] += 1
+            if message.t - self._avg_t0 < p.origin_s:
+                return None
+            mean = np.mean(self._avg, axis=0)
+            self.origin = tuple(float(v) for v in pymap3d.ecef2geodetic(*mean))  # type: ignore[assignment]
+            averaged = float(len(self._avg))
+            self._avg = []
+            n, e, d = pymap3d.ecef2ned(*mean, *self.origin)
+            vn = ve = math.nan                 # the origin fix carries position only
+        else:
+            n, e, d = pymap3d.geodetic2ned(lat, lon, h, *self.origin)
+        return Message(message.t, message.sensor, (float(n), float(e), float(d), vn, ve, hdop, vdop, sats,
+                                                   float(quality), averaged), message.line)

@@ -1,0 +1,161 @@
+"""Measurement ``magnetometer``: the Earth's field seen in the body frame, ``h = C_n^b(q) m_n`` (paper 002 sec. 2.3)."""
+from __future__ import annotations
+
+from typing import ClassVar, Literal, Sequence
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from fusion import quaternion as quat
+from fusion.api import BuildContext, ConfigError, MalformedMessage, MeasurementModel, Message, Observation, Params
+
+
+def earth_field(declination_deg: float, inclination_deg: float, intensity: float) -> np.ndarray:
+    """m_n (3,) in NED from declination D (east of true north), inclination I (below the horizon) and
+    intensity F: ``F [cos I cos D, cos I sin D, sin I]``."""
+    D, I = np.radians(declination_deg), np.radians(inclination_deg)
+    return intensity * np.array([np.cos(I) * np.cos(D), np.cos(I) * np.sin(D), np.sin(I)])
+
+
+class FieldParams(Params):
+    """The local reference field: ``field_ned`` or declination / inclination / intensity (a World
+    Magnetic Model / IGRF value for the place and date)."""
+
+    field_ned: tuple[float, float, float] | None = Field(None, description="m_n (NED, the sensor's units, e.g. uT)")
+    declination_deg: float | None = Field(None, ge=-180, le=180, description="east of true north positive")
+    inclination_deg: float | None = Field(None, ge=-90, le=90, description="below the horizon positive")
+    intensity: float | None = Field(None, gt=0, description="total field (the sensor's units, e.g. uT)")
+
+    @model_validator(mode="after")
+    def _one_way(self):
+        angles = (self.declination_deg, self.inclination_deg, self.intensity)
+        if self.field_ned is None and any(a is None for a in angles):
+            raise ValueError("give field_ned, or declination_deg, inclination_deg and intensity")
+        if self.field_ned is not None and any(a is not None for a in angles):
+            raise ValueError("give field_ned or the declination/inclination/intensity, not both")
+        if self.field_ned is not None and not np.any(self.field_ned):
+            raise ValueError("field_ned must not be zero")
+        return self
+
+    def field(self) -> np.ndarray:
+        if self.field_ned is not None:
+            return np.asarray(self.field_ned, dtype=float)
+        return earth_field(self.declination_deg, self.inclination_deg, self.intensity)  # type: ignore[arg-type]
+
+
+class MagnetometerParams(FieldParams):
+    """YAML parameters of ``magnetometer``."""
+
+    direction_only: bool = Field(False, description="measure the unit vector m_b / |m_b| (insensitive to the "
+                                 "intensity; noise sd then in rad)")
+    align: Literal["improved_triad", "triad", "none"] = Field(
+        "improved_triad", description="initial alignment over the static start (initial.align_s) from the mean "
+        "field and the mean specific force (solvers.triad); none: the attitude is left to the process")
+    updates: bool = Field(True, description="fuse the samples after the static start (false: the magnetometer "
+                          "only aligns, as 'without magnetometer' in paper 002 sec. 5)")
+    align_accel_sd: float = Field(0.01, gt=0, description="sd (m/s^2) of the static mean specific force beyond "
+                                  "the state's accelerometer-bias uncertainty (vibration, residual tilt)")
+
+
+_FLIP = np.array([1.0, -1.0, -1.0, -1.0])
+
+
+class Magnetometer(MeasurementModel):
+    """Three-axis magnetometer, ``z = C_n^b(q) m_n`` (FRD body frame, units of m_n), the direct vector
+    measurement (the alternative to the TRIAD attitude measurement, ``solvers.triad``).
+
+    ``C_n^b = C_b^n(q)^T = C_b^n(q*)`` (computed from q / |q|), so ``dh/dq = rotate_jacobian(q*, m_n)
+    diag(1, -1, -1, -1)`` (analytic; no sensitivity along q). A disturbed field (a vehicle, a bridge)
+    shows as a large NIS: use a chi2 gate. ``direction_only`` measures ``m_b / |m_b|`` against
+    ``C_n^b m_n / |m_n|`` instead.
+    """
+
+    name: ClassVar[str] = "magnetometer"
+    Params: ClassVar[type[Params]] = MagnetometerParams
+    dim: int = 3
+
+    def __init__(self, params: MagnetometerParams | None = None, context: BuildContext | None = None):
+        super().__init__(params, context)
+        layout = self.context.layout
+        if layout is None or "q" not in layout or layout.block("q").kind != "quaternion":
+            raise ConfigError("magnetometer needs a state with an attitude quaternion block 'q'")
+        self._q = layout["q"]
+        self.n = layout.n
+        m = self.params.field()  # type: ignore[attr-defined]
+        self.direction_only = bool(self.params.direction_only)  # type: ignore[attr-defined]
+        self.m_n = m / np.linalg.norm(m) if self.direction_only else m
+        self._aligned = False      # set by align_state: the static start is over
+
+    def h(self, x: np.ndarray) -> np.ndarray:
+        """Predicted field (..., 3) in the body frame for states x (..., n)."""
+        q = np.asarray(x, dtype=float)[..., self._q]
+        return quat.rotate(q * _FLIP, self.m_n)
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        """dh/dx (3, n) at x (n,)."""
+        q = np.asarray(x, dtype=float)[self._q]
+        H = np.zeros((3, self.n))
+        H[:, self._q] = quat.rotate_jacobian(q * _FLIP, self.m_n) * _FLIP
+        return H
+
+    def align_state(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray,
+                    observations: Sequence[Observation], R: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Initial attitude by TRIAD / Improved TRIAD (paper 002 sec. 3.1, fusion.api.AlignsState) from the
+        mean field of the static start and the mean specific force ``u_mean[:3]`` (corrected by the state's
+        ``ba`` / ``sa`` when it has them): body gravity ``g_b = -f_b``, reference ``g_n = [0, 0, g]``.
+
+        Covariance (solvers.triad.attitude_covariance): the accelerometer side is the state's bias
+        covariance plus ``align_accel_sd^2``, the magnetometer side the sensor's R itself (its calibration
+        residual does not average away over a static start); the q block of P0 becomes G P_theta G^T and
+        its correlation with ``ba`` (a bias tilts the levelled attitude) G J1 P_ba."""
+        from fusion_plugins.measurement.attitude import covariance_in_state, error_to_quaternion
+        from fusion_plugins.solvers.triad import attitude_covariance, solve
+
+        method = self.params.align  # type: ignore[attr-defined]
+        self._aligned = True
+        if method == "none" or not observations:
+            return x0, P0
+        layout = self.context.layout
+        x0 = np.array(x0, dtype=float, copy=True)
+        P0 = np.array(P0, dtype=float, copy=True)
+        f = np.asarray(u_mean, dtype=float)[:3].copy()
+        ba = layout["ba"] if "ba" in layout else None  # type: ignore[operator]
+        if ba is not None:
+            f -= x0[ba]
+        if "sa" in layout:  # type: ignore[operator]
+            f /= x0[layout["sa"]]  # type: ignore[index]
+        b1 = -f
+        b2 = np.mean([o.z for o in observations], axis=0)
+        S1 = np.eye(3) * self.params.align_accel_sd ** 2  # type: ignore[attr-defined]
+        if ba is not None:
+            S1 = S1 + P0[ba, ba]
+        S2 = R if R is not None else np.eye(3) * (1e-2 * np.linalg.norm(b2)) ** 2
+        g_n = np.array([0.0, 0.0, np.linalg.norm(b1)])
+        s1 = float(np.sqrt(np.trace(S1) / 3)) / np.linalg.norm(b1)
+        s2 = float(np.sqrt(np.trace(S2) / 3)) / np.linalg.norm(b2)
+        C = solve(method, b1, b2, g_n, self.m_n, s1, s2)
+        P_theta, J1 = attitude_covariance(method, b1, b2, g_n, self.m_n, S1, S2, C)
+        q = quat.from_matrix(C)
+        x0[self._q] = q
+        P0[self._q, :] = 0.0
+        P0[:, self._q] = 0.0
+        P0[self._q, self._q] = covariance_in_state(q, P_theta)
+        if ba is not None:
+            cross = error_to_quaternion(q) @ J1 @ P0[ba, ba]
+            P0[self._q, ba] = cross
+            P0[ba, self._q] = cross.T
+        return x0, P0
+
+    def observe(self, message: Message) -> Observation | None:
+        """Observation of a sample ``mx my mz`` (FRD); None after the static start with ``updates: false``."""
+        if self._aligned and not self.params.updates:  # type: ignore[attr-defined]
+            return None
+        z = message.floats()
+        if z.shape != (3,) or not np.all(np.isfinite(z)):
+            raise MalformedMessage(f"magnetometer expects 3 finite values (mx my mz), got {message.values!r}")
+        if self.direction_only:
+            nz = float(np.linalg.norm(z))
+            if nz == 0.0:
+                raise MalformedMessage("magnetometer: zero field")
+            z = z / nz
+        return Observation(message.t, z, self)

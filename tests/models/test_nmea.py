@@ -1,0 +1,172 @@
+"""Decoder ``nmea`` (paper 002 eqs. 5-6): real sentences, checksums, epochs, invalid fixes, NED by pymap3d."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pymap3d
+import pytest
+
+from fusion.api import MalformedMessage, Message, RejectedMessage
+from fusion.logformat import checksum, parse_line
+from fusion_plugins.decoders.nmea import KNOT, NmeaDecoder, NmeaParams
+
+# Real receiver output: the NMEA reference examples (gpsinformation.org) and a SiRF receiver's log line.
+GGA = "$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47"
+RMC = "$GPRMC,123519,A,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W*6A"
+VTG = "$GPVTG,054.7,T,034.4,M,005.5,N,010.2,K*48"
+GSA = "$GPGSA,A,3,04,05,,09,12,,,24,,,,,2.5,1.3,2.1*39"
+GSV = "$GPGSV,3,1,11,10,63,137,17,07,61,098,15,05,59,290,20,08,54,157,30*70"
+GGA2 = "$GPGGA,092750.000,5321.6802,N,00630.3372,W,1,8,1.03,61.7,M,55.2,M,,*76"
+RMC2 = "$GPRMC,092750.000,A,5321.6802,N,00630.3372,W,0.02,31.66,280511,,,A*43"
+ORIGIN = {"lat_deg": 48.1, "lon_deg": 11.5, "alt_m": 500.0}
+
+
+def dec(**kw) -> NmeaDecoder:
+    return NmeaDecoder(NmeaParams(**kw))
+
+
+def msg(sentence: str, t: float = 1.0) -> Message:
+    return Message(t, "gps", (sentence,), 7)
+
+
+def sentence(body: str) -> str:
+    return f"${body}*{checksum(body)}"
+
+
+def test_registered():
+    from fusion.registry import default_registry
+
+    assert default_registry().get("decoder", "nmea") is NmeaDecoder
+
+
+def test_one_epoch_gga_rmc_is_one_fix_in_ned():
+    d = dec(origin=ORIGIN)
+    assert d.decode(msg(GGA)) is None                       # epoch not complete yet
+    out = d.decode(msg(RMC))
+    assert out is not None and out.t == 1.0 and out.sensor == "gps" and out.line == 7
+    pn, pe, pd, vn, ve, hdop, vdop, sats, quality, averaged = out.values
+    lat, lon = 48 + 7.038 / 60, 11 + 31.0 / 60
+    ref = pymap3d.geodetic2ned(lat, lon, 545.4 + 46.9, 48.1, 11.5, 500.0)   # ellipsoidal h = MSL + N
+    np.testing.assert_allclose([pn, pe, pd], ref, atol=1e-6)
+    speed, course = 22.4 * KNOT, math.radians(84.4)
+    np.testing.assert_allclose([vn, ve], [speed * math.cos(course), speed * math.sin(course)], rtol=1e-12)
+    assert (hdop, sats, quality, averaged) == (0.9, 8.0, 1.0, 1.0) and math.isnan(vdop)
+    assert d.counters["epochs"] == 1
+
+
+def test_gsa_gives_vdop_and_vtg_velocity_when_no_rmc():
+    d = dec(origin=ORIGIN, epoch=["GGA", "VTG"])
+    assert d.decode(msg(GSA)) is None
+    assert d.decode(msg(GSV)) is None                        # not fused, not an error
+    assert d.decode(msg(GGA)) is None
+    out = d.decode(msg(VTG))
+    vn, ve, hdop, vdop = out.values[3:7]
+    np.testing.assert_allclose(math.hypot(vn, ve), 10.2 / 3.6, rtol=1e-12)
+    np.testing.assert_allclose(math.degrees(math.atan2(ve, vn)), 54.7, rtol=1e-12)
+    assert (hdop, vdop) == (1.3, 2.1)
+
+
+@pytest.mark.parametrize("bad, why", [
+    (GGA[:-2] + "48", "checksum"),                           # wrong checksum
+    (GGA.split("*")[0], "checksum"),                          # no checksum at all
+    ("$GPGGA,12351*" + checksum("GPGGA,12351")[:1], "parse"),  # truncated
+    ("GPGGA,123519,4807.038,N", "not an NMEA"),
+])
+def test_bad_sentences_are_malformed(bad, why):
+    with pytest.raises(MalformedMessage):
+        dec(origin=ORIGIN).decode(msg(bad))
+
+
+@pytest.mark.parametrize("lat, lon", [("9507.038", "01131.000"), ("4867.038", "01131.000"), ("4807.038", "18131.000")])
+def test_position_out_of_range_is_malformed(lat, lon):
+    d = dec(origin=ORIGIN, epoch=["GGA"])
+    with pytest.raises(MalformedMessage, match="out of range"):
+        d.decode(msg(sentence(f"GPGGA,123519,{lat},N,{lon},E,1,08,0.9,545.4,M,46.9,M,,")))
+
+
+def test_lost_fix_is_rejected_once_per_epoch():
+    d = dec(origin=ORIGIN)
+    assert d.decode(msg(sentence("GPGGA,140140.00,,,,,0,00,99.9,,M,,M,,"))) is None
+    with pytest.raises(RejectedMessage, match="quality 0"):
+        d.decode(msg(sentence("GPRMC,140140.00,V,,,,,,,100608,,,N")))
+    assert d.counters["invalid"] == 1
+    assert d.decode(msg(GGA2, 2.0)) is None and d.decode(msg(RMC2, 2.0)) is not None   # and goes on
+
+
+def test_incomplete_epoch_dropped_and_counted():
+    d = dec(origin=ORIGIN)
+    assert d.decode(msg(GGA)) is None                        # RMC of 12:35:19 never comes
+    assert d.decode(msg(GGA2, 2.0)) is None
+    assert d.decode(msg(RMC2, 2.0)).values[0] != 0.0
+    assert d.counters == {"epochs": 1, "invalid": 0, "incomplete": 1, "origin_fixes": 0}
+
+
+def _fixes(lat0, lon0, h0, ned, start=0):
+    """GGA+RMC pairs of positions given in NED about (lat0, lon0, h0), as a receiver formats them."""
+    from fusion_plugins.simulators.gps import _lat, _lon
+    out = []
+    for k, (n, e, d) in enumerate(ned):
+        lat, lon, h = pymap3d.ned2geodetic(n, e, d, lat0, lon0, h0)
+        la, ns = _lat(float(lat))
+        lo, ew = _lon(float(lon))
+        hms = f"1400{(start + k) % 60:02d}.00"
+        out.append(sentence(f"GPGGA,{hms},{la},{ns},{lo},{ew},1,08,1.0,{float(h):.3f},M,0.0,M,,"))
+        out.append(sentence(f"GPRMC,{hms},A,{la},{ns},{lo},{ew},0.0,0.0,100608,,,A"))
+    return out
+
+
+def test_ned_round_trip_through_sentences():
+    """NED -> geodetic (pymap3d) -> GGA text -> decoder -> NED: equal to the text's resolution (mm)."""
+    rng = np.random.default_rng(3)
+    lat0, lon0, h0 = -23.21, -45.876, 600.0
+    ned = rng.uniform(-3000, 3000, (20, 3)) * [1, 1, 0.05]
+    d = dec(origin={"lat_deg": lat0, "lon_deg": lon0, "alt_m": h0})
+    got = []
+    for k, s in enumerate(_fixes(lat0, lon0, h0, ned)):
+        out = d.decode(msg(s, float(k // 2)))
+        if out is not None:
+            got.append(out.values[:3])
+    np.testing.assert_allclose(np.array(got), ned, atol=2e-3)
+
+
+def test_origin_from_static_fixes_is_their_ecef_mean():
+    """Paper 002 sec. 3.1: the origin is the mean of the static fixes; one fix at the origin (NED 0, the
+    count N) ends the window, later fixes are NED about it."""
+    rng = np.random.default_rng(5)
+    lat0, lon0, h0 = 35.0, 139.0, 40.0
+    static = rng.normal(0, [2.0, 2.0, 3.0], (10, 3))
+    moving = np.array([[100.0, 50.0, -2.0], [200.0, 60.0, -3.0]])
+    d = dec(origin_s=9.0)
+    outs = [d.decode(msg(s, float(k // 2))) for k, s in enumerate(_fixes(lat0, lon0, h0, np.vstack([static, moving])))]
+    outs = [o for o in outs if o is not None]
+    assert len(outs) == 3
+    first = outs[0]
+    assert first.t == 9.0 and first.values[9] == 10.0
+    np.testing.assert_allclose(first.values[:3], 0.0, atol=1e-6)
+    assert math.isnan(first.values[3])
+    ecef = np.array([pymap3d.geodetic2ecef(*pymap3d.ned2geodetic(*p, lat0, lon0, h0)) for p in static]).mean(axis=0)
+    o = pymap3d.ecef2geodetic(*ecef)
+    np.testing.assert_allclose(d.origin, o, atol=1e-3, rtol=0)           # the text resolution: 1e-7 min, 1 mm
+    np.testing.assert_allclose(d.origin[:2], o[:2], atol=1e-8, rtol=0)
+    assert d.info()["origin"]["lat_deg"] == d.origin[0] and "mean" in d.info()["origin_source"]
+    # later fixes: NED about the mean (the frame moved by the mean static error)
+    for out, p in zip(outs[1:], moving):
+        ref = pymap3d.geodetic2ned(*pymap3d.ned2geodetic(*p, lat0, lon0, h0), *o)
+        np.testing.assert_allclose(out.values[:3], ref, atol=2e-3)
+    np.testing.assert_allclose(np.array([out.values[:3] for out in outs[1:]]),
+                               moving - static.mean(axis=0), atol=0.05)   # ~ the shift of the frame
+
+
+def test_log_line_with_sentence_goes_through_the_log_parser():
+    m = parse_line(f"3.5,gps,{GGA}")
+    assert m.values == (GGA,)
+    assert dec(origin=ORIGIN, epoch=["GGA"]).decode(m) is not None
+
+
+def test_bad_params_are_config_errors():
+    from pydantic import ValidationError
+    with pytest.raises(ValidationError, match="unknown sentence"):
+        NmeaParams(epoch=["GGA", "XYZ"])
+    with pytest.raises(ValidationError, match="needs GGA"):
+        NmeaParams(epoch=["RMC"])
