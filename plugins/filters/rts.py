@@ -101,6 +101,20 @@ class RtsBackend:
         k = len(dts)
         batched = (self.mode == "sigma" and k > 1 and flt._batch_inputs and not flt._augmented
                    and not flt.use_linear_prediction(process))
+        if not batched and not self.sqrt and (self.mode == "linear" or flt.use_linear_prediction(process)):
+            # the EKF chain: C = P_k (F_m ... F_1)^T, one gain for the run
+            b, Phi = b0, None
+            for u, dt in zip(us, dts):
+                x = b.x
+                b1 = flt.predict(b, process, u, float(dt))
+                if b1 is not b:
+                    F = process_jacobian(process, x, u, float(dt))
+                    Phi = F if Phi is None else F @ Phi
+                b = b1
+            if Phi is None:
+                return b, None
+            P0 = covariance_of(b0)
+            return b, Step(_gain(P0 @ Phi.T, covariance_of(b)), P0, b)
         if not batched:
             step = None
             b = b0
