@@ -62,6 +62,30 @@ def _gain(C: np.ndarray, P1: np.ndarray) -> np.ndarray:
     return cho_solve_lower(L, np.ascontiguousarray(C.T)).T
 
 
+class _JacobianMemo:
+    """The process model as the filter sees it, remembering the last analytic Jacobian it gave the filter
+    (so the smoother does not compute F twice; the filter gets the model's own numbers)."""
+
+    def __init__(self, process: ProcessModel):
+        self.__dict__.update(_process=process, x=None, F=None)
+
+    def __getattr__(self, name: str):
+        if name.startswith("__"):
+            raise AttributeError(name)
+        return getattr(self.__dict__["_process"], name)
+
+    def jacobian(self, x, u, dt):
+        F = self._process.jacobian(x, u, dt)
+        self.__dict__.update(x=x, F=F)
+        return F
+
+    def F_at(self, x, u, dt) -> np.ndarray:
+        """F at x: the one the filter just used when it asked at this very x, else computed."""
+        if self.x is x and self.F is not None:
+            return self.F
+        return process_jacobian(self._process, x, u, dt)
+
+
 class RtsBackend:
     """Forward terms of the smoother for one filter (``flt``, the filter the scheduler runs). ``sqrt``:
     the belief and the smoothed belief are square-root (``Belief.S``)."""
@@ -71,6 +95,13 @@ class RtsBackend:
     def __init__(self, flt: KalmanBase):
         self.flt = flt
         self.mode = self._mode(flt)
+        self._memo: _JacobianMemo | None = None
+
+    def memo(self, process: ProcessModel) -> _JacobianMemo:
+        m = self._memo
+        if m is None or m._process is not process:
+            m = self._memo = _JacobianMemo(process)
+        return m
 
     @staticmethod
     def _mode(flt) -> str:
@@ -85,12 +116,16 @@ class RtsBackend:
     def predict(self, b0: Belief, process: ProcessModel, u, dt: float) -> tuple[Belief, Step | None]:
         """``flt.predict`` and its transition terms (None when the filter did not move the belief)."""
         flt = self.flt
+        if self.mode == "linear" or flt.use_linear_prediction(process):
+            memo = self.memo(process)
+            b1 = flt.predict(b0, memo, u, dt)
+            if b1 is b0:
+                return b1, None
+            F = memo.F_at(b0.x, u, dt)
+            return b1, self.linear_step(b0, F, b1, process.Q(b0.x, u, dt))
         b1 = flt.predict(b0, process, u, dt)
         if b1 is b0:
             return b1, None
-        if self.mode == "linear" or flt.use_linear_prediction(process):
-            F = process_jacobian(process, b0.x, u, dt)
-            return b1, self.linear_step(b0, F, b1, process.Q(b0.x, u, dt))
         return b1, self.sigma_step(b0, lambda X: process.f(X, u, dt), process.Q(b0.x, u, dt), b1)
 
     def predict_inputs(self, b0: Belief, process: ProcessModel, us: np.ndarray, dts: np.ndarray
@@ -104,11 +139,12 @@ class RtsBackend:
         if not batched and not self.sqrt and (self.mode == "linear" or flt.use_linear_prediction(process)):
             # the EKF chain: C = P_k (F_m ... F_1)^T, one gain for the run
             b, Phi = b0, None
+            memo = self.memo(process)
             for u, dt in zip(us, dts):
                 x = b.x
-                b1 = flt.predict(b, process, u, float(dt))
+                b1 = flt.predict(b, memo, u, float(dt))
                 if b1 is not b:
-                    F = process_jacobian(process, x, u, float(dt))
+                    F = memo.F_at(x, u, float(dt))
                     Phi = F if Phi is None else F @ Phi
                 b = b1
             if Phi is None:
