@@ -161,3 +161,24 @@ def test_config_smoother_section(tmp_path):
     bad.write_text(text + "smoother: {lag_s: -1}\n")
     p = _fusion("run", str(bad), "-q")
     assert p.returncode == 2 and "smoother" in p.stderr and "Traceback" not in p.stderr
+
+
+def test_a_recovery_reset_breaks_the_chain():
+    """A reset (fusion.recovery) starts a new chain: nothing after it flows back, so before it (the filter
+    locked out, every fix rejected) the smoothed estimates are the filtered ones; after it smoothing helps."""
+    sys.path.insert(0, str(ROOT / "tests" / "core"))
+    from test_recovery import _system
+
+    system, lines = _system("fix", {"after_s": 1.0, "min_rejected": 3, "action": "reset", "blocks": ["p"]})
+    plain, sm = pipeline.Collect(), pipeline.Collect()
+    pipeline.run(system, lines, [plain])
+    res = run_smoothed(system, lines, [sm])
+    assert res.summary["health"]["resets"] == 1 and res.summary["smoothed"]["breaks"] == 1
+    t, x, _ = _arrays(plain.estimates)
+    ts, xs, _ = _arrays(sm.estimates)
+    assert np.array_equal(t, ts)
+    reset_t = next(e.t for e in plain.estimates if abs(e.belief.x[0] - 9.0) > 2.0)  # first estimate after it
+    before = t < reset_t
+    assert before.sum() > 5
+    assert np.abs(xs[before] - x[before]).max() < 1e-9
+    assert np.abs(xs[~before] - x[~before]).max() > 1e-3
