@@ -6,7 +6,7 @@
 
 Each run is its own process; its peak resident set size comes from ``os.wait4`` (ru_maxrss of that child
 alone), the bytes the smoother wrote to its temporary store from the summary (``smoothed.store``). The
-forward records go to disk past the store's in-memory budget (64 MB, fusion/smoothing/store.py), so the
+forward records go to disk past each store's in-memory budget (8 MB, fusion/smoothing/store.py), so the
 peak should stay flat (issue 17: within the pipeline's flat-memory bound plus the store on disk).
 Written to benchmarks/results/smoother_memory.md.
 """

@@ -5,7 +5,7 @@ the backward pass reads them last to first. Records are buffered in a chunk of `
 arrays, one per field); a full chunk is kept in memory while the store holds less than
 ``memory_bytes``, and from then on every chunk (those already kept too) is written with ``np.save`` to
 a temporary directory and read back as a read-only memory map. So memory stays bounded by one chunk
-plus ``memory_bytes`` whatever the length of the run; ``disk=True`` spills from the first chunk,
+plus ``memory_bytes`` (8 MB) whatever the length of the run; ``disk=True`` spills from the first chunk,
 ``disk=False`` never spills. ``close()`` deletes the directory.
 """
 from __future__ import annotations
@@ -29,7 +29,7 @@ class ChunkStore:
     :param directory: where the temporary directory is made (default: the system's temp dir).
     """
 
-    def __init__(self, chunk: int = 1024, disk: bool | None = None, memory_bytes: int = 64 << 20,
+    def __init__(self, chunk: int = 1024, disk: bool | None = None, memory_bytes: int = 8 << 20,
                  directory: str | Path | None = None, prefix: str = "fusion-smooth-"):
         if chunk < 1:
             raise ValueError("chunk must be >= 1")
