@@ -23,7 +23,7 @@ from fusion.api import Belief, Estimate, Message
 
 from .store import ChunkStore
 
-__all__ = ["ForwardLog", "RecordingFilter", "EstimateNotes"]
+__all__ = ["ForwardLog", "RecordingFilter"]
 
 
 def _same(a: Belief, b: Belief | None) -> bool:
@@ -178,16 +178,3 @@ class RecordingFilter:
             log.current = result.belief
         return result
 
-
-class EstimateNotes:
-    """A sink for the forward run: notes each estimate's node (and, through ``note_truth``, the truth
-    lines); writes nothing."""
-
-    def __init__(self, log: ForwardLog):
-        self.log = log
-
-    def on_estimate(self, estimate: Estimate) -> None:
-        self.log.note_estimate(estimate)
-
-    def close(self) -> None:
-        pass

@@ -14,7 +14,6 @@ store. Memory: the forward pass writes its records to a :class:`fusion.smoothing
 """
 from __future__ import annotations
 
-import copy
 import dataclasses
 import time
 from typing import Any, Callable, Sequence
@@ -25,7 +24,7 @@ from fusion.metrics import ErrorTracker
 from fusion.truth_stream import TruthComparison
 
 from .backward import FixedLag, smooth, smoothed_estimates, state_difference
-from .record import EstimateNotes, ForwardLog, RecordingFilter
+from .record import ForwardLog, RecordingFilter
 from .store import ChunkStore
 
 __all__ = ["run_smoothed", "smoother_backend"]

@@ -6,7 +6,6 @@ and with lag 0 the filter; the disk store gives the same numbers; the square-roo
 covariance one on the 16-state INS (quaternion block, batched IMU runs)."""
 from __future__ import annotations
 
-import itertools
 import json
 import os
 import subprocess
