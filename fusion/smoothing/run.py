@@ -75,6 +75,12 @@ class _SmoothedStats:
         return out
 
 
+def _close(sinks: list) -> None:
+    """Close the sinks once (as fusion.pipeline does, also when the run fails)."""
+    while sinks:
+        sinks.pop(0).close()
+
+
 def run_smoothed(system: System, source: Any, sinks: Sequence[Any] = (), *, lag: float | None = None,
                  disk: bool | None = None, chunk: int = 1024, on_event: Callable | None = None,
                  progress: Callable | None = None, plot: Any = None, hooks: bool = True,
@@ -152,8 +158,7 @@ def run_smoothed(system: System, source: Any, sinks: Sequence[Any] = (), *, lag:
             stats.add_truth(Message(float(pending["t"]), "truth", tuple(pending["v"].tolist()), 0))
             pending = next(truth, None)
         backward_s = time.perf_counter() - t0
-        for s in sinks:
-            s.close()
+        _close(sinks)
         stores = [log.steps, log.estimates, log.truth] + [s for s in (out, lagged) if s is not None]
         smoothed = {"smoother": "rts" if fixed is None else "fixed_lag", "filter": system.filter.name,
                     **({"lag_s": lag} if lag is not None else {}),
@@ -168,6 +173,9 @@ def run_smoothed(system: System, source: Any, sinks: Sequence[Any] = (), *, lag:
             smoothed["unmatched_estimates"] = log.unmatched
         result.summary["smoothed"] = smoothed
         return result
+    except BaseException:
+        _close(sinks)
+        raise
     finally:
         log.close()
         for store in (out, lagged):
