@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "docs" / "results" / "smoothing.md"
-NOTE = ("abps_ins: the smoothed NEES is above its 15 dof (the filter's is not); on recordings/abps_mine.log the position block is 5.6 against 3 (filtered 2.9), velocity 3.9 against 3, the biases below 3: the smoothed position covariance is too small by about 2x. Not the cause (tried): the sigma-point batching of the IMU runs (the EKF smoother, composed sample by sample, gives the same), the trilateration window, projecting the quaternion block's covariance onto the unit sphere's tangent space. Open: the fixes' errors may be correlated in time in a way the filter's short memory hides and the smoother's two-sided averaging does not.")
+NOTE = ("abps_ins: the smoothed NEES is above its 15 dof (the filter's is not); on recordings/abps_mine.log the position block is 5.6 against 3 (filtered 2.9), velocity 3.9 against 3, the biases below 3: the smoothed position covariance is too small by about 2x. Not the cause (tried): the sigma-point batching of the IMU runs (the EKF smoother, composed sample by sample, gives the same overall NEES: 16.6 against the srukf smoother's 16.6), the trilateration window, projecting the quaternion block's covariance onto the unit sphere's tangent space. Open: the fixes' errors may be correlated in time in a way the filter's short memory hides and the smoother's two-sided averaging does not.")
 SYSTEMS = [  # config, scenario
     ("abps_ins.yaml", "abps_mine.yaml"),
     ("uwb_pv_ukf.yaml", "uwb_route1.yaml"),
