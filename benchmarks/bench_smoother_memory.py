@@ -69,6 +69,10 @@ def main(argv=None) -> int:
         lines.append(f"| {m:g} min ABPS route | {'--smooth' if smooth else 'plain'} | {r['data_s']:.0f} | "
                      f"{r['peak_mb']:.1f} | {r['wall_s']:.1f} | {r['disk_mb']:.1f} | {r['nodes'] or '-'} | "
                      f"{r['backward_s'] if r['backward_s'] is None else round(r['backward_s'], 1)} | {rm} |")
+    lines += ["", "Wall times are of single runs on a shared 2-core machine (other jobs were running); the careful "
+              "timing of the two passes is benchmarks/results/smoother.md (`python benchmarks/bench_smoother.py`). "
+              "The peak is bounded by the stores' in-memory budgets (8 MB each, four stores, plus a chunk buffer "
+              "each), not by the length: the 10-minute run has not filled them yet."]
     peak = {(m, s): r["peak_mb"] for m, s, r in rows}
     lines += ["", f"Smoothed peak ratio {long_min:g} min / {short_min:g} min: "
               f"**{peak[(long_min, True)] / peak[(short_min, True)]:.3f}**; smoothed / plain at {long_min:g} min: "
