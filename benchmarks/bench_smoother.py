@@ -71,7 +71,7 @@ def main(argv=None) -> int:
             f"{platform.machine()}, Python {platform.python_version()}, best of {args.repeats}, thread CPU time).",
             "", "*plain*: the replay without smoothing; *forward*: the smoothed run's forward pass (the filter "
             "plus the recorded transition terms); *backward*: the RTS recursion, writing the smoothed estimates "
-            "and scoring them against truth. Target: backward <= plain forward.", "",
+            "and scoring them against truth. Target: backward <= plain forward. The smoothed run is one call, timed as a whole; it is split into forward and backward in the proportion of the two passes' wall times that the run reports (`smoothed.forward_wall_s`, `backward_wall_s`).", "",
             "| config | filter | nodes | plain s | forward s | backward s | backward / plain | "
             "position RMSE filtered -> smoothed (m) |", "|---|---|---:|---:|---:|---:|---:|---|"]
     for config, filt, m in rows:
