@@ -5,6 +5,7 @@
 * ``record.py``: the recorded chain of nodes and transitions (``RecordingFilter``, ``ForwardLog``).
 * ``backward.py``: the backward recursion, full and fixed-lag.
 * ``store.py``: the disk-backed chunk store of the records (flat memory on long runs).
+* ``protocol.py``: the capability a third-party filter declares (``rts_backend()``).
 * The per-filter math (gains, cross-covariances, square-root form): ``fusion_plugins.filters.rts``.
 """
 from __future__ import annotations

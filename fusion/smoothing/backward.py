@@ -43,13 +43,21 @@ def state_difference(layout) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
     return diff
 
 
-def _steps():
-    from fusion_plugins.filters.rts import rts_step, rts_step_sqrt
-    return rts_step, rts_step_sqrt
+_STEPS: tuple | None = None
+
+
+def _steps() -> tuple:
+    """(rts_step, rts_step_sqrt) of fusion_plugins.filters.rts, imported once (the core does not import
+    plugins at start-up)."""
+    global _STEPS
+    if _STEPS is None:
+        from fusion_plugins.filters.rts import rts_step, rts_step_sqrt
+        _STEPS = (rts_step, rts_step_sqrt)
+    return _STEPS
 
 
 def _back(rec: dict, xs: np.ndarray, Cs: np.ndarray, sqrt: bool, normalize, diff) -> tuple[np.ndarray, np.ndarray]:
-    rts_step, rts_step_sqrt = _steps()
+    rts_step, rts_step_sqrt = _STEPS or _steps()
     if sqrt:
         xs, Cs = rts_step_sqrt(rec["x"], rec["A"], rec["G"], rec["x1"], xs, Cs, diff)
     else:

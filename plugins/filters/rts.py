@@ -272,9 +272,10 @@ def backend_for(flt) -> RtsBackend:
     """The smoother backend of a filter: its own ``rts_backend()`` when it declares one (a third-party
     filter's capability), the square-root one for the srukf, the covariance one for the other built-ins.
     ConfigError for a filter that has neither."""
-    own = getattr(flt, "rts_backend", None)
-    if callable(own):
-        return own()
+    from fusion.smoothing.protocol import SmoothableFilter
+
+    if isinstance(flt, SmoothableFilter):
+        return flt.rts_backend()
     if isinstance(flt, SquareRootUnscentedKalmanFilter):
         return SqrtRtsBackend(flt)
     if isinstance(flt, KalmanBase):

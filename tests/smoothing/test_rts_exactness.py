@@ -248,3 +248,21 @@ def test_smoothed_nees_is_chi_square_over_seeds():
     lo, hi = chi2.ppf([0.0005, 0.9995], 4 * count) / count
     assert lo < total / count < hi
     assert better >= 45          # smoothed position MSE below the filtered one on (nearly) every seed
+
+
+def test_a_filter_declares_its_smoother_or_gets_one_clear_error():
+    from fusion.api import ConfigError, Filter
+    from fusion_plugins.filters.rts import RtsBackend, SqrtRtsBackend, backend_for
+
+    class Plain(Filter):
+        name = "plain"
+
+    class Own(Plain):
+        def rts_backend(self):
+            return "mine"
+
+    with pytest.raises(ConfigError, match="no Rauch-Tung-Striebel smoother"):
+        backend_for(Plain())
+    assert backend_for(Own()) == "mine"
+    assert type(backend_for(testing.build("filter", "srukf"))) is SqrtRtsBackend
+    assert type(backend_for(testing.build("filter", "iekf"))) is RtsBackend
