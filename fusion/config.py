@@ -97,6 +97,16 @@ class EvaluationSpec(_Strict):
                                        "for a horizontal accuracy (default: the whole block p)")
 
 
+class SmootherSpec(_Strict):
+    """``smoother:`` in a system YAML: Rauch-Tung-Striebel smoothing after the forward filter, as
+    ``fusion run --smooth`` (``lag_s``: the fixed-lag smoother, as ``--smooth-lag``); fusion/smoothing/."""
+
+    enabled: bool = Field(True, description="smooth every `fusion run` of this config")
+    lag_s: float | None = Field(None, ge=0.0, description="fixed lag (s); none: the full smoother")
+    disk: bool | None = Field(None, description="the forward records on disk: true, false, or none (on "
+                                                "disk past an in-memory budget)")
+
+
 class SystemSpec(_Strict):
     name: str
     description: str = ""
@@ -109,6 +119,7 @@ class SystemSpec(_Strict):
     scheduler: SchedulerSpec = Field(default_factory=SchedulerSpec)
     output: OutputSpec = Field(default_factory=OutputSpec)
     evaluation: EvaluationSpec = Field(default_factory=EvaluationSpec)
+    smoother: SmootherSpec | None = None
 
     @field_validator("beacons")
     @classmethod

@@ -462,9 +462,10 @@ def _lines_of(source: Any) -> tuple[Iterable[str], str, Callable[[], Any] | None
 
 def run(system: System, source: Any, sinks: Sequence[Any] = (), *, on_event: Callable[[Event], Any] | None = None,
         progress: Callable[[float], Any] | None = None, plot: Any = None, hooks: bool = True,
-        label: str | None = None) -> RunResult:
+        label: str | None = None, on_truth: Callable[[Message], Any] | None = None) -> RunResult:
     """Run ``system`` over ``source`` (a recording path or source URL, a ``Source``, or an iterable of text
-    lines) and return its ``RunResult``. ``sinks`` get every estimate and are closed at the end.
+    lines) and return its ``RunResult``. ``sinks`` get every estimate and are closed at the end;
+    ``on_truth`` every truth message, on the stream's time base (as ``Run``'s).
 
     Ctrl-C stops reading: what was read is processed, the sinks are closed and the result has
     ``interrupted=True``. A bug in a component ends the run with a RuntimeError that says how far it got;
@@ -472,7 +473,7 @@ def run(system: System, source: Any, sinks: Sequence[Any] = (), *, on_event: Cal
     after the sinks are closed."""
     lines, name, close = _lines_of(source)
     session = Run(system, sinks, on_event=on_event, progress=progress, plot=plot, hooks=hooks,
-                  label=label if label is not None else name)
+                  label=label if label is not None else name, on_truth=on_truth)
     interrupted = False
     try:
         session.consume(iter_messages(lines, session.parsed))

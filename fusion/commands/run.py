@@ -29,6 +29,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="write estimates: the sink is chosen by suffix (.csv, .jsonl, or a plugin's; '-' CSV on stdout)")
     p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON")
     p.add_argument("--plot", metavar="PATH.png", help="plot trajectory, errors with 3-sigma bounds and NIS")
+    p.add_argument("--smooth", action="store_true",
+                   help="Rauch-Tung-Striebel smoothing after the forward filter: --output and the summary give the "
+                        "smoothed estimates, the summary the filtered and smoothed errors side by side")
+    p.add_argument("--smooth-lag", metavar="SECONDS", type=float, default=None,
+                   help="fixed-lag smoother: each estimate SECONDS late, smoothed over that window")
     p.add_argument("--force", action="store_true", help="replace output files that exist")
     p.add_argument("--quiet", "-q", action="store_true", help="no table on stdout")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -112,13 +117,24 @@ def run(args: argparse.Namespace) -> int:
     show_progress = not args.no_progress and not args.quiet and sys.stdout.isatty()
     with report.progress(_duration_hint(source), enabled=show_progress) as tick:
         notes = EventNotes(sys.stderr, enabled=not args.quiet)
-        result = pipeline.run(system, src, sinks, on_event=notes, progress=tick, plot=plot, label=str(source))
+        smoothing = _smoothing(args, system)
+        if smoothing is None:
+            result = pipeline.run(system, src, sinks, on_event=notes, progress=tick, plot=plot, label=str(source))
+        else:
+            from fusion.smoothing import run_smoothed
+
+            result = run_smoothed(system, src, sinks, on_event=notes, progress=tick, plot=plot, label=str(source),
+                                  **smoothing)
         notes.close()
     summary = result.summary
     if args.summary_json:
         write_summary_json(args.summary_json, summary)
     if not args.quiet:
-        report.print_summary(summary)
+        report.print_summary({k: v for k, v in summary.items() if k != "smoothed"})
+        if "smoothed" in summary:
+            from fusion.smoothing.report import print_smoothed
+
+            print_smoothed(summary)
     if plot is not None:
         plot.write(args.plot, system, result.stats, title=f"{system.spec.name} ({system.filter.name})")
     if result.interrupted:
@@ -129,6 +145,22 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 3
     return 0
+
+
+def _smoothing(args: argparse.Namespace, system) -> dict[str, Any] | None:
+    """run_smoothed's options from --smooth / --smooth-lag and the config's ``smoother:`` (None: no
+    smoothing). The command line wins over the config."""
+    spec = getattr(system.spec, "smoother", None)
+    lag = args.smooth_lag
+    if lag is not None:
+        if not (lag >= 0.0 and math.isfinite(lag)):
+            raise ConfigError(f"--smooth-lag {lag:g}: expected a finite number of seconds >= 0")
+        return {"lag": lag, "disk": None if spec is None else spec.disk}
+    if args.smooth:
+        return {"lag": None, "disk": None if spec is None else spec.disk}
+    if spec is not None and spec.enabled:
+        return {"lag": spec.lag_s, "disk": spec.disk}
+    return None
 
 
 def _duration_hint(source: str | Path) -> float | None:

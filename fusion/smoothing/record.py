@@ -1,0 +1,180 @@
+"""The forward pass of a smoother: what the filter does, recorded as a chain of nodes and transitions.
+
+:class:`RecordingFilter` stands in for the system's filter (the scheduler drives it like any filter:
+``initial_belief``, ``predict``, ``predict_inputs``, ``update``; everything else is the wrapped
+filter's). It calls the wrapped filter, so the forward estimates are the filter's own numbers, and its
+smoother backend (``fusion_plugins.filters.rts``) adds the transition terms of each prediction.
+
+The chain (``ForwardLog``): a *node* is the belief between two predictions; updates change the node's
+filtered belief in place (same time); a prediction closes the node with one record (filtered mean and
+covariance or conditional factor, gain, predicted mean and covariance) and opens the next. A belief that
+does not come from the last one (a reset by recovery, a re-initialisation) closes the node with a zero
+gain: the smoothed belief before a break is the filtered one. Each estimate the scheduler emits is noted
+with the node it belongs to, so the backward pass can give the smoothed belief at every output.
+"""
+from __future__ import annotations
+
+import copy
+from typing import Any, Callable
+
+import numpy as np
+
+from fusion.api import Belief, Estimate, Message
+
+from .store import ChunkStore
+
+__all__ = ["ForwardLog", "RecordingFilter"]
+
+
+def _same(a: Belief, b: Belief | None) -> bool:
+    """b is a (possibly re-timed, ``with_``) copy of a: the same mean and covariance objects."""
+    return b is not None and (a is b or (a.x is b.x and a.P is b.P and a.S is b.S))
+
+
+class ForwardLog:
+    """The records of a forward pass: ``steps`` (one a transition), ``estimates`` (time, node, reason,
+    sensor of each emitted estimate), ``truth`` (truth lines, for the smoothed errors) and the open node.
+
+    :param on_step: called with ``(node_index, record)`` after each transition record (the fixed-lag
+        smoother keeps a window of them); None for the full smoother.
+    """
+
+    REASONS = ("update", "output")
+
+    def __init__(self, backend, n: int, chunk: int = 1024, disk: bool | None = None,
+                 on_step: Callable[[int, dict], Any] | None = None, keep: bool = True):
+        self.backend = backend
+        self.sqrt = backend.sqrt
+        self.n = n
+        self.keep = keep
+        self.steps = ChunkStore(chunk, disk)
+        self.estimates = ChunkStore(chunk * 4, disk)
+        self.truth = ChunkStore(chunk * 4, disk)
+        self._truth_width = 0
+        self.sensors: list[str] = []
+        self.current: Belief | None = None
+        self.nodes = 0          # index of the open node = records so far
+        self.breaks = 0
+        self.unmatched = 0      # estimates whose belief is not the open node's (mapped to it anyway)
+        self.on_step = on_step
+
+    def __deepcopy__(self, memo) -> "ForwardLog":
+        return self
+
+    # ------------------------------------------------------------------ the chain
+    def _record(self, step) -> None:
+        b0 = self.current
+        assert b0 is not None
+        b1 = step.b1
+        rec = {"x": b0.x, "A": step.A, "G": step.G, "x1": b1.x}
+        if not self.sqrt:
+            rec["P1"] = b1.P if b1.P is not None else b1.cov
+        if self.keep:
+            self.steps.append(**rec)
+        if self.on_step is not None:
+            self.on_step(self.nodes, rec)
+        self.nodes += 1
+        self.current = b1
+
+    def enter(self, b: Belief) -> None:
+        """The belief the filter is given next: a break of the chain unless it is the open node's."""
+        if self.current is None:
+            self.current = b
+        elif not _same(self.current, b):
+            self.breaks += 1
+            self._record(self.backend.broken(self.current))
+            self.current = b
+
+    def transition(self, step) -> None:
+        if step is not None:
+            self._record(step)
+
+    def note_estimate(self, est: Estimate) -> None:
+        if self.current is None:
+            return
+        if not _same(est.belief, self.current):
+            self.unmatched += 1
+        reason = self.REASONS.index(est.reason) if est.reason in self.REASONS else 0
+        if self.keep:
+            self.estimates.append(t=float(est.t), node=self.nodes, reason=reason, sensor=self.sensor_code(est.sensor))
+
+    def sensor_code(self, sensor: str | None) -> int:
+        """A small integer for a sensor name (the stores hold numbers)."""
+        sensor = sensor or ""
+        try:
+            return self.sensors.index(sensor)
+        except ValueError:
+            self.sensors.append(sensor)
+            return len(self.sensors) - 1
+
+    def note_truth(self, msg: Message) -> None:
+        try:
+            values = [float(v) for v in msg.values]
+        except (TypeError, ValueError):
+            return
+        if self.truth.rows and len(values) != self._truth_width:
+            return
+        self._truth_width = len(values)
+        self.truth.append(t=float(msg.t), v=np.asarray(values))
+
+    def final(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(mean, covariance or factor) of the last node."""
+        if self.current is None:
+            return None
+        return self.current.x, self.backend.final(self.current)
+
+    def close(self) -> None:
+        for s in (self.steps, self.estimates, self.truth):
+            s.close()
+
+    @property
+    def bytes_on_disk(self) -> int:
+        return self.steps.bytes_on_disk + self.estimates.bytes_on_disk + self.truth.bytes_on_disk
+
+
+class RecordingFilter:
+    """The system's filter with its forward pass recorded in ``log`` (see the module). Deep copies (the
+    scheduler's) copy the wrapped filter and share the log."""
+
+    def __init__(self, inner, log: ForwardLog):
+        self.__dict__["inner"] = inner
+        self.__dict__["log"] = log
+
+    def __getattr__(self, name: str):
+        if name.startswith("__"):
+            raise AttributeError(name)
+        return getattr(self.__dict__["inner"], name)
+
+    def __deepcopy__(self, memo) -> "RecordingFilter":
+        inner = copy.deepcopy(self.inner, memo)
+        log = self.log
+        log.backend = type(log.backend)(inner)
+        return RecordingFilter(inner, log)
+
+    def initial_belief(self, t: float, x: np.ndarray, P: np.ndarray) -> Belief:
+        b = self.inner.initial_belief(t, x, P)
+        self.log.enter(b)
+        return b
+
+    def predict(self, belief: Belief, process, u, dt: float) -> Belief:
+        log = self.log
+        log.enter(belief)
+        b1, step = log.backend.predict(belief, process, u, dt)
+        log.transition(step)
+        return b1
+
+    def predict_inputs(self, belief: Belief, process, us: np.ndarray, dts: np.ndarray) -> Belief:
+        log = self.log
+        log.enter(belief)
+        b1, step = log.backend.predict_inputs(belief, process, us, dts)
+        log.transition(step)
+        return b1
+
+    def update(self, belief: Belief, model, z, R, gate=None):
+        log = self.log
+        log.enter(belief)
+        result = self.inner.update(belief, model, z, R, gate)
+        if result.accepted:
+            log.current = result.belief
+        return result
+

@@ -1,0 +1,183 @@
+"""A smoothed run: the forward pass through ``fusion.pipeline`` (recorded), then the backward pass.
+
+    from fusion.smoothing import run_smoothed
+    result = run_smoothed(system, system.recording, [sink])             # full RTS smoother
+    result = run_smoothed(system, "-", [sink], lag=2.0)                 # fixed lag, 2 s late
+    result.summary["errors"], result.summary["smoothed"]["errors"]    # filtered | smoothed
+
+The sinks get the smoothed estimates (at the same times, reasons and sensors as the filter's), after
+the forward pass (full) or ``lag`` s of sensor time late as the run goes (fixed lag). The summary is
+the forward run's (its ``errors`` and ``consistency`` are the filtered ones) plus ``smoothed``: the
+smoothed errors and NEES against the same truth, the wall time of the backward pass, the nodes and the
+store. Memory: the forward pass writes its records to a :class:`fusion.smoothing.store.ChunkStore`
+(on disk past its in-memory budget, ``disk``), and the fixed-lag smoother keeps only its window.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any, Callable, Sequence
+
+from fusion.api import ConfigError, Estimate, Message
+from fusion.config import System
+from fusion.metrics import ErrorTracker
+from fusion.truth_stream import TruthComparison
+
+from .backward import FixedLag, smooth, smoothed_estimates, state_difference
+from .record import ForwardLog, RecordingFilter
+from .store import ChunkStore
+
+__all__ = ["run_smoothed", "smoother_backend"]
+
+
+def smoother_backend(flt):
+    """The Rauch-Tung-Striebel backend of a filter (``fusion_plugins.filters.rts.backend_for``)."""
+    from fusion_plugins.filters.rts import backend_for
+
+    return backend_for(flt)
+
+
+class _SmoothedStats:
+    """Errors and NEES of the smoothed estimates against the run's truth (the forward run's settings)."""
+
+    def __init__(self, system: System, names: Sequence[str] | None):
+        ev = system.spec.evaluation
+        self.tracker = ErrorTracker(system.layout, None, settle_s=ev.settle_s, position=ev.position,
+                                    keep_nis_series=False)
+        self.comparison = TruthComparison(self.tracker, names) if names else None
+        self.started = False
+        self.count = 0
+
+    def add_truth(self, msg: Message) -> None:
+        if self.comparison is not None:
+            self.comparison.add_truth(msg)
+
+    def add_estimate(self, est: Estimate) -> None:
+        self.count += 1
+        if not self.started:
+            self.tracker.start(est.t)
+            self.started = True
+        if self.comparison is not None:
+            self.comparison.add_estimate(est)
+
+    def summary(self, system: System) -> dict[str, Any]:
+        if self.comparison is not None:
+            self.comparison.finish()
+        s = self.tracker.summary()
+        out: dict[str, Any] = {}
+        if s.get("errors"):
+            out["errors"] = s["errors"]
+            if system.spec.evaluation.position:
+                out["errors"]["position_elements"] = list(system.spec.evaluation.position)
+        c = {k: v for k, v in (s.get("consistency") or {}).items() if k.startswith("nees")}
+        if c:
+            out["consistency"] = c
+        return out
+
+
+def _close(sinks: list) -> None:
+    """Close the sinks once (as fusion.pipeline does, also when the run fails)."""
+    while sinks:
+        sinks.pop(0).close()
+
+
+def run_smoothed(system: System, source: Any, sinks: Sequence[Any] = (), *, lag: float | None = None,
+                 disk: bool | None = None, chunk: int = 1024, on_event: Callable | None = None,
+                 progress: Callable | None = None, plot: Any = None, hooks: bool = True,
+                 label: str | None = None):
+    """Run ``system`` over ``source`` and smooth (see the module). ``lag`` None: the full smoother;
+    else the fixed-lag smoother with that lag (s). Returns the forward run's ``RunResult`` with the
+    summary's ``smoothed`` section. ConfigError when the filter has no smoother or the scheduler
+    replays late messages (the chain would fork)."""
+    from fusion import pipeline
+
+    if system.spec.scheduler.late_policy == "replay":
+        raise ConfigError("smoothing needs scheduler.late_policy: drop (a replay rewinds the recorded chain)")
+    if lag is not None and not lag >= 0.0:
+        raise ConfigError(f"--smooth-lag must be a number of seconds >= 0, got {lag}")
+    backend = smoother_backend(system.filter)
+    process = system.process
+    normalize, diff = process.normalize, state_difference(system.layout)
+    sinks = list(sinks)
+    fixed: FixedLag | None = None
+
+    lagged = ChunkStore(chunk * 4, disk) if lag is not None else None
+
+    def emit(est: Estimate) -> None:
+        """A fixed-lag estimate: to the sinks now, to the store for the statistics after the run."""
+        b = est.belief
+        lagged.append(t=est.t, x=b.x, C=b.S if backend.sqrt else b.P,  # type: ignore[union-attr]
+                      reason=ForwardLog.REASONS.index(est.reason), sensor=log.sensor_code(est.sensor))
+        for s in sinks:
+            s.on_estimate(est)
+
+    if lag is not None:
+        fixed = FixedLag(backend.sqrt, lag, normalize, diff, emit)
+        log = ForwardLog(backend, system.layout.n, chunk, disk, on_step=fixed.on_step, keep=False)
+        fixed.log = log
+    else:
+        log = ForwardLog(backend, system.layout.n, chunk, disk)
+    wrapped = dataclasses.replace(system, filter=RecordingFilter(system.filter, log))
+
+    class _Forward:
+        """The forward run's sink: notes estimates (and feeds the fixed-lag smoother)."""
+
+        def on_estimate(self, est: Estimate) -> None:
+            log.note_estimate(est)
+            if fixed is not None:
+                fixed.on_estimate(est)
+
+        def close(self) -> None:
+            pass
+
+    out: ChunkStore | None = None
+    try:
+        result = pipeline.run(wrapped, source, [_Forward()], on_event=on_event, progress=progress, plot=plot,
+                              hooks=hooks, label=label, on_truth=log.note_truth)
+        stats = _SmoothedStats(system, result.parsed.header.fields.get("truth"))
+        t0 = time.perf_counter()
+        if fixed is not None:
+            fixed.finish()
+            nodes = log.nodes + 1
+            estimates = smoothed_estimates(lagged, backend.sqrt, log.sensors, forward=True)  # type: ignore[arg-type]
+        else:
+            out = ChunkStore(chunk * 4, disk)
+            nodes = smooth(log, normalize, diff, out)
+            estimates = smoothed_estimates(out, backend.sqrt, log.sensors)
+        truth = log.truth.forward_rows()
+        pending = next(truth, None)
+        for est in estimates:
+            while pending is not None and pending["t"] <= est.t:
+                stats.add_truth(Message(float(pending["t"]), "truth", tuple(pending["v"].tolist()), 0))
+                pending = next(truth, None)
+            stats.add_estimate(est)
+            if fixed is None:
+                for s in sinks:
+                    s.on_estimate(est)
+        while pending is not None:
+            stats.add_truth(Message(float(pending["t"]), "truth", tuple(pending["v"].tolist()), 0))
+            pending = next(truth, None)
+        backward_s = time.perf_counter() - t0
+        _close(sinks)
+        stores = [log.steps, log.estimates, log.truth] + [s for s in (out, lagged) if s is not None]
+        smoothed = {"smoother": "rts" if fixed is None else "fixed_lag", "filter": system.filter.name,
+                    **({"lag_s": lag} if lag is not None else {}),
+                    **stats.summary(system),
+                    "nodes": nodes, "estimates": stats.count, "breaks": log.breaks,
+                    "forward_wall_s": result.wall_s, "backward_wall_s": backward_s,
+                    "store": {"on_disk": any(s.on_disk or s.bytes_on_disk for s in stores),
+                              "bytes_on_disk": sum(s.bytes_on_disk for s in stores)}}
+        if fixed is not None:
+            smoothed["largest_window"] = fixed.largest_window
+        if log.unmatched:
+            smoothed["unmatched_estimates"] = log.unmatched
+        result.summary["smoothed"] = smoothed
+        return result
+    except BaseException:
+        _close(sinks)
+        raise
+    finally:
+        log.close()
+        for store in (out, lagged):
+            if store is not None:
+                store.close()
