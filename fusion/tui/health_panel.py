@@ -1,5 +1,6 @@
-"""The health panel: per sensor its rate against the expected rate, the time since its last accepted
-measurement against its limit, and its problem counts; then the filter events and the overall state."""
+"""The health panel: per sensor its rate against the expected rate (Hz), the time since its last accepted
+measurement against its limit (s), its gap and clock events and its status; then the filter events
+(covariance repairs, resets, clock events) and the overall state with its reason."""
 from __future__ import annotations
 
 import math
@@ -12,7 +13,8 @@ from fusion.tui.text_table import text_table
 
 STATE_STYLE = {"OK": "bold green", "DEGRADED": "bold yellow", "LOST": "bold red"}
 _ROW_STYLE = {"ok": None, "waiting": "dim", "slow": "yellow", "stale": "bold yellow"}
-HEADERS = ("sensor", "Hz", "exp", "since ok", "limit", "rej", "malf", "late", "gap", "clock", "")
+# rejected, malformed and late are in the sensors panel beside this one
+HEADERS = ("sensor", "Hz", "expected", "since ok", "limit", "gap", "clock", "status")
 
 
 def _f(v: float, fmt: str) -> str:
@@ -39,11 +41,10 @@ class HealthPanel(Static):
         for s in health.sensors:
             c = s.counts
             rows[s.name] = (s.name, _f(s.rate, ".1f"), _f(s.expected, ".1f"), _f(s.since_ok, ".2f"),
-                            _f(s.limit, "g"), *(str(c.get(k, 0)) for k in ("rejected", "malformed", "late", "gap", "clock")),
-                            s.status)
+                            _f(s.limit, ".3g"), str(c.get("gap", 0)), str(c.get("clock", 0)), s.status)
             styles.append(_ROW_STYLE.get(s.status))
         self.rows = rows
-        out = text_table(HEADERS, list(rows.values()), right=(False, *([True] * 9), False), styles=styles)
+        out = text_table(HEADERS, list(rows.values()), right=(False, *([True] * 6), False), styles=styles)
         out.append(f"\nfilter: {health.repairs} repairs  {health.resets} resets  {health.clock} clock events\n")
         out.append(f" {health.state} ", style="reverse " + STATE_STYLE.get(health.state, "bold"))
         out.append(f" {health.reason}")
