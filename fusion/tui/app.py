@@ -275,8 +275,8 @@ def make_app(config_path_or_system: str | Path | System, source: Any = None, *, 
     by sensor time (0 = as fast as possible); a source with ``live = True`` is never paced. Opening
     errors (missing recording, dead port) raise ``InputError`` here, before the UI takes the terminal.
     ``udp``: ``HOST:PORT`` to stream every estimate as JSON (fusion.tui.udp); ``expected_rates`` (Hz)
-    and ``limits`` (s) by sensor for the health; ``pause_at``: a replay pauses itself at the first
-    estimate at or after this sensor time (s), for pictures at a fixed replay time."""
+    and ``limits`` (s) by sensor for the health; ``pause_at``: a replay pauses itself after the first
+    message at or after this sensor time (s), for pictures at a fixed replay time."""
     if isinstance(config_path_or_system, System):
         system = config_path_or_system
     else:

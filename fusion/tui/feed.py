@@ -195,6 +195,9 @@ class LiveFeed:
                         self._t_start = item.t
                     self.sensor_t = item.t
                     self.health.on_message(item)
+                    if self.pause_at is not None and item.t >= self.pause_at and not self.live:
+                        self.pause_at = None
+                        self._running.clear()  # held before the next line (pictures at fixed replay times)
                 for out in run.push(item):
                     self._take(out)
                 now = time.monotonic()
@@ -286,9 +289,7 @@ class LiveFeed:
             if self._stepping:
                 self._stepping = False
                 self._next_post = 0.0  # show the step at once
-            if self.pause_at is not None and out.t >= self.pause_at and not self.live:
-                self.pause_at = None
-                self._running.clear()  # held before the next line (fusion tui pictures at fixed times)
+
             if self._pos is not None and out.t - self._track_t >= self.track_dt:
                 x = out.belief.x
                 self.track.append((float(x[self._pos[0]]), float(x[self._pos[1]])))
