@@ -86,6 +86,11 @@ class FusionApp(App):
         self._pos = (lay["p"].start, lay["p"].start + 1) if "p" in lay and lay.block("p").size >= 2 else None
         self._view: dict[str, Any] = {}  # view settings kept across a change of layout
 
+    @property
+    def _main(self):
+        """The main screen (its widgets are updated while the help screen is shown over it)."""
+        return self.screen_stack[0]
+
     def _post_snapshot(self, snap: FeedSnapshot) -> None:  # called in the worker thread
         self.post_message(FeedUpdate(snap))
 
@@ -133,25 +138,27 @@ class FusionApp(App):
         self.run_worker(self.feed.run, name="feed", thread=True, exit_on_error=False)
         self.set_interval(0.5, self._tick)
 
-    def _tick(self) -> None:
-        for line in self.query(StatusLine):
+    async def _tick(self) -> None:
+        for line in self._main.query(StatusLine):
             line.tick()
+        await self._relayout()
 
-    async def on_resize(self, event) -> None:
-        if self.wide is not None and self._is_wide() != self.wide:
+    async def _relayout(self) -> None:
+        """Switch between the wide layout and the tabs when the terminal crossed WIDE (checked twice a second)."""
+        if self.wide is not None and self._is_wide() != self.wide and self.screen is self._main:
             self._keep_view()
             await self.recompose()
             self._restore_view()
 
     def _keep_view(self) -> None:
-        track, plots = self.query_one(TrackPlot), self.query_one(InnovationPanel)
+        track, plots = self._main.query_one(TrackPlot), self._main.query_one(InnovationPanel)
         self._view = dict(zoom=track.zoom, follow=track.follow, hide=(track._hide_track, track._hide_truth),
                           sensor=plots.sensor, element=plots.element)
 
     def _restore_view(self) -> None:
         v = self._view
         if v:
-            track, plots = self.query_one(TrackPlot), self.query_one(InnovationPanel)
+            track, plots = self._main.query_one(TrackPlot), self._main.query_one(InnovationPanel)
             track.zoom, track.follow = v["zoom"], v["follow"]
             track._hide_track, track._hide_truth = v["hide"]
             plots.sensor, plots.element = v["sensor"], v["element"]
@@ -175,21 +182,21 @@ class FusionApp(App):
         if only_status and not self.feed.live:  # a paused replay: a single step still shows
             only_status = False
         if only_status:
-            self.query_one(StatusLine).show(snap, True)
+            self._main.query_one(StatusLine).show(snap, True)
             return
-        self.query_one(StateTable).show(snap.estimate)
-        self.query_one(SensorCounters).show(snap.counters, snap.ignored, snap.rates)
-        self.query_one(HealthPanel).show(snap.health)
-        self.query_one(EventLog).show(snap.events)
+        self._main.query_one(StateTable).show(snap.estimate)
+        self._main.query_one(SensorCounters).show(snap.counters, snap.ignored, snap.rates)
+        self._main.query_one(HealthPanel).show(snap.health)
+        self._main.query_one(EventLog).show(snap.events)
         current = cov = None
         if snap.estimate is not None and self._pos is not None:
             x = snap.estimate.belief.x
             i, j = self._pos
             current = (float(x[i]), float(x[j]))
             cov = snap.estimate.belief.cov[[i, j]][:, [i, j]]
-        self.query_one(TrackPlot).show(snap, current, cov)
-        self.query_one(InnovationPanel).show(snap.series, force=force or self.paused)
-        self.query_one(StatusLine).show(snap, self.paused)
+        self._main.query_one(TrackPlot).show(snap, current, cov)
+        self._main.query_one(InnovationPanel).show(snap.series, force=force or self.paused)
+        self._main.query_one(StatusLine).show(snap, self.paused)
 
     def action_pause(self) -> None:
         """Pause or resume: a replay stops reading; a live port is still read (and recorded), the view freezes."""
@@ -200,7 +207,7 @@ class FusionApp(App):
             self.feed.resume()
         if self.latest is not None:
             if self.paused:
-                self.query_one(StatusLine).show(self.latest, True)
+                self._main.query_one(StatusLine).show(self.latest, True)
             else:
                 self._render(self.latest)
 
@@ -213,20 +220,20 @@ class FusionApp(App):
             self.feed.step()
 
     def action_reset_view(self) -> None:
-        self.query_one(TrackPlot).reset()
-        self.query_one(EventLog).reset()
+        self._main.query_one(TrackPlot).reset()
+        self._main.query_one(EventLog).reset()
 
     def action_next_sensor(self) -> None:
-        self.query_one(InnovationPanel).next_sensor()
+        self._main.query_one(InnovationPanel).next_sensor()
 
     def action_next_element(self) -> None:
-        self.query_one(InnovationPanel).next_element()
+        self._main.query_one(InnovationPanel).next_element()
 
     def action_follow(self) -> None:
-        self.query_one(TrackPlot).toggle_follow()
+        self._main.query_one(TrackPlot).toggle_follow()
 
     def action_zoom(self, factor: float) -> None:
-        track = self.query_one(TrackPlot)
+        track = self._main.query_one(TrackPlot)
         if factor == 0:
             track.zoom, track.follow = 1.0, False
             track.refresh()
@@ -234,7 +241,7 @@ class FusionApp(App):
             track.set_zoom(factor)
 
     def action_tab(self, tab: str) -> None:
-        for tabs in self.query(TabbedContent):
+        for tabs in self._main.query(TabbedContent):
             tabs.active = tab
 
     def action_help(self) -> None:
