@@ -47,7 +47,7 @@ class FusionApp(App):
     #right { width: 1fr; }
     #right InnovationPanel { height: 16; }
     StateTable, SensorCounters, HealthPanel, EventLog { border: round $primary-darken-2; }
-    EventLog { height: 8; }
+    EventLog { height: 7; }
     TabbedContent { height: 1fr; }
     TabbedContent EventLog, TabbedContent TrackPlot, TabbedContent InnovationPanel { height: 1fr; }
     TabPane { padding: 0; }

@@ -14,7 +14,7 @@ from fusion.tui.text_table import text_table
 STATE_STYLE = {"OK": "bold green", "DEGRADED": "bold yellow", "LOST": "bold red"}
 _ROW_STYLE = {"ok": None, "waiting": "dim", "slow": "yellow", "stale": "bold yellow"}
 # rejected, malformed and late are in the sensors panel beside this one
-HEADERS = ("sensor", "Hz", "expected", "since ok", "limit", "gap", "clock", "status")
+HEADERS = ("sensor", "Hz", "exp", "ok ago", "limit", "gap", "clk", "status")  # Hz; s since accepted; s
 
 
 def _f(v: float, fmt: str) -> str:

@@ -32,7 +32,7 @@ def describe(snap: FeedSnapshot, paused: bool, filter_name: str, now: float | No
             overall, reason = "LOST", f"no data for {silent:.0f} s"
         out.append(" ")
         out.append(f" {overall} ", style="reverse " + STATE_STYLE.get(overall, "bold"))
-        if reason != snap.message:
+        if reason != snap.message and overall != "OK":
             out.append(f" {reason}")
     parts = [f"t = {snap.sensor_t:.3f} s" if snap.sensor_t == snap.sensor_t else "t = -"]
     if snap.speed_ratio == snap.speed_ratio and not paused:
