@@ -197,3 +197,22 @@ def test_ellipse_points_are_the_2_sigma_contour():
     d = pts - np.array([1.0, -2.0])
     m2 = np.einsum("ij,jk,ik->i", d, np.linalg.inv(P), d)  # Mahalanobis distance squared
     np.testing.assert_allclose(m2, 4.0, rtol=1e-9)
+
+
+@pytest.mark.parametrize("config", sorted(p.name for p in (ROOT / "configs").glob("*.yaml") if p.name != "example_2d.yaml"))
+def test_every_shipped_config_replays_in_the_view_to_the_end(config):
+    """(example_2d.yaml is replayed to the end in test_tui_app.py.) The view ends where fusion run ends."""
+    system = load_system(ROOT / "configs" / config)
+    last = pipeline.run(system, system.recording).last
+
+    async def drive():
+        app = make_app(ROOT / "configs" / config, speed=0)
+        async with app.run_test(size=(120, 40)) as pilot:
+            await until(pilot, lambda: app.latest is not None and app.latest.state in DONE, "the end", timeout=60)
+            await pilot.pause(0.05)
+            assert app.latest.state == "finished", app.latest.message
+            np.testing.assert_array_equal(app.latest.estimate.belief.x, last.belief.x)
+            assert app.latest.health.state == "OK"
+            await pilot.press("q")
+
+    asyncio.run(drive())
