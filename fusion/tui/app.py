@@ -2,7 +2,7 @@
 
 Layout, wide terminals (at least WIDE = 120 x 36 cells): state, per-sensor counters and health on the
 left; the track (top view) and the innovation plots on the right; the event log below; a status line at
-the bottom. Smaller terminals (down to 80 x 24) get the same panels as tabs (keys 1-5), each scrolling
+the bottom. Smaller terminals (down to 80 x 24) get the same panels as tabs (keys 1-6), each scrolling
 rather than being cut. Keys: see ``FusionApp.BINDINGS`` (``?`` shows them all).
 """
 from __future__ import annotations
@@ -15,7 +15,7 @@ from typing import Any, Iterator
 from textual.app import App, ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
-from textual.widgets import Footer, Header, TabbedContent, TabPane
+from textual.widgets import ContentSwitcher, Footer, Header, TabbedContent, TabPane
 
 from fusion.api import ConfigError
 from fusion.config import System, load_system
@@ -28,13 +28,14 @@ from fusion.tui.health_panel import HealthPanel
 from fusion.tui.help_screen import HelpScreen
 from fusion.tui.innovation_plot import InnovationPanel
 from fusion.tui.messages import FeedUpdate
+from fusion.tui.state_plot import StatePlot
 from fusion.tui.state_table import StateTable
 from fusion.tui.status_line import StatusLine
 from fusion.tui.track_plot import TrackPlot
 
 WIDE = (120, 36)  # cells: at least this wide and tall for the side-by-side layout
 TABS = (("tab-state", "state"), ("tab-sensors", "sensors"), ("tab-track", "track"), ("tab-plots", "innovations"),
-        ("tab-events", "events"))
+        ("tab-events", "events"), ("tab-states", "states"))
 
 
 class FusionApp(App):
@@ -45,7 +46,8 @@ class FusionApp(App):
     #main { height: 1fr; }
     #left { width: 62; }
     #right { width: 1fr; }
-    #right InnovationPanel { height: 16; }
+    #right ContentSwitcher { height: 16; }
+    #right InnovationPanel, #right StatePlot { height: 16; }
     StateTable, SensorCounters, HealthPanel, EventLog { border: round $primary-darken-2; }
     EventLog { height: 7; }
     TabbedContent { height: 1fr; }
@@ -59,6 +61,8 @@ class FusionApp(App):
         Binding("r", "reset_view", "reset view"),
         Binding("s", "next_sensor", "plot sensor"),
         Binding("e", "next_element", "plot element", show=False),
+        Binding("x", "next_state", "state element", show=False),
+        Binding("v", "switch_plots", "innovations/states", show=False),
         Binding("f", "follow", "follow", show=False),
         Binding("plus,equals_sign", "zoom(2.0)", "zoom in", show=False),
         Binding("minus", "zoom(0.5)", "zoom out", show=False),
@@ -70,8 +74,10 @@ class FusionApp(App):
             ("n", "single step: while a replay is paused, read on to the next estimate"),
             ("r", "reset view: forget the trail and the events shown so far"),
             ("s", "innovation plots: next sensor"), ("e", "innovation plots: next element of the innovation"),
+            ("x", "state plot: next state element (error against truth with +-3 sigma, or value with +-1 sigma)"),
+            ("v", "wide layout: show the innovation plots or the state plot"),
             ("f", "track: follow the current estimate (on/off)"), ("+ / -", "track: zoom in / out"),
-            ("0", "track: fit everything"), ("1-5", "small terminals: tabs state, sensors, track, innovations, events"),
+            ("0", "track: fit everything"), ("1-6", "small terminals: tabs state, sensors, track, innovations, events, states"),
             ("?", "this help"), ("ctrl+p", "command palette")]
 
     def __init__(self, system: System, feed_options: dict[str, Any]):
@@ -105,6 +111,7 @@ class FusionApp(App):
         counters, health = SensorCounters(), HealthPanel()
         track = TrackPlot(self.system.beacons, has_position=self._pos is not None)
         plots, events = InnovationPanel(), EventLog()
+        states = StatePlot(list(self.feed.states.names))
         if self.wide:
             with Horizontal(id="main"):
                 with VerticalScroll(id="left"):
@@ -113,7 +120,11 @@ class FusionApp(App):
                     yield health
                 with Vertical(id="right"):
                     yield track
-                    yield plots
+                    with ContentSwitcher(initial="plots", id="plot-switch"):
+                        plots.id = "plots"
+                        states.id = "states"
+                        yield plots
+                        yield states
             yield events
         else:
             with TabbedContent(id="tabs"):
@@ -130,6 +141,8 @@ class FusionApp(App):
                     yield plots
                 with TabPane("5 events", id="tab-events"):
                     yield events
+                with TabPane("6 states", id="tab-states"):
+                    yield states
         yield StatusLine(self.system.filter.name)
         yield Footer()
 
@@ -153,7 +166,8 @@ class FusionApp(App):
     def _keep_view(self) -> None:
         track, plots = self._main.query_one(TrackPlot), self._main.query_one(InnovationPanel)
         self._view = dict(zoom=track.zoom, follow=track.follow, hide=(track._hide_track, track._hide_truth),
-                          sensor=plots.sensor, element=plots.element)
+                          sensor=plots.sensor, element=plots.element,
+                          state=self._main.query_one(StatePlot).element)
 
     def _restore_view(self) -> None:
         v = self._view
@@ -162,6 +176,7 @@ class FusionApp(App):
             track.zoom, track.follow = v["zoom"], v["follow"]
             track._hide_track, track._hide_truth = v["hide"]
             plots.sensor, plots.element = v["sensor"], v["element"]
+            self._main.query_one(StatePlot).element = v["state"]
         if self.latest is not None:
             self._render(self.latest, force=True)
 
@@ -196,6 +211,7 @@ class FusionApp(App):
             cov = snap.estimate.belief.cov[[i, j]][:, [i, j]]
         self._main.query_one(TrackPlot).show(snap, current, cov)
         self._main.query_one(InnovationPanel).show(snap.series, force=force or self.paused)
+        self._main.query_one(StatePlot).show(snap.states, force=force or self.paused)
         self._main.query_one(StatusLine).show(snap, self.paused)
 
     def action_pause(self) -> None:
@@ -228,6 +244,13 @@ class FusionApp(App):
 
     def action_next_element(self) -> None:
         self._main.query_one(InnovationPanel).next_element()
+
+    def action_next_state(self) -> None:
+        self._main.query_one(StatePlot).next_element()
+
+    def action_switch_plots(self) -> None:
+        for switcher in self._main.query("#plot-switch"):
+            switcher.current = "states" if switcher.current == "plots" else "plots"
 
     def action_follow(self) -> None:
         self._main.query_one(TrackPlot).toggle_follow()

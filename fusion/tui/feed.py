@@ -26,6 +26,7 @@ from fusion.logformat import iter_messages
 from fusion.pipeline import COUNTERS, Run
 from fusion.tui.health import Health, HealthMonitor
 from fusion.tui.series import InnovationHistory, Sample
+from fusion.tui.state_series import StateHistory, StateSample
 
 __all__ = ["LiveFeed", "FeedSnapshot", "LoggedEvent", "COUNTERS"]
 _SLICE = 0.05  # s: longest sleep between checks of pause/stop while pacing
@@ -71,6 +72,7 @@ class FeedSnapshot:
     message: str = ""
     health: Health | None = None
     series: Mapping[str, tuple[Sample, ...]] = field(default_factory=dict)
+    states: tuple[StateSample, ...] = ()
     attempt: int = 0
 
 
@@ -95,6 +97,7 @@ class LiveFeed:
         sensors = self.run_.scheduler.sensors
         self.health = HealthMonitor({n: s.role for n, s in sensors.items()}, expected_rates, limits)
         self.history = InnovationHistory({n: s.gate for n, s in sensors.items() if s.gate is not None})
+        self.states = StateHistory(system.layout, lambda: self.parsed.header.fields.get("truth"))
         self.attempt = 0
         self.pause_at = pause_at
         self._step = threading.Event()
@@ -286,6 +289,7 @@ class LiveFeed:
             self.estimate = out
             self.health.on_estimate(out)
             self.history.on_estimate(out)
+            self.states.on_estimate(out)
             if self._stepping:
                 self._stepping = False
                 self._next_post = 0.0  # show the step at once
@@ -299,7 +303,9 @@ class LiveFeed:
             self._log(out)
 
     def _take_truth(self, msg: Message) -> None:
-        """A truth line: its (north, east) point goes to the view's true track (decimated by time)."""
+        """A truth line: its (north, east) point goes to the view's true track (decimated by time), the
+        whole line to the state errors."""
+        self.states.on_truth(msg)
         if self._truth_idx is None and self._pos is not None:
             names = self.parsed.header.fields.get("truth")
             ok = names is not None and all(n in names for n in self._pos_names)
@@ -354,7 +360,8 @@ class LiveFeed:
             ignored=self.run_.stats.ignored(), rates=rates, events=tuple(self.events), track=tuple(self.track),
             track_total=self.track_total, truth=tuple(self.truth), truth_total=self.truth_total,
             lines=self.lines_read, data_wall=self._data_wall, sensor_t=t, speed_ratio=ratio, wall=now, message=self.message,
-            health=self._assess(t, rates, counters, now, active), series=self.history.snapshot(), attempt=self.attempt)
+            health=self._assess(t, rates, counters, now, active), series=self.history.snapshot(), attempt=self.attempt,
+            states=self.states.snapshot())
         self._next_post = now + self.refresh_dt
         self._emitted_lines = self.lines_read
         self._post(snap)

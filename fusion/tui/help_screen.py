@@ -17,7 +17,9 @@ PANELS = """\
             2-sigma ellipse, true position now (○)
 [b]innovations[/] test ratio NIS/gate with the gate at 1 (red x: rejected), and the
             innovation of one element with +-sqrt(S)
-[b]events[/]      rejected, late, gap, malformed (line numbers), port lost and back"""
+[b]events[/]      rejected, late, gap, malformed (line numbers), port lost and back
+[b]states[/]      one state element: its error against truth with +-3 sigma, or (no truth)
+            its value with +-1 sigma (bias states: how well the bias is known)"""
 
 
 class HelpScreen(ModalScreen):

@@ -49,15 +49,16 @@ def test_udp_stream_sends_every_estimate_as_plotjuggler_json(tmp_path):
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
     rx.bind(("127.0.0.1", 0))
-    rx.settimeout(0.5)
-    got = []
+    rx.settimeout(0.2)
+    got, done = [], threading.Event()
 
-    def receive():
+    def receive():  # until the view has ended and nothing more is waiting
         while True:
             try:
                 got.append(json.loads(rx.recv(65536)))
             except socket.timeout:
-                return
+                if done.is_set():
+                    return
 
     reader = threading.Thread(target=receive)
     reader.start()
@@ -68,7 +69,10 @@ def test_udp_stream_sends_every_estimate_as_plotjuggler_json(tmp_path):
             await until(pilot, lambda: app.latest is not None and app.latest.state in DONE, "the end")
             await pilot.press("q")
 
-    asyncio.run(drive())
+    try:
+        asyncio.run(drive())
+    finally:
+        done.set()
     reader.join()
     rx.close()
     assert len(got) == len(ref)
@@ -127,7 +131,8 @@ def test_small_terminal_gets_tabs_and_nothing_is_cut():
             n_rows = len(table.cells)
             assert n_rows == 15  # p v (3 + 3), roll pitch yaw, ba bw (3 + 3)
             assert table.outer_size.height == n_rows + 3  # header and borders: every row laid out
-            for key, tab in (("2", "tab-sensors"), ("3", "tab-track"), ("4", "tab-plots"), ("5", "tab-events")):
+            for key, tab in (("2", "tab-sensors"), ("3", "tab-track"), ("4", "tab-plots"), ("5", "tab-events"),
+                             ("6", "tab-states")):
                 await pilot.press(key)
                 await pilot.pause(0.05)
                 assert app.query_one("#tabs").active == tab
@@ -155,7 +160,7 @@ def test_help_screen_lists_every_key():
             for binding in FusionApp.BINDINGS:
                 key = binding.key.split(",")[0]
                 name = HELP_NAMES.get(key, key)
-                assert name in listed or (name.isdigit() and "1-5" in listed), key
+                assert name in listed or (name.isdigit() and "1-6" in listed), key
             await pilot.press("escape")
             await pilot.pause(0.05)
             assert not isinstance(app.screen, HelpScreen)
@@ -213,6 +218,39 @@ def test_every_shipped_config_replays_in_the_view_to_the_end(config):
             assert app.latest.state == "finished", app.latest.message
             np.testing.assert_array_equal(app.latest.estimate.belief.x, last.belief.x)
             assert app.latest.health.state == "OK"
+            await pilot.press("q")
+
+    asyncio.run(drive())
+
+
+def test_state_errors_against_truth_match_an_interpolation_of_the_recording():
+    rows = [ln.split(",") for ln in RECORDING.read_text().splitlines() if ",truth," in ln]
+    header = next(ln for ln in RECORDING.read_text().splitlines() if ln.startswith("# fields truth"))
+    names = header.split()[3:]
+    tt = np.array([float(r[0]) for r in rows])
+    true_px = np.array([float(r[2 + names.index("px")]) for r in rows])
+
+    async def drive():
+        app = make_app(CONFIG, speed=0, pause_at=40.0)
+        async with app.run_test(size=(120, 40)) as pilot:
+            await until(pilot, lambda: app.feed.paused and app.latest is not None and app.latest.sensor_t >= 40.0,
+                        "the pause")
+            await pilot.pause(0.1)
+            samples = app.latest.states
+            k = app.feed.states.names.index("px")
+            t = np.array([s.t for s in samples])
+            err = np.array([s.err[k] for s in samples])
+            x = np.array([s.x[k] for s in samples])
+            sd = np.array([s.sd[k] for s in samples])
+            ok = np.isfinite(err)
+            assert ok.sum() > 300 and np.all(np.diff(t) >= 0.1 - 1e-9)
+            np.testing.assert_allclose(err[ok], x[ok] - np.interp(t[ok], tt, true_px), rtol=0, atol=1e-9)
+            settled = ok & (t > 10.0)
+            assert np.mean(np.abs(err[settled]) <= 3 * sd[settled]) > 0.95  # consistent: inside +-3 sigma
+            await pilot.press("v")
+            assert app.query_one("#plot-switch").current == "states"
+            await pilot.press("x")
+            assert app.query_one("#states").element == 1
             await pilot.press("q")
 
     asyncio.run(drive())
