@@ -226,6 +226,11 @@ class LiveFeed:
                 self.state = "error"
                 self.message = f"internal error: {type(exc).__name__}: {exc}"
                 self._log(Event(self.sensor_t, "error", None, self.message))
+        else:
+            try:
+                run.close_sinks()  # stopped: the --udp socket is released too
+            except Exception:  # a sink that fails to close must not hide how the run ended
+                pass
         return self._emit(time.monotonic())
 
     def _paced(self, lines: Iterable[str]) -> Iterator[str]:
