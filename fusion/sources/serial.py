@@ -262,7 +262,7 @@ class SerialSource(Source):
         delay, attempt, why = p.backoff, 0, "port lost"
         while not self._closed.is_set():
             attempt += 1
-            self._status("reconnecting", attempt, f"{why}; attempt {attempt} in {delay:.1f} s")
+            self._status("reconnecting", attempt, f"{why}; attempt {attempt} in {delay:.3g} s")
             if self._closed.wait(delay):
                 return None
             try:

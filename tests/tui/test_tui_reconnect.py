@@ -79,7 +79,7 @@ def test_source_reopens_a_replugged_port_with_backoff_and_marks_the_gap(tmp_path
         assert [s[:2] for s in status[:4]] == [("reconnecting", i) for i in (1, 2, 3, 4)]
         assert "No such file or directory" in status[1][2] or "cannot open" in status[1][2]
         # backoff doubles up to backoff_max: 0.05, 0.1, 0.2, 0.2 s
-        assert [s[2].rsplit(" in ", 1)[1] for s in status[:4]] == ["0.1 s", "0.1 s", "0.2 s", "0.2 s"]
+        assert [s[2].rsplit(" in ", 1)[1] for s in status[:4]] == ["0.05 s", "0.1 s", "0.2 s", "0.2 s"]
         dev.plug()
         wait(lambda: status[-1][0] == "connected", what="the port to come back")
         n = len(idle)
