@@ -6,8 +6,8 @@ messages through the scheduler and, at most ``refresh_hz`` times a second, hands
 estimate, counters, the last events and track points), so a newer one can always replace an older one:
 a 100-200 Hz estimate stream costs the UI 10-20 refreshes a second.
 
-Health (``fusion.tui.health``) and the innovation histories (``fusion.tui.series``) are accumulated here
-too and ride in each snapshot. A reconnecting serial source reports through ``source_status``.
+Health (``fusion.tui.health``), the innovation histories (``fusion.tui.series``) and the state histories
+(``fusion.tui.state_series``) are accumulated here too and ride in each snapshot. A reconnecting serial source reports through ``source_status``.
 
 The UI thread only calls ``pause()``, ``resume()``, ``step()`` and ``stop()`` (thread-safe).
 """
@@ -50,7 +50,8 @@ class FeedSnapshot:
     (a view that was reset hides the ones before its mark). ``state``: waiting, running, finished,
     reconnecting (a serial port being reopened: ``attempt``), lost (the source failed), stopped or error.
     ``health``: sensor rates and limits and the overall OK/DEGRADED/LOST; ``series``: innovation samples
-    by sensor; ``truth_now``: the latest true (north, east), if any."""
+    by sensor (fusion.tui.series); ``states``: estimate, 1-sigma and error against truth of the state
+    elements (fusion.tui.state_series); ``attempt``: the reopen attempt while reconnecting."""
 
     source: str
     live: bool
