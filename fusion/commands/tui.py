@@ -4,6 +4,7 @@
     fusion tui configs/uwb_pv_ukf.yaml --port /dev/ttyUSB0 --baud 115200 --record today.log
     fusion tui configs/uwb_pv_ukf.yaml --speed 4       # the config's recording at 4x real time
     fusion tui configs/example_2d.yaml --input walk.log --speed 0
+    fusion tui configs/example_2d.yaml --udp 127.0.0.1:9870   # also stream estimates to PlotJuggler
 """
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Live view (state with 1-sigma, per-sensor counters, events, horizontal track) "
                                    "of the estimator a config composes, fed by a serial device (--port) or by a "
                                    "recording replayed at --speed x real time (the config's own, or --input). "
-                                   "Keys: q quit, p pause/resume, r reset view.")
+                                   "Keys: ? lists them all (q quit, p pause, n step, s plot sensor, f follow, +/- zoom).")
     p.add_argument("config", nargs="?", metavar="CONFIG",
                    help=f"system YAML (default: {DEFAULT_CONFIG} when it exists)")
     src = p.add_mutually_exclusive_group()
@@ -39,19 +40,56 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="set a filter parameter (repeatable; VALUE is YAML, e.g. alpha=0.5)")
     p.add_argument("--refresh", type=float, default=15.0, metavar="HZ",
                    help="view refreshes per second (default 15; estimates in between are coalesced)")
+    p.add_argument("--udp", metavar="HOST:PORT",
+                   help="also send every estimate and innovation as one JSON datagram (PlotJuggler's UDP server, "
+                        "JSON protocol, timestamp field 'timestamp'; its default port is 9870)")
+    p.add_argument("--expect-rate", metavar="SENSOR=HZ", action="append", default=[],
+                   help="health: the rate a sensor should have (repeatable; default: learned over its first 5 s)")
+    p.add_argument("--limit", metavar="SENSOR=S", action="append", default=[],
+                   help="health: longest time without an accepted measurement before DEGRADED "
+                        "(repeatable; default max(1 s, 10 / expected rate))")
+    p.add_argument("--no-reconnect", action="store_true",
+                   help="with --port: a lost port ends reading (LOST) instead of being reopened with backoff")
     p.set_defaults(func=run)
 
 
 def _config_path(config: str | None) -> Path:
+    """CONFIG, else the default: in the current folder's configs/ (a checkout), else the one installed
+    with the package (fusion_configs), else the source tree's."""
     if config is not None:
         return Path(config)
     import fusion
 
-    for base in (Path.cwd(), Path(fusion.__file__).resolve().parents[1]):
-        if (base / DEFAULT_CONFIG).is_file():
-            return base / DEFAULT_CONFIG
+    if (Path.cwd() / DEFAULT_CONFIG).is_file():
+        return Path.cwd() / DEFAULT_CONFIG
+    try:
+        from importlib.resources import files
+
+        shipped = files("fusion_configs").joinpath(DEFAULT_CONFIG.name)
+        if shipped.is_file():
+            return Path(str(shipped))
+    except (ImportError, TypeError):  # an install without the configs package
+        pass
+    base = Path(fusion.__file__).resolve().parents[1]
+    if (base / DEFAULT_CONFIG).is_file():
+        return base / DEFAULT_CONFIG
     raise ConfigError(f"no CONFIG given and the default {DEFAULT_CONFIG} was not found; give a system YAML, "
                       "e.g. fusion tui configs/example_2d.yaml --port /dev/ttyUSB0")
+
+
+def _per_sensor(values: list[str], option: str, unit: str) -> dict[str, float]:
+    """``["uwb=40", "imu=100"]`` -> {"uwb": 40.0, "imu": 100.0}; ConfigError naming the bad item."""
+    out = {}
+    for item in values:
+        name, sep, text = item.partition("=")
+        try:
+            value = float(text) if sep and name else math.nan
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and value > 0.0):
+            raise ConfigError(f"{option} {item}: expected SENSOR={unit} with a positive number, e.g. {option} uwb=40")
+        out[name.strip()] = value
+    return out
 
 
 def build_app(args: argparse.Namespace):
@@ -75,15 +113,27 @@ def build_app(args: argparse.Namespace):
                           "give a file, a --port (socket://host:port for a network stream), or use fusion run")
     if args.record and Path(args.record).exists():
         raise InputError(f"--record {args.record}: the file exists; choose a new name (nothing is overwritten)")
+    if args.no_reconnect and not args.port:
+        raise ConfigError("--no-reconnect applies to a live --port")
+    rates = _per_sensor(args.expect_rate, "--expect-rate", "HZ")
+    limits = _per_sensor(args.limit, "--limit", "S")
+    if args.udp:
+        from fusion.tui.udp import parse_address
+
+        parse_address(args.udp)
     config = _config_path(args.config)
     override = filter_override(config, args.filter, args.filter_param)
     source = args.input
     if args.port:
         from fusion.sources.select import open_source
 
-        source = open_source(args.port, device=True, baud=args.baud, record=args.record)
+        options = dict(baud=args.baud, record=args.record)
+        if not args.no_reconnect:
+            options["reconnect"] = True
+        source = open_source(args.port, device=True, **options)
     speed = 1.0 if args.speed is None else args.speed
-    return make_app(config, source, speed=speed, refresh_hz=args.refresh, filter_override=override)
+    return make_app(config, source, speed=speed, refresh_hz=args.refresh, filter_override=override, udp=args.udp,
+                    expected_rates=rates, limits=limits)
 
 
 def run(args: argparse.Namespace) -> int:

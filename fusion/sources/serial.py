@@ -15,12 +15,24 @@ sending after the port is open loses nothing.
 Errors: a port that cannot be opened is an ``InputError`` ("cannot open PORT: reason"); a port that fails
 while reading (unplugged device, closed pty) is a ``PortLost`` (an ``InputError``) raised from ``lines()``
 after the last partial line is yielded, so nothing received is lost.
+
+Reconnect (``reconnect=True``, what ``fusion tui --port`` uses): a port that fails while reading is closed
+and opened again with exponential backoff (``backoff`` s doubling up to ``backoff_max`` s) until it returns
+or ``close()`` is called; ``on_status(state, attempt, detail)`` reports ``"reconnecting"`` before each wait
+and ``"connected"`` when the port is back. The stream (and the record file, which stays the stream's
+byte-exact copy) gets one comment line at the loss and one at the return, so the gap is marked and line
+numbers in the record file stay those of the stream:
+``# fusion: port lost at 2026-12-01T10:01:02.345Z: Input/output error; reconnecting`` and
+``# fusion: port back at ...Z after 3 attempts (4.2 s without data)``. A line cut by the loss is ended
+there (a line of its own); the first line after the return is treated as cut by the open (see above).
 """
 from __future__ import annotations
 
 import errno
 import os
 import threading
+import time
+from datetime import datetime, timezone
 from typing import BinaryIO, Callable, Iterator
 
 from pydantic import Field
@@ -41,6 +53,11 @@ def _reason(exc: BaseException) -> str:
         return os.strerror(code)
     text = str(exc)
     return text or type(exc).__name__
+
+
+def _utc_now() -> str:
+    """Wall-clock time for a gap marker: ISO 8601 UTC with milliseconds."""
+    return datetime.now(timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
 def _hint(port: str, exc: BaseException) -> str:
@@ -74,6 +91,9 @@ class SerialSource(Source):
         baud: int = Field(115200, gt=0, description="bit/s (8 data bits, no parity, 1 stop bit)")
         timeout: float = Field(0.1, gt=0.0, description="s a read waits before checking for close()")
         record: str | None = Field(None, description="tee the raw bytes received to this file")
+        reconnect: bool = Field(False, description="reopen a port that fails while reading, with backoff")
+        backoff: float = Field(0.25, gt=0.0, description="s before the first reopen attempt (doubles each attempt)")
+        backoff_max: float = Field(5.0, gt=0.0, description="s between reopen attempts at most")
 
     def __init__(self, params=None, context=None, **kwargs):
         if params is None and kwargs:
@@ -88,6 +108,11 @@ class SerialSource(Source):
         # Called in the reading thread each time a read times out with nothing (a consumer blocked in
         # lines() can refresh its view of a silent port).
         self.on_idle: Callable[[], object] | None = None
+        # Called in the reading thread with (state, attempt, detail) while reconnecting: state
+        # "reconnecting" (before attempt number ``attempt``) or "connected" (the port is back).
+        self.on_status: Callable[[str, int, str], object] | None = None
+        self.reconnects = 0  # times the port came back
+        self._last_byte = b"\n"  # last byte recorded (a gap marker starts on a line of its own)
 
     @property
     def label(self) -> str:
@@ -105,7 +130,7 @@ class SerialSource(Source):
             self.port = serial.serial_for_url(p.port, baudrate=p.baud, timeout=p.timeout)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise InputError(f"cannot open {p.port}: {_reason(exc)}{_hint(p.port, exc)}") from None
-        if p.record:
+        if p.record and self._record is None:
             try:
                 self._record = open(p.record, "xb")  # never overwrite: nothing the user gave is lost
             except OSError as exc:
@@ -130,59 +155,123 @@ class SerialSource(Source):
                 pass
 
     def lines(self) -> Iterator[str]:
-        """Complete lines (with their ``\\n``) as they arrive, until close() or the port fails."""
+        """Complete lines (with their ``\\n``) as they arrive, until close() or the port fails (with
+        ``reconnect``: until close(), the port reopened whenever it fails)."""
         with self._lock:
             if self._closed.is_set():
                 return
             self._reading = True
+        try:
+            self.open()
+            while True:
+                try:
+                    yield from self._read_lines()
+                    return
+                except PortLost as lost:
+                    if not self.params.reconnect or self._closed.is_set():
+                        raise
+                    lost_at = time.monotonic()
+                    reason = str(lost).split(": ", 1)[-1]
+                    yield self._mark(f"# fusion: port lost at {_utc_now()}: {reason}; reconnecting\n")
+                    attempts = self._reopen()
+                    if attempts is None:  # closed while waiting
+                        return
+                    self.reconnects += 1
+                    yield self._mark(f"# fusion: port back at {_utc_now()} after {attempts} attempt"
+                                     f"{'s' if attempts > 1 else ''} ({time.monotonic() - lost_at:.1f} s without data)\n")
+                    self._status("connected", attempts, "")
+        finally:
+            self._reading = False
+            self._shutdown()
+
+    def _read_lines(self) -> Iterator[str]:
+        """Lines from the open port until close(); PortLost when a read fails (after the partial line)."""
         import serial
 
         buf = bytearray()
         first = True  # the first line is cut when the port is opened while the device is sending
+        port = self.port
+        while not self._closed.is_set():
+            try:
+                chunk = port.read(min(_CHUNK, max(1, port.in_waiting)))
+            except (serial.SerialException, OSError) as exc:
+                if self._closed.is_set():
+                    break
+                if buf:
+                    yield buf.decode("utf-8", "replace")
+                    buf.clear()
+                raise PortLost(f"lost {self.params.port}: {_reason(exc)}") from None
+            if not chunk:
+                if first and not buf:
+                    first = False  # a read timed out before any byte: the device starts on a line
+                if self.on_idle is not None:
+                    self.on_idle()
+                continue
+            self.bytes_received += len(chunk)
+            self._tee(chunk)
+            buf += chunk
+            if b"\n" not in chunk:
+                continue
+            *done, rest = buf.split(b"\n")
+            buf = bytearray(rest)
+            for raw in done:
+                text = raw.decode("utf-8", "replace")
+                if first and not text.startswith("#"):
+                    # A fragment may still parse ("560000,imu,..." from "1234.560000,imu,...") with a
+                    # wrong time that would make every later message late: keep it as a comment (same
+                    # line number as in the record file, never fused).
+                    first = False
+                    text = "# fusion: first line cut by opening the port mid-stream: " + text
+                first = False
+                yield text + "\n"
+        if buf:  # closed mid-line: the partial line too
+            yield buf.decode("utf-8", "replace")
+
+    def _tee(self, data: bytes) -> None:
+        """Append raw bytes to the record file (flushed: a crash loses nothing received)."""
+        if self._record is None or not data:
+            return
         try:
-            port = self.open().port
-            while not self._closed.is_set():
-                try:
-                    chunk = port.read(min(_CHUNK, max(1, port.in_waiting)))
-                except (serial.SerialException, OSError) as exc:
-                    if self._closed.is_set():
-                        break
-                    if buf:
-                        yield buf.decode("utf-8", "replace")
-                        buf.clear()
-                    raise PortLost(f"lost {self.params.port}: {_reason(exc)}") from None
-                if not chunk:
-                    if first and not buf:
-                        first = False  # a read timed out before any byte: the device starts on a line
-                    if self.on_idle is not None:
-                        self.on_idle()
-                    continue
-                self.bytes_received += len(chunk)
-                if self._record is not None:
-                    try:
-                        self._record.write(chunk)
-                        self._record.flush()
-                    except OSError as exc:  # stop rather than go on without the record asked for
-                        raise InputError(f"cannot write the record file {self.params.record}: {_reason(exc)}") from None
-                buf += chunk
-                if b"\n" not in chunk:
-                    continue
-                *done, rest = buf.split(b"\n")
-                buf = bytearray(rest)
-                for raw in done:
-                    text = raw.decode("utf-8", "replace")
-                    if first and not text.startswith("#"):
-                        # A fragment may still parse ("560000,imu,..." from "1234.560000,imu,...") with a
-                        # wrong time that would make every later message late: keep it as a comment (same
-                        # line number as in the record file, never fused).
-                        first = False
-                        text = "# fusion: first line cut by opening the port mid-stream: " + text
-                    yield text + "\n"
-            if buf:  # closed mid-line: the partial line too
-                yield buf.decode("utf-8", "replace")
-        finally:
-            self._reading = False
-            self._shutdown()
+            self._record.write(data)
+            self._record.flush()
+        except OSError as exc:  # stop rather than go on without the record asked for
+            raise InputError(f"cannot write the record file {self.params.record}: {_reason(exc)}") from None
+        self._last_byte = data[-1:]
+
+    def _mark(self, comment: str) -> str:
+        """A gap marker: recorded on a line of its own (a line cut by the loss is ended first)."""
+        if self._last_byte != b"\n":
+            self._tee(b"\n")
+        self._tee(comment.encode("utf-8"))
+        return comment
+
+    def _status(self, state: str, attempt: int, detail: str) -> None:
+        if self.on_status is not None:
+            self.on_status(state, attempt, detail)
+
+    def _reopen(self) -> int | None:
+        """Close the failed port and open it again with backoff; the number of attempts it took, or None
+        when close() was called first."""
+        if self.port is not None:
+            try:
+                self.port.close()
+            except Exception:  # a vanished device may fail to close; it is gone anyway
+                pass
+            self.port = None
+        p = self.params
+        delay, attempt, why = p.backoff, 0, "port lost"
+        while not self._closed.is_set():
+            attempt += 1
+            self._status("reconnecting", attempt, f"{why}; attempt {attempt} in {delay:.3g} s")
+            if self._closed.wait(delay):
+                return None
+            try:
+                self.open()
+                return attempt
+            except InputError as exc:
+                why = str(exc).split(" (", 1)[0]
+                delay = min(2.0 * delay, p.backoff_max)
+        return None
 
     def _shutdown(self) -> None:
         if self.port is not None:

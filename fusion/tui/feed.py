@@ -6,7 +6,10 @@ messages through the scheduler and, at most ``refresh_hz`` times a second, hands
 estimate, counters, the last events and track points), so a newer one can always replace an older one:
 a 100-200 Hz estimate stream costs the UI 10-20 refreshes a second.
 
-The UI thread only calls ``pause()``, ``resume()`` and ``stop()`` (thread-safe).
+Health (``fusion.tui.health``), the innovation histories (``fusion.tui.series``) and the state histories
+(``fusion.tui.state_series``) are accumulated here too and ride in each snapshot. A reconnecting serial source reports through ``source_status``.
+
+The UI thread only calls ``pause()``, ``resume()``, ``step()`` and ``stop()`` (thread-safe).
 """
 from __future__ import annotations
 
@@ -15,12 +18,15 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Callable, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from fusion.api import Estimate, Event, InputError, Message
 from fusion.config import System
 from fusion.logformat import iter_messages
 from fusion.pipeline import COUNTERS, Run
+from fusion.tui.health import Health, HealthMonitor
+from fusion.tui.series import InnovationHistory, Sample
+from fusion.tui.state_series import StateHistory, StateSample
 
 __all__ = ["LiveFeed", "FeedSnapshot", "LoggedEvent", "COUNTERS"]
 _SLICE = 0.05  # s: longest sleep between checks of pause/stop while pacing
@@ -42,7 +48,10 @@ class FeedSnapshot:
     """Everything the view shows, at one instant. ``track``/``truth`` are (north, east) points in m,
     decimated to one per ``track_dt`` s of sensor time; ``track_total`` counts every point ever kept
     (a view that was reset hides the ones before its mark). ``state``: waiting, running, finished,
-    lost (the source failed), stopped or error."""
+    reconnecting (a serial port being reopened: ``attempt``), lost (the source failed), stopped or error.
+    ``health``: sensor rates and limits and the overall OK/DEGRADED/LOST; ``series``: innovation samples
+    by sensor (fusion.tui.series); ``states``: estimate, 1-sigma and error against truth of the state
+    elements (fusion.tui.state_series); ``attempt``: the reopen attempt while reconnecting."""
 
     source: str
     live: bool
@@ -62,6 +71,10 @@ class FeedSnapshot:
     speed_ratio: float
     wall: float = field(default_factory=time.monotonic)
     message: str = ""
+    health: Health | None = None
+    series: Mapping[str, tuple[Sample, ...]] = field(default_factory=dict)
+    states: tuple[StateSample, ...] = ()
+    attempt: int = 0
 
 
 class LiveFeed:
@@ -70,15 +83,26 @@ class LiveFeed:
     ``lines``: an iterable of text lines; ``live``: True for a device (never paced, never blocked by
     pause: pausing a live feed freezes only the view, so nothing the device sends is lost); ``speed``:
     replay rate against sensor time (0: as fast as possible); ``close``: called by stop() to wake a
-    blocked reader (a serial source's close)."""
+    blocked reader (a serial source's close); ``sinks``: extra pipeline sinks (the ``--udp`` stream);
+    ``expected_rates``/``limits``: per-sensor Hz and s for the health (fusion.tui.health)."""
 
     def __init__(self, system: System, lines: Iterable[str], post: Callable[[FeedSnapshot], object], *,
                  source: str = "", live: bool = False, speed: float = 1.0, refresh_hz: float = 15.0,
                  close: Callable[[], object] | None = None, max_events: int = 500,
-                 max_track: int = 4000, track_dt: float = 0.1):
+                 max_track: int = 4000, track_dt: float = 0.1, sinks: Sequence[Any] = (),
+                 expected_rates: Mapping[str, float] | None = None, limits: Mapping[str, float] | None = None,
+                 pause_at: float | None = None):
         self.system = system
         # The run keeps its statistics in bounded memory; the view's own histories are the deques below.
-        self.run_ = Run(system, on_truth=self._take_truth, label=source)
+        self.run_ = Run(system, sinks, on_truth=self._take_truth, label=source)
+        sensors = self.run_.scheduler.sensors
+        self.health = HealthMonitor({n: s.role for n, s in sensors.items()}, expected_rates, limits)
+        self.history = InnovationHistory({n: s.gate for n, s in sensors.items() if s.gate is not None})
+        self.states = StateHistory(system.layout, lambda: self.parsed.header.fields.get("truth"))
+        self.attempt = 0
+        self.pause_at = pause_at
+        self._step = threading.Event()
+        self._stepping = False
         self.parsed = self.run_.parsed
         self.result = None  # the RunResult once the input has ended
         self._lines = lines
@@ -129,6 +153,23 @@ class LiveFeed:
     def paused(self) -> bool:
         return not self._running.is_set()
 
+    def step(self) -> None:
+        """While a replay is paused: read on to the next estimate, then hold again."""
+        self._step.set()
+
+    def source_status(self, state: str, attempt: int, detail: str) -> None:
+        """Called by a reconnecting source in the reading thread: ``reconnecting`` (before attempt
+        ``attempt``) or ``connected``."""
+        if state == "reconnecting":
+            if self.state != "reconnecting":
+                self._log(Event(self.sensor_t, "source", None, f"port lost; reconnecting ({detail})"))
+            self.state, self.attempt = "reconnecting", attempt
+            self.message = f"attempt {attempt}: {detail}"
+        else:
+            self._log(Event(self.sensor_t, "source", None, f"port back after {attempt} attempt(s)"))
+            self.state, self.attempt, self.message = "running", 0, ""
+        self._emit(time.monotonic())
+
     def stop(self) -> None:
         """Stop reading (returns at once; the worker ends within ~0.1 s)."""
         self._stop.set()
@@ -157,6 +198,10 @@ class LiveFeed:
                     if self.sensor_t != self.sensor_t:
                         self._t_start = item.t
                     self.sensor_t = item.t
+                    self.health.on_message(item)
+                    if self.pause_at is not None and item.t >= self.pause_at and not self.live:
+                        self.pause_at = None
+                        self._running.clear()  # held before the next line (pictures at fixed replay times)
                 for out in run.push(item):
                     self._take(out)
                 now = time.monotonic()
@@ -182,6 +227,11 @@ class LiveFeed:
                 self.state = "error"
                 self.message = f"internal error: {type(exc).__name__}: {exc}"
                 self._log(Event(self.sensor_t, "error", None, self.message))
+        else:
+            try:
+                run.close_sinks()  # stopped: the --udp socket is released too
+            except Exception:  # a sink that fails to close must not hide how the run ended
+                pass
         return self._emit(time.monotonic())
 
     def _paced(self, lines: Iterable[str]) -> Iterator[str]:
@@ -193,11 +243,13 @@ class LiveFeed:
             self.lines_read += 1
             self._data_wall = time.monotonic()
             if not self.live:
-                if not self._running.is_set():
+                if not self._running.is_set() and not self._stepping:
                     held = self._hold()
                     if wall0 is not None:
                         wall0 += held
-                if self.speed > 0.0:
+                if self._stepping:
+                    t0 = None  # a single step is not paced; pacing restarts from the next line
+                elif self.speed > 0.0:
                     t = _time_of(raw)
                     if t is not None:
                         if t0 is None:
@@ -214,7 +266,10 @@ class LiveFeed:
         if self.lines_read:
             self._emit(start)  # the view shows where the replay stopped
         while not self._running.wait(_SLICE):
-            pass
+            if self._step.is_set():
+                self._step.clear()
+                self._stepping = True
+                break
         return time.monotonic() - start
 
     def _sleep_until(self, target: float) -> float:
@@ -223,7 +278,7 @@ class LiveFeed:
         while not self._stop.is_set():
             now = time.monotonic()
             self._maybe_emit(now)
-            if not self._running.is_set():
+            if not self._running.is_set() and not self._stepping:
                 h = self._hold()
                 held += h
                 target += h
@@ -238,6 +293,13 @@ class LiveFeed:
     def _take(self, out: Estimate | Event) -> None:
         if isinstance(out, Estimate):
             self.estimate = out
+            self.health.on_estimate(out)
+            self.history.on_estimate(out)
+            self.states.on_estimate(out)
+            if self._stepping:
+                self._stepping = False
+                self._next_post = 0.0  # show the step at once
+
             if self._pos is not None and out.t - self._track_t >= self.track_dt:
                 x = out.belief.x
                 self.track.append((float(x[self._pos[0]]), float(x[self._pos[1]])))
@@ -247,7 +309,9 @@ class LiveFeed:
             self._log(out)
 
     def _take_truth(self, msg: Message) -> None:
-        """A truth line: its (north, east) point goes to the view's true track (decimated by time)."""
+        """A truth line: its (north, east) point goes to the view's true track (decimated by time), the
+        whole line to the state errors."""
+        self.states.on_truth(msg)
         if self._truth_idx is None and self._pos is not None:
             names = self.parsed.header.fields.get("truth")
             ok = names is not None and all(n in names for n in self._pos_names)
@@ -263,6 +327,7 @@ class LiveFeed:
                 self._truth_t = msg.t
 
     def _log(self, ev: Event) -> None:
+        self.health.on_event(ev)
         self._seq += 1
         self.events.append(LoggedEvent(self._seq, ev.t, ev.kind, ev.sensor, ev.detail))
 
@@ -287,23 +352,35 @@ class LiveFeed:
             win.popleft()
         w0, t0, r0 = win[0]
         ratio, rates = math.nan, {}
-        if self.state in ("running", "waiting") and now - w0 > 0.2 and t0 == t0:
+        active = self.state in ("running", "waiting", "reconnecting")
+        if active and now - w0 > 0.2 and t0 == t0:
             ratio = (t - t0) / (now - w0)
         elif self._wall0 is not None and now > self._wall0:
             ratio = (t - self._t_first) / (now - self._wall0)
-        if self.state not in ("running", "waiting") and t - self._t_start > 0.0:
+        if not active and t - self._t_start > 0.0:
             rates = {k: n / (t - self._t_start) for k, n in received.items()}  # the run's mean
-        elif t0 == t0 and t - t0 > 0.0:
-            rates = {k: (n - r0.get(k, 0)) / (t - t0) for k, n in received.items()}
+        elif t == t:
+            rates = {k: v for k, v in self.health.rates(t).items() if v == v}  # by sensor time: deterministic
         snap = FeedSnapshot(
             source=self.source, live=self.live, state=self.state, estimate=self.estimate, counters=counters,
             ignored=self.run_.stats.ignored(), rates=rates, events=tuple(self.events), track=tuple(self.track),
             track_total=self.track_total, truth=tuple(self.truth), truth_total=self.truth_total,
-            lines=self.lines_read, data_wall=self._data_wall, sensor_t=t, speed_ratio=ratio, wall=now, message=self.message)
+            lines=self.lines_read, data_wall=self._data_wall, sensor_t=t, speed_ratio=ratio, wall=now, message=self.message,
+            health=self._assess(t, rates, counters, now, active), series=self.history.snapshot(), attempt=self.attempt,
+            states=self.states.snapshot())
         self._next_post = now + self.refresh_dt
         self._emitted_lines = self.lines_read
         self._post(snap)
         return snap
+
+
+    def _assess(self, t: float, rates: dict[str, float], counters: dict[str, dict[str, int]], now: float,
+                active: bool) -> Health:
+        sched = self.run_.scheduler
+        repairs = int(self.run_.stats.filter_counters.get("not_positive_definite", 0))
+        return self.health.assess(t, rates, counters, self.state, silent_wall_s=now - self._data_wall, live=self.live,
+                                  estimate=self.estimate, repairs=repairs, resets=sched.resets, message=self.message,
+                                  rate_valid=active)
 
 
 def _time_of(raw: str) -> float | None:

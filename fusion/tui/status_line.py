@@ -1,4 +1,6 @@
-"""The status line: source, state, sensor time, speed against real time, filter, lines read."""
+"""The status line: source, state (RECONNECTING with the attempt count), overall health (OK, DEGRADED,
+LOST) with its reason, sensor time, speed against real time, filter, lines read. It wraps onto a second
+line in a narrow terminal rather than being cut."""
 from __future__ import annotations
 
 import time
@@ -7,9 +9,12 @@ from rich.text import Text
 from textual.widgets import Static
 
 from fusion.tui.feed import FeedSnapshot
+from fusion.tui.health_panel import STATE_STYLE
+
+SILENT_S = 5.0  # s without a byte on a live port: LOST (as fusion.tui.health)
 
 _STATE_STYLE = {"running": "bold green", "waiting": "bold", "finished": "bold blue", "paused": "bold yellow",
-                "lost": "bold red", "error": "bold red", "stopped": "bold"}
+                "lost": "bold red", "error": "bold red", "stopped": "bold", "reconnecting": "bold yellow"}
 
 
 def describe(snap: FeedSnapshot, paused: bool, filter_name: str, now: float | None = None) -> Text:
@@ -17,7 +22,18 @@ def describe(snap: FeedSnapshot, paused: bool, filter_name: str, now: float | No
     state = "paused" if paused and snap.state in ("running", "waiting") else snap.state
     out = Text()
     out.append(f" {'live' if snap.live else 'replay'} {snap.source} ")
-    out.append(f" {state.upper()} ", style="reverse " + _STATE_STYLE.get(state, "bold"))
+    label = f"RECONNECTING (attempt {snap.attempt})" if state == "reconnecting" else state.upper()
+    out.append(f" {label} ", style="reverse " + _STATE_STYLE.get(state, "bold"))
+    health = snap.health
+    silent = now - snap.data_wall if snap.live and snap.state == "running" and now is not None else 0.0
+    if health is not None:
+        overall, reason = health.state, health.reason
+        if silent > SILENT_S and overall != "LOST":  # the feed posts nothing while the port is silent
+            overall, reason = "LOST", f"no data for {silent:.0f} s"
+        out.append(" ")
+        out.append(f" {overall} ", style="reverse " + STATE_STYLE.get(overall, "bold"))
+        if reason != snap.message and overall != "OK":
+            out.append(f" {reason}")
     parts = [f"t = {snap.sensor_t:.3f} s" if snap.sensor_t == snap.sensor_t else "t = -"]
     if snap.speed_ratio == snap.speed_ratio and not paused:
         parts.append(f"{snap.speed_ratio:.1f}x real time")
@@ -35,7 +51,7 @@ class StatusLine(Static):
     """Shows ``describe()`` of the latest snapshot; ``text`` is its plain text."""
 
     DEFAULT_CSS = """
-    StatusLine { height: 1; background: $panel; }
+    StatusLine { height: auto; max-height: 3; background: $panel; }
     """
 
     def __init__(self, filter_name: str, **kwargs) -> None:

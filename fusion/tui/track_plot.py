@@ -1,7 +1,10 @@
 """A live top view of the horizontal track (NED: east right, north up), drawn with braille dots.
 
-Shows the estimated track, the truth when the stream carries truth lines, the beacons and the current
-position; scales are equal on both axes and fit everything shown. ``reset()`` (key r) forgets the trail
+Shows the estimated track, the truth when the stream carries truth lines (and the latest true position
+beside the estimate), the beacons, the current position and its 2-sigma covariance ellipse (the
+horizontal 2 x 2 block of P: semi-axes 2 sqrt(eigenvalue), 86% of the probability of a Gaussian);
+scales are equal on both axes and fit everything shown. ``zoom`` (keys + and -) narrows the view around
+its centre, ``follow`` (key f) centres it on the current estimate; ``reset()`` (key r) forgets the trail
 drawn so far and refits the view to what comes next.
 """
 from __future__ import annotations
@@ -16,7 +19,15 @@ from textual.widget import Widget
 from fusion.tui.canvas import BrailleCanvas
 from fusion.tui.feed import FeedSnapshot
 
-EST, TRUTH, BEACON, NOW = "bold cyan", "#a0a0a0", "bold red", "bold yellow"
+EST, TRUTH, BEACON, NOW, ELLIPSE = "bold cyan", "#a0a0a0", "bold red", "bold yellow", "yellow"
+
+
+def ellipse_points(center: np.ndarray, cov: np.ndarray, k: float = 2.0, n: int = 64) -> np.ndarray:
+    """(n, 2) points of the k-sigma ellipse of a 2 x 2 covariance around ``center`` (same units, m)."""
+    w, V = np.linalg.eigh(0.5 * (cov + cov.T))
+    a = np.linspace(0.0, 2.0 * math.pi, n)
+    unit = np.stack([np.cos(a), np.sin(a)], axis=1)
+    return np.asarray(center, dtype=float) + (unit * (k * np.sqrt(np.clip(w, 0.0, None)))) @ V.T
 
 
 class TrackPlot(Widget):
@@ -34,14 +45,21 @@ class TrackPlot(Widget):
         self.track: np.ndarray = np.zeros((0, 2))
         self.truth: np.ndarray = np.zeros((0, 2))
         self.current: tuple[float, float] | None = None
+        self.cov: np.ndarray | None = None  # (2, 2) horizontal covariance at the current estimate, m^2
+        self.truth_now: tuple[float, float] | None = None
+        self.zoom = 1.0
+        self.follow = False
         self._hide_track = self._hide_truth = 0
         self._totals = (0, 0)
         self.border_title = "track (top view)"
         self.border_subtitle = (f"[{EST}]━ estimate[/] [{TRUTH}]━ truth[/] [{BEACON}]▲ beacon[/] "
-                                f"[{NOW}]● now[/]")
+                                f"[{NOW}]● now[/] [{ELLIPSE}]◌ 2σ[/] [{TRUTH}]○ true now[/]")
 
-    def show(self, snap: FeedSnapshot, current: tuple[float, float] | None) -> None:
-        """Take the snapshot's track (only points after the last reset) and the current position."""
+    def show(self, snap: FeedSnapshot, current: tuple[float, float] | None, cov: np.ndarray | None = None) -> None:
+        """Take the snapshot's track (only points after the last reset), the current position and its
+        horizontal covariance (2 x 2, m^2)."""
+        self.cov = None if cov is None or not np.isfinite(cov).all() else np.asarray(cov, dtype=float)
+        self.truth_now = snap.truth[-1] if snap.truth else None
         self._totals = (snap.track_total, snap.truth_total)
         self.track = _tail(snap.track, snap.track_total - self._hide_track)
         self.truth = _tail(snap.truth, snap.truth_total - self._hide_truth)
@@ -53,6 +71,15 @@ class TrackPlot(Widget):
         self._hide_track, self._hide_truth = self._totals
         self.track = np.zeros((0, 2))
         self.truth = np.zeros((0, 2))
+        self.refresh()
+
+    def set_zoom(self, factor: float) -> None:
+        """Multiply the zoom (1 = fit everything); kept within 1/4 to 1000."""
+        self.zoom = min(1000.0, max(0.25, self.zoom * factor))
+        self.refresh()
+
+    def toggle_follow(self) -> None:
+        self.follow = not self.follow
         self.refresh()
 
     @property
@@ -71,14 +98,23 @@ class TrackPlot(Widget):
         """The plot as rich Text of ``cols`` x ``rows`` cells (one row used for the scale)."""
         canvas = BrailleCanvas(cols, rows - 1)
         pts = [self.track, self.truth, np.array(list(self.beacons.values())).reshape(-1, 2)]
+        ring = None
         if self.current is not None:
             pts.append(np.array([self.current]))
+            if self.cov is not None:
+                ring = ellipse_points(np.array(self.current), self.cov)
+                if not self.follow and self.zoom == 1.0:
+                    pts.append(ring)
         allp = np.vstack(pts)
         if not allp.size:
             return Text("waiting for a position estimate", style="dim")
         lo, hi = allp.min(axis=0), allp.max(axis=0)  # (north, east)
         span = np.maximum(hi - lo, 1.0)
         lo, hi = lo - 0.05 * span, hi + 0.05 * span
+        if self.zoom != 1.0 or self.follow:
+            centre = np.array(self.current) if self.follow and self.current is not None else (lo + hi) / 2.0
+            half = (hi - lo) / (2.0 * self.zoom)
+            lo, hi = centre - half, centre + half
         w, h = canvas.width - 1, canvas.height - 1
         scale = min(w / (hi[1] - lo[1]), h / (hi[0] - lo[0]))  # dots per metre, equal on both axes
         off_x = (w - scale * (hi[1] - lo[1])) / 2.0
@@ -92,15 +128,21 @@ class TrackPlot(Widget):
             canvas.polyline(*to_dots(self.truth), style=TRUTH)
         if len(self.track):
             canvas.polyline(*to_dots(self.track), style=EST)
+        if ring is not None:
+            canvas.polyline(*to_dots(ring), style=ELLIPSE)
         for name, b in self.beacons.items():
             x, y = to_dots(b)
             canvas.text(x[0], y[0], "▲" + name, style=BEACON)
+        if self.truth_now is not None:
+            x, y = to_dots(np.array(self.truth_now))
+            canvas.text(x[0], y[0], "○", style=TRUTH)
         if self.current is not None:
             x, y = to_dots(np.array(self.current))
             canvas.text(x[0], y[0], "●", style=NOW)
         out = canvas.render()
         out.append("\n")
-        out.append(_scale_bar(scale, cols), style="dim")
+        view = (" follow" if self.follow else "") + (f" zoom {self.zoom:g}x" if self.zoom != 1.0 else "")
+        out.append(_scale_bar(scale, cols) + view, style="dim")
         return out
 
 

@@ -85,3 +85,36 @@ def test_default_config_is_used_when_present(monkeypatch, tmp_path):
     monkeypatch.setattr(tui, "DEFAULT_CONFIG", Path("configs") / "fusion-none.yaml")
     with pytest.raises(ConfigError, match="no CONFIG given"):
         tui._config_path(None)
+
+
+def test_default_config_comes_from_the_installed_package_outside_a_checkout(monkeypatch, tmp_path):
+    from importlib.resources import files
+
+    from fusion.commands import tui
+
+    monkeypatch.chdir(tmp_path)  # no configs/ here
+    found = tui._config_path(None)
+    assert found.read_bytes() == (ROOT / "configs" / "abps_ins.yaml").read_bytes()
+    assert found == Path(str(files("fusion_configs").joinpath("abps_ins.yaml")))
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--expect-rate", "uwb"], "--expect-rate uwb: expected SENSOR=HZ"),
+    (["--expect-rate", "uwb=-3"], "--expect-rate uwb=-3"),
+    (["--limit", "sonar=1"], "--limit sonar=...: no sensor 'sonar' in the config (sensors: uwb)"),
+    (["--udp", "localhost"], "--udp localhost: expected HOST:PORT"),
+    (["--udp", "127.0.0.1:99999"], "1 to 65535"),
+    (["--no-reconnect"], "--no-reconnect applies to a live --port"),
+])
+def test_bad_live_view_options_exit_2_with_one_line(argv, words, capsys):
+    assert main(["tui", str(CONFIG), *argv]) == 2
+    assert words in one_error_line(capsys)
+
+
+def test_a_port_reconnects_unless_asked_not_to():
+    app = build_app(build_parser().parse_args(["tui", str(CONFIG), "--port", "loop://"]))
+    assert app.feed._close.__self__.params.reconnect is True
+    app.feed.stop()
+    app = build_app(build_parser().parse_args(["tui", str(CONFIG), "--port", "loop://", "--no-reconnect"]))
+    assert app.feed._close.__self__.params.reconnect is False
+    app.feed.stop()
