@@ -7,7 +7,8 @@ sentence may follow the prefix: ``t,gps,$GPGGA,...*HH`` (the checksum is then th
 checked by the ``nmea`` decoder).
 
 Fields parse as float when they look numeric; tokens that start with a letter or ``$`` are labels (a
-beacon name) kept as strings. ``nan``/``inf`` and anything else that is neither is malformed.
+beacon name) kept as strings. ``nan``/``inf`` and anything else that is neither is malformed, and so is
+a line holding binary junk (a NUL or another control character, or U+FFFD where a byte was not UTF-8).
 """
 from __future__ import annotations
 
@@ -74,7 +75,14 @@ def parse_line(text: str, lineno: int | None = None) -> Message:
     return _parse_stripped(text.strip(), lineno)
 
 
+_BINARY = re.compile(r"[\x00-\x08\x0e-\x1f\x7f\ufffd]")  # control characters; U+FFFD: a byte that was not UTF-8
+
+
 def _parse_stripped(line: str, lineno: int | None) -> Message:
+    if "\ufffd" in line or (not line.isprintable() and _BINARY.search(line)):  # isprintable: ~0.1 us, no regex
+        bad = _BINARY.search(line)
+        what = "invalid UTF-8" if bad.group() == "\ufffd" else f"control byte 0x{ord(bad.group()):02x}"  # type: ignore[union-attr]
+        raise MalformedMessage(f"binary data in the line ({what} at column {bad.start() + 1})")  # type: ignore[union-attr]
     parts = line.split(",")
     if len(parts) < 3:
         raise MalformedMessage("expected 't,sensor,value,...'")
