@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import traceback
 
 from fusion.api import FusionError
 from fusion.config import load_system
@@ -27,6 +28,8 @@ def run(args: argparse.Namespace) -> int:
                 raise FusionError(f"{path}: recording: {rec} does not exist")
         except FusionError as exc:
             bad += 1
+            if getattr(args, "debug", False):
+                traceback.print_exc()
             print(f"{exc}", file=sys.stderr)
             continue
         sensors = ", ".join(f"{n} ({s.role})" for n, s in system.sensors.items())
