@@ -5,23 +5,28 @@ is read; this decoder optionally checks the number of values and that they are n
 """
 from __future__ import annotations
 
+from pydantic import Field
+
 from fusion.api import Decoder, MalformedMessage, Message, Params
 
 
 class LineDecoder(Decoder):
     """The log format's own fields, unchanged (``t,sensor,v1,v2,...``).
 
-    Params: ``count``: expected number of values (None: any); ``numeric``: every value must be a number."""
+    Params: ``count``: expected number of values (None: any); ``numeric``: every value must be a finite
+    number. A message that breaks either is malformed (MalformedMessage with the reason)."""
 
     name = "line"
 
     class Params(Params):
-        count: int | None = None
+        count: int | None = Field(None, ge=0)
         numeric: bool = False
 
     def decode(self, message: Message) -> Message | None:
         if self.params.count is not None and len(message.values) != self.params.count:
             raise MalformedMessage(f"expected {self.params.count} values, got {len(message.values)}")
-        if self.params.numeric and any(isinstance(v, str) for v in message.values):
-            raise MalformedMessage(f"expected numbers, got {message.values!r}")
+        if self.params.numeric:
+            for i, v in enumerate(message.values):
+                if isinstance(v, str) or not isinstance(v, (int, float)) or v - v != 0.0:
+                    raise MalformedMessage(f"value {i + 1}: expected a finite number, got {v!r}")
         return message

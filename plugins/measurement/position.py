@@ -111,7 +111,9 @@ class Position(MeasurementModel):
 
     def observe(self, message: Message) -> Observation | None:
         """Observation of a fix message: ``dim`` (or 3) coordinates, or 9 values with the covariance, or 10:
-        the covariance and the fix's age (s: the position is of that long before the message time)."""
+        the covariance and the fix's age (s: the position is of that long before the message time).
+        MalformedMessage, with the reason, for another count, a value that is no finite number, a negative
+        age or a covariance that is not positive definite."""
         z = message.floats()
         if not np.all(np.isfinite(z)):
             raise MalformedMessage(f"position: non-finite value in {message.values!r}")
@@ -129,6 +131,11 @@ class Position(MeasurementModel):
             cov = z[_SYM3]                      # the upper triangle x y z cxx cxy cxz cyy cyz czz, mirrored
             if self.params.use_fix_covariance:  # type: ignore[attr-defined]
                 R = cov[:self.dim, :self.dim]
+                try:                            # a covariance a filter cannot factor: no use as R
+                    np.linalg.cholesky(R)
+                except np.linalg.LinAlgError:
+                    raise MalformedMessage(f"position: the fix's covariance {R.tolist()} (m^2) is not positive "
+                                           "definite") from None
             z = z[:3]
         elif z.size not in (self.dim, 3) or z.size < self.dim:
             raise MalformedMessage(f"position expects {self.dim} coordinates (or 9 values: x y z and the "

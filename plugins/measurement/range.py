@@ -27,8 +27,9 @@ class RangeModel(MeasurementModel):
     """Ranges (m) from the position block ``p`` (2-D or 3-D) to named beacons (config ``beacons:``).
 
     Params: ``beacons``: the beacons this sensor may range to (default: all); ``tag_z``: the tag's height
-    (m, same frame as the beacons) used when the state is 2-D and the beacons are 3-D; ``gdop_warn`` and
-    ``mirror_warn_sigma``: thresholds of ``check`` (see the module docstring)."""
+    (m, same frame as the beacons) used when the state is 2-D and the beacons are 3-D; ``max_range``: the
+    sensor's longest range (m), a longer one is malformed; ``gdop_warn`` and ``mirror_warn_sigma``:
+    thresholds of ``check`` (see the module docstring)."""
 
     name = "range"
     dim = 1
@@ -36,6 +37,8 @@ class RangeModel(MeasurementModel):
     class Params(Params):
         beacons: list[str] | None = None
         tag_z: float = 0.0
+        max_range: float | None = Field(None, gt=0.0, description="m: a longer range is malformed (not "
+                                        "physical for the sensor; None: no limit)")
         gdop_warn: float | None = Field(10.0, gt=0.0, description="check(): warn when the GDOP of the beacons "
                                         "at the estimated position exceeds this (None: never)")
         mirror_warn_sigma: float | None = Field(3.0, gt=0.0, description="check(): with beacons on one line "
@@ -55,6 +58,10 @@ class RangeModel(MeasurementModel):
         unknown = [b for b in names if b not in ctx.beacons]
         if unknown:
             raise ConfigError(f"range: unknown beacon(s) {unknown}; the config defines {sorted(ctx.beacons)}")
+        short = [b for b in names if len(ctx.beacons[b]) < self._dp]
+        if short:
+            raise ConfigError(f"range: beacon(s) {short} have {len(ctx.beacons[short[0]])} coordinates but the "
+                              f"state position is {self._dp}-D")
         self._known = frozenset(names)
         self._all = np.array([ctx.beacons[b] for b in names], float)
         self._all_dz2 = ((self.params.tag_z - self._all[:, 2]) ** 2 if (self._all.shape[1] == 3 and self._dp == 2)
@@ -151,21 +158,30 @@ class RangeModel(MeasurementModel):
         return ev
 
     def observe(self, message: Message) -> Observation | None:
+        """Observation of ``beacon range [beacon range ...]`` (m). MalformedMessage, with the reason, for
+        a wrong field count, a beacon that is no name or not one of this sensor's, a range that is not a
+        finite number >= 0 or is beyond ``max_range``."""
         vals = message.values
         if len(vals) < 2 or len(vals) % 2:
-            raise MalformedMessage(f"range expects 'beacon range' pairs, got {len(vals)} values")
+            raise MalformedMessage(f"range expects 'beacon range' pairs, got {len(vals)} value(s) {vals!r}")
         names = tuple(vals[0::2])
         for b in names:
             if not isinstance(b, str):
-                raise MalformedMessage(f"range expects a beacon name, got {b!r}")
+                raise MalformedMessage(f"range expects a beacon name, got {b!r} (fields 'beacon range', "
+                                       f"beacons {', '.join(sorted(self._known))})")
             if b not in self._known:
                 raise MalformedMessage(f"unknown beacon {b!r} (known: {', '.join(sorted(self._known))})")
         try:
             z = np.array(vals[1::2], float)
-        except ValueError:
+        except (TypeError, ValueError):
             raise MalformedMessage(f"range expects numbers, got {vals[1::2]!r}") from None
+        if not np.all(np.isfinite(z)):
+            raise MalformedMessage(f"non-finite range in {vals!r}")
         if np.any(z < 0):
-            raise MalformedMessage(f"negative range {z.min()}")
+            raise MalformedMessage(f"negative range {z.min()} m")
+        mx = self.params.max_range
+        if mx is not None and np.any(z > mx):
+            raise MalformedMessage(f"range {z.max()} m beyond max_range {mx} m")
         return Observation(message.t, z, self._bind(names))
 
 

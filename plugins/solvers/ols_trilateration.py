@@ -213,6 +213,8 @@ class OlsParams(Params):
     z: float = Field(0.0, description="receiver height (m, navigation frame) used in 2-D")
     z_sd: float = Field(0.1, ge=0, description="sd (m) of the known height, attached to the 2-D fix")
     range_sd: float = Field(0.05, gt=0, description="range noise sd (m): the fix covariance scales with it")
+    max_range: float | None = Field(None, gt=0, description="m: a longer range is malformed (not physical "
+                                    "for the sensor; None: no limit)")
     window: float = Field(1.0, gt=0, description="a cycle holds ranges within this time of its first one")
     min_beacons: int | None = Field(None, ge=3, description="fewest beacons for a fix (default dim + 1)")
     beacons: list[str] | None = Field(None, description="beacons this receiver ranges (default: all); a cycle "
@@ -297,6 +299,9 @@ class OlsTrilateration(Solver):
                               "position the fix gives to the closing message)")
         if self.min_beacons < p.dim + 1:
             raise ConfigError(f"ols_trilateration: min_beacons {self.min_beacons} < {p.dim + 1} needed for a {p.dim}-D fix")
+        if self.min_beacons > len(names):
+            raise ConfigError(f"ols_trilateration: min_beacons {self.min_beacons} but only {len(names)} beacon(s) "
+                              f"{names}: no cycle could ever give a fix")
         self.counters: dict[str, int] = {"cycles": 0, "fixes": 0, "qr": 0, "outliers_removed": 0,
                                          "unknown_beacon": 0, **{r: 0 for r in REASONS}}
         self.events: list[Event] = []
@@ -325,6 +330,9 @@ class OlsTrilateration(Solver):
                 raise MalformedMessage(f"range to {label} is not a number: {rng!r}") from None
             if not np.isfinite(rng) or rng < 0:
                 raise MalformedMessage(f"range to {label} must be finite and >= 0, got {rng}")
+            if self.params.max_range is not None and rng > self.params.max_range:  # type: ignore[attr-defined]
+                raise MalformedMessage(f"range to {label} {rng} m beyond max_range "
+                                       f"{self.params.max_range} m")  # type: ignore[attr-defined]
             pairs.append((label, rng))
         out: list[Message] = []
         for label, rng in pairs:
@@ -366,14 +374,22 @@ class OlsTrilateration(Solver):
         try:
             if len(names) < self.min_beacons:
                 raise NoFix("too_few_beacons", f"{len(names)} beacon(s) {names}, need {self.min_beacons}")
-            pos, cov, info = trilaterate(
-                B, ranges, dim=p.dim, z=p.z, z_sd=p.z_sd, sigma=p.range_sd, reference=p.reference,
-                qr_condition=p.qr_condition, degenerate_condition=p.degenerate_condition,
-                refine=p.refine_iterations, consistency_probability=p.consistency_probability,
-                consistency_sd=p.consistency_sd, max_outliers=p.max_outliers)
+            with np.errstate(over="ignore", invalid="ignore"):    # overflowing ranges: caught just below
+                pos, cov, info = trilaterate(
+                    B, ranges, dim=p.dim, z=p.z, z_sd=p.z_sd, sigma=p.range_sd, reference=p.reference,
+                    qr_condition=p.qr_condition, degenerate_condition=p.degenerate_condition,
+                    refine=p.refine_iterations, consistency_probability=p.consistency_probability,
+                    consistency_sd=p.consistency_sd, max_outliers=p.max_outliers)
+            if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(cov))):
+                raise NoFix("inconsistent", f"the fix is not finite (ranges {ranges.tolist()} m overflow eq. 25)")
         except NoFix as exc:
             self.counters[exc.reason] += 1
             self.events.append(Event(t_end, "no_fix", last.sensor, str(exc)))
+            return []
+        except (np.linalg.LinAlgError, ValueError) as exc:  # numbers no fix can come from (not finite)
+            self.counters["inconsistent"] += 1
+            self.events.append(Event(t_end, "no_fix", last.sensor, f"inconsistent: no fix from ranges "
+                                     f"{ranges.tolist()} m: {exc}"))
             return []
         for j in info["rejected"]:
             self.counters["outliers_removed"] += 1
