@@ -256,9 +256,11 @@ class Estimate:
 
 # --------------------------------------------------------------------------- components
 class Params(BaseModel):
-    """Base of every plugin's Params model: unknown keys are errors."""
+    """Base of every plugin's Params model: unknown keys are errors, and every float (nested in lists,
+    tuples and dicts too) must be finite: NaN or inf is an error naming the field. A field that means
+    something by inf says so in its description and opts out with ``Field(..., allow_inf_nan=True)``."""
 
-    model_config = ConfigDict(extra="forbid", arbitrary_types_allowed=True)
+    model_config = ConfigDict(extra="forbid", arbitrary_types_allowed=True, allow_inf_nan=False)
 
 
 @dataclass

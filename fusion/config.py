@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any, Literal, Union
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from fusion.api import (BuildContext, Component, ConfigError, Decoder, Filter, Gate, MeasurementModel,
                         ProcessModel, Solver)
@@ -31,7 +31,21 @@ from fusion.yamlsource import LocatedYAML, load_yaml, pydantic_errors
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    """Unknown keys are errors; every float (nested ones too) must be finite, NaN and inf are errors."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+#: Largest initial standard deviation (in the block's SI unit: m, m/s, rad, ...). The first update leaves a
+#: posterior variance of about the measurement's, computed as P0 - K S K^T; it keeps no digit once P0 / R
+#: passes 1 / eps = 4.5e15 (float64). 1e6 against a 1 cm sensor is that ratio (1e16); measured on
+#: configs/uwb_pv_ukf.yaml (0.1 m ranges), the EKF still converges at sd 1e7 and diverges at 1e8 (1046
+#: non-positive-definite repairs). No physical prior is wider: 1e6 m is a continent, 1e6 m/s is 30x orbital
+#: speed.
+MAX_INITIAL_SD = 1e6
+#: Fastest fixed-rate output (Hz): each output costs a prediction and a row (~200 B of CSV); beyond the
+#: fastest sensor (an IMU at 100 Hz-1 kHz) more rows carry no information (1 kHz over an hour: 3.6 M rows).
+MAX_OUTPUT_RATE_HZ = 1000.0
 
 
 ComponentSpec = Union[str, dict[str, Any]]
@@ -42,6 +56,12 @@ class NoiseSpec(_Strict):
 
     sd: float | list[float] | None = None
     R: list[list[float]] | None = None
+
+    @model_validator(mode="after")
+    def _one_of(self) -> "NoiseSpec":
+        if self.sd is not None and self.R is not None:
+            raise ValueError("give sd or R, not both (sd: standard deviations, R: the full covariance)")
+        return self
 
 
 class SensorSpec(_Strict):
@@ -72,12 +92,13 @@ class InitialSpec(_Strict):
 class SchedulerSpec(_Strict):
     max_latency: float = Field(0.0, ge=0.0, description="reorder buffer length, s")
     late_policy: Literal["drop", "replay"] = "drop"
-    history: int = Field(500, ge=1, description="beliefs kept for replay")
+    history: int = Field(500, ge=1, le=100_000, description="beliefs kept for replay")
 
 
 class OutputSpec(_Strict):
     on_update: bool = True
-    rate_hz: float | None = Field(None, gt=0.0)
+    rate_hz: float | None = Field(None, gt=0.0, le=MAX_OUTPUT_RATE_HZ, description="fixed-rate outputs by "
+                                  "prediction, Hz (at most MAX_OUTPUT_RATE_HZ)")
 
 
 class EvaluationSpec(_Strict):
@@ -175,7 +196,7 @@ def build_component(registry: Registry, kind: str, spec: ComponentSpec, ctx: Bui
     except ValidationError as exc:
         if doc is not None:
             raise pydantic_errors(doc, exc, loc) from None
-        raise ConfigError(f"{where}: {exc}") from None
+        raise ConfigError(f"{where}: {pydantic_errors(None, exc, data=params)}") from None
     try:
         return cls(p, ctx)
     except ConfigError as exc:
@@ -193,7 +214,7 @@ def _noise_matrix(noise: NoiseSpec | float | list[float] | None, m: int, where: 
         R = np.asarray(noise.R, float)
         if R.shape != (m, m):
             raise ConfigError(f"{where}.R: must be {m} x {m} for this measurement model, got {R.shape[0]} x {R.shape[1] if R.ndim > 1 else 1}")
-        if not np.allclose(R, R.T) or np.any(np.linalg.eigvalsh(0.5 * (R + R.T)) <= 0):
+        if not _positive_definite(R):
             raise ConfigError(f"{where}.R: must be symmetric positive definite")
         return R
     if noise.sd is not None:
@@ -202,8 +223,24 @@ def _noise_matrix(noise: NoiseSpec | float | list[float] | None, m: int, where: 
             raise ConfigError(f"{where}.sd: needs 1 or {m} values for this measurement model, got {sd.size}")
         if np.any(sd <= 0):
             raise ConfigError(f"{where}.sd: standard deviations must be > 0")
-        return np.diag(np.broadcast_to(sd, (m,)) ** 2)
+        with np.errstate(over="ignore", under="ignore"):
+            var = np.broadcast_to(sd, (m,)) ** 2
+        if not (np.all(np.isfinite(var)) and np.all(var > 0)):
+            raise ConfigError(f"{where}.sd: {sd.tolist()} squared is not a positive finite variance "
+                              "(float64: 1e-150 < sd < 1e150)")
+        return np.diag(var)
     return None
+
+
+def _positive_definite(A: np.ndarray) -> bool:
+    """A symmetric positive definite (and finite: a Cholesky factor exists)."""
+    if not (np.all(np.isfinite(A)) and np.allclose(A, A.T)):
+        return False
+    try:
+        np.linalg.cholesky(A)
+    except np.linalg.LinAlgError:
+        return False
+    return bool(np.all(np.linalg.eigvalsh(A) > 0))
 
 
 def _fill_blocks(target: np.ndarray, values: dict[str, Any], layout, where) -> None:
@@ -228,10 +265,19 @@ def _initial(spec: SystemSpec, process: ProcessModel, doc: LocatedYAML | None) -
         if block.kind == "quaternion":
             x0[lay[block.name].start] = 1.0
     _fill_blocks(x0, spec.initial.mean, lay, lambda name: where("mean", name))
+    for block in lay.blocks:
+        if block.kind == "quaternion" and not np.linalg.norm(x0[lay[block.name]]) > 1e-6:
+            raise ConfigError(f"{where('mean', block.name)}: a quaternion needs a non-zero norm (e.g. [1, 0, 0, 0]), "
+                              f"got {x0[lay[block.name]].tolist()}")
     if spec.initial.P is not None:
         P0 = np.asarray(spec.initial.P, float)
-        if P0.shape != (lay.n, lay.n):
+        if P0.ndim != 2 or P0.shape != (lay.n, lay.n):
             raise ConfigError(f"{where('P')}: must be {lay.n} x {lay.n} for the state {lay!r}, got {P0.shape}")
+        big = np.flatnonzero(np.diagonal(P0) > MAX_INITIAL_SD ** 2)
+        if big.size:
+            raise ConfigError(f"{where('P')}: variance {np.diagonal(P0)[big[0]]:g} of {lay.names[big[0]]} above "
+                              f"{MAX_INITIAL_SD ** 2:g} (sd {MAX_INITIAL_SD:g}): the filter would lose every digit "
+                              "of the first update")
     else:
         sd = np.ones(lay.n)
         _fill_blocks(sd, spec.initial.sd, lay, lambda name: where("sd", name))
@@ -240,8 +286,16 @@ def _initial(spec: SystemSpec, process: ProcessModel, doc: LocatedYAML | None) -
             raise ConfigError(f"{where('sd')}: no standard deviation for block(s) {missing}")
         if np.any(sd <= 0):
             raise ConfigError(f"{where('sd')}: standard deviations must be > 0")
+        big = np.flatnonzero(sd > MAX_INITIAL_SD)
+        if big.size:
+            name = next(b.name for b in lay.blocks if lay[b.name].start <= big[0] < lay[b.name].stop)
+            raise ConfigError(f"{where('sd', name)}: {sd[big[0]]:g} is above {MAX_INITIAL_SD:g}: with a measurement "
+                              "of 1 cm sd the first update would keep no digit (P0 / R > 1 / eps); no prior "
+                              "is that wide")
         P0 = np.diag(sd ** 2)
-    if not np.allclose(P0, P0.T) or np.any(np.linalg.eigvalsh(0.5 * (P0 + P0.T)) <= 0):
+        if not np.all(np.diagonal(P0) > 0):
+            raise ConfigError(f"{where('sd')}: standard deviations below 1e-150 square to a zero variance")
+    if not _positive_definite(P0):
         raise ConfigError(f"{where('P')}: initial covariance must be symmetric positive definite")
     return x0, P0
 
@@ -256,8 +310,11 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
     process = build_component(reg, "process", spec.process, ctx, doc, ["process"])
     assert isinstance(process, ProcessModel)
     layout = process.layout
-    fspec = filter_override if filter_override is not None else spec.filter
-    filt = build_component(reg, "filter", fspec, BuildContext(layout, beacons, None, base_dir), doc, ["filter"])
+    fctx = BuildContext(layout, beacons, None, base_dir)
+    if filter_override is not None:  # from the command line: no file line to name
+        filt = build_component(reg, "filter", filter_override, fctx, None, ["filter (--filter/--filter-param)"])
+    else:
+        filt = build_component(reg, "filter", spec.filter, fctx, doc, ["filter"])
     sensors: dict[str, SensorRuntime] = {}
     for sname, s in spec.sensors.items():
         if not s.enabled:

@@ -52,6 +52,7 @@ class Header:
 
     fields: dict[str, tuple[str, ...]] = field(default_factory=dict)
     meta: dict[str, str] = field(default_factory=dict)
+    beacons: dict[str, tuple[float, ...]] = field(default_factory=dict)  # '# beacon B1: x y z' (fusion simulate)
 
 
 def parse_comment(text: str, header: Header) -> None:
@@ -62,9 +63,33 @@ def parse_comment(text: str, header: Header) -> None:
         if len(parts) >= 2:
             header.fields[parts[1]] = tuple(parts[2:])
         return
+    if body.startswith("beacon "):
+        b = _BEACON.match(body)
+        if b:
+            try:
+                header.beacons[b.group(1)] = tuple(float(v) for v in b.group(2).split())
+            except ValueError:
+                pass
+            return
     m = re.match(r"^([A-Za-z_][A-Za-z0-9_\-]*)\s*:\s*(.*)$", body)
     if m:
         header.meta[m.group(1)] = m.group(2)
+
+
+_BEACON = re.compile(r"^beacon\s+([A-Za-z_][A-Za-z0-9_.\-]*)\s*:\s*(.*)$")
+
+
+def read_header(lines: Iterable[str], max_lines: int = 10_000) -> Header:
+    """The metadata of the ``#`` lines before the first message (at most ``max_lines`` lines read)."""
+    header = Header()
+    for n, raw in enumerate(lines):
+        text = raw.strip().lstrip("\ufeff")
+        if not text:
+            continue
+        if not text.startswith("#") or n >= max_lines:
+            break
+        parse_comment(text, header)
+    return header
 
 
 _GOOD_SENSORS: set[str] = set()  # names already checked against _SENSOR (the regex costs ~1 us a line)
