@@ -15,6 +15,7 @@ from fusion.api import ConfigError, Estimate, Event, FusionError
 from fusion.config import System, load_system
 from fusion.yamlsource import load_yaml
 from fusion.logformat import ParsedStream, iter_messages
+from fusion.overrides import filter_override
 from fusion.scheduler import Scheduler
 from fusion.sources.recording import open_lines
 
@@ -35,25 +36,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quiet", "-q", action="store_true", help="no table on stdout")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
-
-
-def filter_override(config: str | Path, name: str | None, params: list[str]) -> Any:
-    """The filter spec after --filter/--filter-param (None when neither is given). Only --filter-param
-    without --filter reads the config, to start from its own filter spec."""
-    if name is None and not params:
-        return None
-    base: dict[str, Any]
-    if name is not None:
-        base = {"type": name}
-    else:
-        own = load_yaml(config).data.get("filter", "ekf")
-        base = {"type": own} if isinstance(own, str) else dict(own)
-    for item in params:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise ConfigError(f"--filter-param {item!r}: expected KEY=VALUE")
-        base[key.strip()] = yaml.safe_load(value)
-    return base
 
 
 def replay(system: System, source: str | Path, on_estimate=None, on_event=None, progress=None) -> dict[str, Any]:
