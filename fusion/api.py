@@ -346,6 +346,9 @@ class MeasurementModel(Component):
 
     kind: ClassVar[str] = "measurement"
     dim: int = 0
+    #: Whether ``observe`` can take R from the message itself (a fix with its covariance): False means the
+    #: sensor needs ``noise:`` in the config (``fusion validate`` checks it); None (default): not known.
+    carries_R: bool | None = None
 
     def h(self, x: np.ndarray) -> np.ndarray:
         """Predicted measurement (..., m) for states x (..., n)."""

@@ -330,6 +330,9 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
                 raise ConfigError(f"{where}: a measurement sensor needs 'model: NAME'")
             model = build_component(reg, "measurement", s.model, sctx, doc, [*loc, "model"])
             R = _noise_matrix(s.noise, model.dim, doc.where([*loc, "noise"]) if doc else f"{where}.noise")
+            if R is None and model.carries_R is False:
+                raise ConfigError(f"{where}: a measurement sensor needs 'noise:' (sd or R): its model "
+                                  f"{model.name!r} takes no covariance from its messages")
             gate = build_component(reg, "gate", s.gate, sctx, doc, [*loc, "gate"]) if s.gate else None
         elif process.input_dim == 0:
             raise ConfigError(f"{where}.role: 'input' but process {process.name!r} takes no control input")

@@ -66,6 +66,7 @@ class Position(MeasurementModel):
         if self.dim > np_:
             raise ConfigError(f"position: dim {self.dim} but the state's p block has {np_} elements")
         self.n = layout.n
+        self.carries_R = bool(p.use_fix_covariance)   # a 9- or 10-value fix carries its covariance
         self._v = layout["v"] if "v" in layout and layout["v"].stop - layout["v"].start >= self.dim else None
         self.lever_arm = np.asarray(p.lever_arm, dtype=float)
         qblocks = [b.name for b in layout.blocks if b.kind == "quaternion"]

@@ -33,6 +33,7 @@ class RangeModel(MeasurementModel):
 
     name = "range"
     dim = 1
+    carries_R = False   # a range message has no covariance: R is the sensor's noise
 
     class Params(Params):
         beacons: list[str] | None = None
