@@ -5,7 +5,7 @@ import argparse
 import sys
 import traceback
 
-from fusion.api import ConfigError, FusionError
+from fusion.api import ConfigError, FusionError, InputError
 from fusion.config import load_system
 from fusion.logformat import read_header
 from fusion.sources.recording import open_lines
@@ -28,6 +28,8 @@ def _check_recording(path: str, system, rec) -> None:
     lines = open_lines(rec)
     try:
         header = read_header(lines)
+    except InputError as exc:   # a directory, empty, binary: no log to replay
+        raise ConfigError(f"{load_yaml(path).where(['recording'])}: {exc}") from None
     finally:
         lines.close()  # type: ignore[attr-defined]
     missing = [b for b in header.beacons if b not in system.beacons]
@@ -45,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
             system = load_system(path)
             rec = system.recording
             if rec is not None and not rec.exists():
-                raise FusionError(f"{path}: recording: {rec} does not exist")
+                raise FusionError(f"{load_yaml(path).where(['recording'])}: {rec} does not exist")
             if rec is not None:
                 _check_recording(path, system, rec)
         except FusionError as exc:

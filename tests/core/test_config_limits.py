@@ -89,6 +89,28 @@ def test_absurd_values_are_refused(tmp_path, capsys, old, new, expect, key):
     assert "(and " not in err   # one problem, not the members of a union that do not fit
 
 
+def test_a_range_sensor_without_noise_is_refused(tmp_path, capsys):
+    """A range carries no covariance: without noise the run could use none of them."""
+    bad = edit(UWB, "    noise: {sd: 0.1}          # m\n", "")
+    code, err, cfg = validate(tmp_path, capsys, bad)
+    assert code == 2 and err.startswith(f"{cfg}:{line_of(bad, '  uwb:')}: sensors.uwb: a measurement sensor needs "
+                                        "'noise:' (sd or R): its model 'range' takes no covariance")
+
+
+def test_a_position_fed_by_a_solver_needs_no_noise(tmp_path, capsys):
+    code, err, _ = validate(tmp_path, capsys, ABPS)   # abps: fixes carry their covariance
+    assert code == 0, err
+    bad = edit(ABPS, "model: {type: position, ", "model: {type: position, use_fix_covariance: false, ")
+    code, err, _ = validate(tmp_path, capsys, bad)
+    assert code == 2 and "a measurement sensor needs 'noise:'" in err
+
+
+def test_a_recording_that_is_a_directory_is_named_at_its_line(tmp_path, capsys):
+    bad = edit(UWB, f"recording: {ROOT}/recordings/uwb_route1.log", f"recording: {ROOT}")
+    code, err, cfg = validate(tmp_path, capsys, bad)
+    assert code == 2 and err.startswith(f"{cfg}:{line_of(bad, 'recording:')}: recording: {ROOT}: is a directory")
+
+
 def test_a_zero_quaternion_is_refused(tmp_path, capsys):
     bad = edit(ABPS, "q: [1, 0, 0, 0]", "q: [0, 0, 0, 0]")
     code, err, cfg = validate(tmp_path, capsys, bad)
