@@ -60,7 +60,7 @@ def parse_comment(text: str, header: Header) -> None:
     body = text[1:].strip()
     if body.startswith("fields "):
         parts = body.split()
-        if len(parts) >= 2:
+        if len(parts) >= 3:  # '# fields SENSOR' without names says nothing (a cut line): ignored
             header.fields[parts[1]] = tuple(parts[2:])
         return
     if body.startswith("beacon "):
@@ -100,13 +100,19 @@ def parse_line(text: str, lineno: int | None = None) -> Message:
     return _parse_stripped(text.strip(), lineno)
 
 
-_BINARY = re.compile(r"[\x00-\x08\x0e-\x1f\x7f\ufffd]")  # control characters; U+FFFD: a byte that was not UTF-8
+#: Ends a line a source cut because it was too long (fusion.sources.recording.bounded_lines): a
+#: noncharacter, never in text, so the line is malformed rather than a shorter line that parses.
+OVERLONG = "\uffff"
+_BINARY = re.compile(r"[\x00-\x08\x0e-\x1f\x7f\ufffd\uffff]")  # control characters; U+FFFD: a byte that was not UTF-8
 
 
 def _parse_stripped(line: str, lineno: int | None) -> Message:
     if "\ufffd" in line or (not line.isprintable() and _BINARY.search(line)):  # isprintable: ~0.1 us, no regex
         bad = _BINARY.search(line)
-        what = "invalid UTF-8" if bad.group() == "\ufffd" else f"control byte 0x{ord(bad.group()):02x}"  # type: ignore[union-attr]
+        c = bad.group()  # type: ignore[union-attr]
+        if c == OVERLONG:
+            raise MalformedMessage(f"line longer than {bad.start()} characters (skipped to its end)")  # type: ignore[union-attr]
+        what = "invalid UTF-8" if c == "\ufffd" else f"control byte 0x{ord(c):02x}"
         raise MalformedMessage(f"binary data in the line ({what} at column {bad.start() + 1})")  # type: ignore[union-attr]
     parts = line.split(",")
     if len(parts) < 3:

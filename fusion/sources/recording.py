@@ -8,8 +8,11 @@ from pathlib import Path
 from typing import Iterator
 
 from fusion.api import InputError, Params, Source
+from fusion.logformat import OVERLONG
 
 _PROBE = 65536
+#: Longest line read into memory (characters); a log line is at most a few hundred fields (~10 kB).
+MAX_LINE = 1 << 20
 _CONTROL = re.compile(rb"[\x00-\x08\x0e-\x1f\x7f]")  # bytes no text line holds (tab, CR, LF, FF, VT are text)
 
 
@@ -49,7 +52,7 @@ def open_lines(path: str | Path) -> Iterator[str]:
     multi-byte character) only spoils those lines: they read with U+FFFD for the bad bytes and are
     counted as malformed by fusion.logformat."""
     if str(path) == "-":
-        yield from io.TextIOWrapper(sys.stdin.buffer, encoding="utf-8", errors="replace")
+        yield from bounded_lines(io.TextIOWrapper(sys.stdin.buffer, encoding="utf-8", errors="replace"))
         return
     p = Path(path)
     if not p.exists():
@@ -74,7 +77,30 @@ def open_lines(path: str | Path) -> Iterator[str]:
                          f"control bytes or invalid UTF-8{bom}; a log is UTF-8 lines 't,sensor,v1,...' (a few bad "
                          "lines are only counted as malformed)")
     with p.open("r", encoding="utf-8", errors="replace", newline=None) as fh:
-        yield from fh
+        yield from bounded_lines(fh)
+
+
+def bounded_lines(fh: io.TextIOBase, limit: int = MAX_LINE) -> Iterator[str]:
+    """The lines of a text stream, each read into memory up to ``limit`` characters: a longer one (junk
+    without a newline: a port sending zeros for an hour) is skipped to its end and stands as its first
+    ``limit`` characters plus fusion.logformat.OVERLONG, so it is one malformed line, never one that
+    fills the memory or a cut line that parses as a shorter valid one."""
+    readline = fh.readline
+    while True:
+        line = readline(limit)
+        if not line:
+            return
+        if len(line) == limit and line[-1] != "\n":
+            rest = readline(limit)
+            if rest == "\n":          # exactly limit characters
+                line += rest
+            elif rest:               # longer: skip to its end
+                while rest and rest[-1] != "\n":
+                    rest = readline(limit)
+                line = line + OVERLONG + "\n"
+            yield line
+            continue
+        yield line
 
 
 class RecordingSource(Source):

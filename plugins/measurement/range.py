@@ -172,6 +172,8 @@ class RangeModel(MeasurementModel):
                                        f"beacons {', '.join(sorted(self._known))})")
             if b not in self._known:
                 raise MalformedMessage(f"unknown beacon {b!r} (known: {', '.join(sorted(self._known))})")
+        if len(names) > 1 and len(set(names)) != len(names):   # (also bounds a message to one range a beacon)
+            raise MalformedMessage(f"beacon {next(b for b in names if names.count(b) > 1)!r} twice in one message")
         try:
             z = np.array(vals[1::2], float)
         except (TypeError, ValueError):

@@ -334,6 +334,8 @@ class OlsTrilateration(Solver):
                 raise MalformedMessage(f"range to {label} {rng} m beyond max_range "
                                        f"{self.params.max_range} m")  # type: ignore[attr-defined]
             pairs.append((label, rng))
+        if len(pairs) > 1 and len({label for label, _ in pairs}) != len(pairs):
+            raise MalformedMessage(f"beacon named twice in one message {vals!r}")
         out: list[Message] = []
         for label, rng in pairs:
             if self._cycle and (label in self._cycle or message.t - self._t_first >= self.params.window):  # type: ignore[attr-defined]

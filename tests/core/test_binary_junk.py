@@ -102,3 +102,32 @@ def test_a_multibyte_character_cut_by_the_probe_is_not_junk(tmp_path):
     head = b"# " + "\u00e9".encode() * (_PROBE // 2)   # ends mid-character at the probe's last byte
     s = summary_of(tmp_path, head + b"\n" + RECORDING.read_bytes())
     assert s["sensors"]["uwb"]["malformed"] == 0
+
+
+def test_an_overlong_line_is_one_malformed_line(tmp_path, base):
+    """3 MiB without a newline mid-file (a port sending junk for a while): one malformed line, read in
+    pieces (never whole), and the next lines are used."""
+    from fusion.sources.recording import MAX_LINE
+
+    lines = RECORDING.read_bytes().split(b"\n")
+    i = uwb_line_index(lines, 20_000)
+    lines[i] = lines[i] + b"7" * (3 * MAX_LINE)     # digits: a cut piece would parse as a valid range
+    s = summary_of(tmp_path, b"\n".join(lines))
+    assert s["sensors"]["uwb"]["malformed"] == base["sensors"]["uwb"]["malformed"] + 1
+    assert s["sensors"]["uwb"]["used"] == base["sensors"]["uwb"]["used"] - 1
+
+
+def test_a_line_of_exactly_the_limit_is_whole():
+    import io
+
+    from fusion.sources.recording import bounded_lines
+
+    text = "x" * 10 + "\n" + "y" * 11 + "\nz"
+    assert list(bounded_lines(io.StringIO(text), limit=10)) == ["x" * 10 + "\n", "y" * 10 + "\uffff\n", "z"]
+
+
+def test_a_fields_line_without_names_is_ignored(tmp_path, base):
+    """'# fields uwb' cut after the sensor would make every uwb line a wrong field count."""
+    text = RECORDING.read_bytes().replace(b"# fields uwb beacon range", b"# fields uwb")
+    assert b"# fields uwb\n" in text
+    assert summary_of(tmp_path, text)["sensors"]["uwb"] == base["sensors"]["uwb"]

@@ -50,6 +50,8 @@ RANGE_CASES = {
     "three fields": "20.000000,uwb,B1,12.5,3.0",
     "label for range": "20.000000,uwb,B1,B2",
     "beyond max_range": "20.000000,uwb,B1,1e300",
+    "beacon twice": "20.000000,uwb,B1,12.5,B1,12.6",
+    "ten thousand pairs": "20.000000,uwb," + ",".join(["B1,12.5"] * 10_000),   # no 10,000 x 10,000 S
 }
 
 
@@ -90,7 +92,8 @@ def test_range_reasons_name_what_is_valid():
                            ((3.0, 1.0), "expects a beacon name, got 3.0"),
                            (("B1",), "'beacon range' pairs, got 1 value(s)"),
                            (("B1", float("nan")), "non-finite range"),
-                           (("B1", -1.0), "negative range -1.0 m")]:
+                           (("B1", -1.0), "negative range -1.0 m"),
+                           (("B1", 1.0, "B2", 2.0, "B1", 3.0), "beacon 'B1' twice in one message")]:
         with pytest.raises(MalformedMessage, match=reason.replace("(", r"\(").replace(")", r"\)")):
             model.observe(Message(1.0, "uwb", values))
 
@@ -109,7 +112,9 @@ OLS_CASES = {
     "beyond max_range": f"{_T},abps,B3,1e20",
     "label for range": f"{_T},abps,B3,B4",
     "three fields": f"{_T},abps,B3,2.5,1.0",
+    "beacon twice": f"{_T},abps,B3,2.5,B3,2.6",
 }
+BY_HEADER = ("three fields", "beacon twice")   # more values than '# fields abps beacon range' names
 
 
 @pytest.fixture(scope="module")
@@ -126,7 +131,7 @@ def abps_base(abps_config, tmp_path_factory):
 @pytest.mark.xfail(strict=True, raises=AssertionError,
                    reason="needs the run loop to count a MalformedMessage from a preprocessor's feed (the lead's "
                           "part of issue 10 item 1; fusion/scheduler.py calls feed outside its try)")
-@pytest.mark.parametrize("case", [c for c in OLS_CASES if c != "three fields"])
+@pytest.mark.parametrize("case", [c for c in OLS_CASES if c not in BY_HEADER])
 def test_a_bad_abps_range_is_malformed_and_the_run_goes_on(tmp_path, abps_config, abps_base, case):
     lines = list(ABPS_LINES)
     lines[ABPS_AT] = OLS_CASES[case]
@@ -137,10 +142,11 @@ def test_a_bad_abps_range_is_malformed_and_the_run_goes_on(tmp_path, abps_config
     assert got["abps"]["used"] == abps_base["abps"]["used"]
 
 
-def test_three_fields_is_malformed_by_the_header(tmp_path, abps_config, abps_base):
-    """'# fields abps beacon range' names two values: the parser refuses a third before any plugin."""
+@pytest.mark.parametrize("case", BY_HEADER)
+def test_extra_fields_are_malformed_by_the_header(tmp_path, abps_config, abps_base, case):
+    """'# fields abps beacon range' names two values: the parser refuses more before any plugin."""
     lines = list(ABPS_LINES)
-    lines[ABPS_AT] = OLS_CASES["three fields"]
+    lines[ABPS_AT] = OLS_CASES[case]
     got = run(tmp_path, abps_config, lines, "m")
     assert got["abps"]["malformed"] == abps_base["abps"]["malformed"] + 1
     assert got["imu"]["used"] == abps_base["imu"]["used"]
@@ -153,7 +159,8 @@ def test_ols_feed_refuses_with_the_reason(abps_config, case):
     vals = tuple(v if v[:1].isalpha() else float(v) for v in values)
     reason = {"unknown beacon": "unknown beacon 'B9'", "number for beacon": "unknown beacon 9.0",
               "swapped fields": "unknown beacon 2.5", "negative range": "must be finite and >= 0, got -2.5",
-              "beyond max_range": "beyond max_range 100.0 m", "label for range": "not a number: 'B4'"}[case]
+              "beyond max_range": "beyond max_range 100.0 m", "label for range": "not a number: 'B4'",
+              "beacon twice": "beacon named twice in one message"}[case]
     with pytest.raises(MalformedMessage, match=reason.replace("(", r"\(")):
         solver.feed(Message(float(t), "abps", vals, 7))
     assert solver.flush() == []   # nothing of the refused message was gathered
