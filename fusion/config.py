@@ -46,6 +46,9 @@ MAX_INITIAL_SD = 1e6
 #: Fastest fixed-rate output (Hz): each output costs a prediction and a row (~200 B of CSV); beyond the
 #: fastest sensor (an IMU at 100 Hz-1 kHz) more rows carry no information (1 kHz over an hour: 3.6 M rows).
 MAX_OUTPUT_RATE_HZ = 1000.0
+#: Largest |time_offset| (s): Unix time is 1.7e9 s, so an offset between time bases fits; 1e10 s (317
+#: years) is no clock's.
+MAX_TIME_OFFSET_S = 1e10
 
 
 ComponentSpec = Union[str, dict[str, Any]]
@@ -71,7 +74,8 @@ class SensorSpec(_Strict):
     model: ComponentSpec | None = None
     noise: NoiseSpec | float | list[float] | None = None
     gate: ComponentSpec | None = None
-    time_offset: float = 0.0
+    time_offset: float = Field(0.0, ge=-MAX_TIME_OFFSET_S, le=MAX_TIME_OFFSET_S, description="s added to the "
+                               "sensor's time stamps (a known latency, or a clock's offset)")
     max_gap: float | None = Field(None, gt=0.0, description="input sensors: report a gap between samples "
                                   "longer than this (s)")
     enabled: bool = True

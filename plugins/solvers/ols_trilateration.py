@@ -18,6 +18,7 @@ from fusion.chisquare import chi2
 from fusion.api import BuildContext, ConfigError, Event, MalformedMessage, Message, Params, Solver
 
 REASONS = ("too_few_beacons", "degenerate", "inconsistent")
+MAX_SD_M = 1e6   # m (m/s^2 for accel_sd): its square must stay finite through the fix covariance; no sensor is worse
 
 
 class NoFix(ValueError):
@@ -211,8 +212,9 @@ class OlsParams(Params):
 
     dim: Literal[2, 3] = Field(2, description="2: the mine case (z known), 3: x y z estimated")
     z: float = Field(0.0, description="receiver height (m, navigation frame) used in 2-D")
-    z_sd: float = Field(0.1, ge=0, description="sd (m) of the known height, attached to the 2-D fix")
-    range_sd: float = Field(0.05, gt=0, description="range noise sd (m): the fix covariance scales with it")
+    z_sd: float = Field(0.1, ge=0, le=MAX_SD_M, description="sd (m) of the known height, attached to the 2-D fix")
+    range_sd: float = Field(0.05, gt=0, le=MAX_SD_M, description="range noise sd (m): the fix covariance scales "
+                            "with it")
     max_range: float | None = Field(None, gt=0, description="m: a longer range is malformed (not physical "
                                     "for the sensor; None: no limit)")
     window: float = Field(1.0, gt=0, description="a cycle holds ranges within this time of its first one")
@@ -225,7 +227,7 @@ class OlsParams(Params):
     refine_iterations: int = Field(0, ge=0, description="Gauss-Newton iterations after OLS (0: paper)")
     consistency_probability: float | None = Field(0.999, gt=0, lt=1, description="chi-square test of range "
                                                   "residuals (None: off, leave outliers to the filter's gate)")
-    consistency_sd: float | None = Field(None, gt=0, description="range sd (m) for that test (default "
+    consistency_sd: float | None = Field(None, gt=0, le=MAX_SD_M, description="range sd (m) for that test (default "
                                          "range_sd; raise it to tolerate motion within a cycle)")
     max_outliers: int = Field(1, ge=0, description="ranges a cycle may drop to pass the test")
     age: bool = Field(False, description="with stamp close: refer the ranges to their mean time instead and "
@@ -237,7 +239,7 @@ class OlsParams(Params):
                                       "the velocity fitted to the recent fixes (not in the paper)")
     velocity_span: float = Field(1.3, gt=0, description="fixes within this many s give that velocity")
     max_speed: float = Field(3.0, gt=0, description="m/s; a faster fitted velocity is not used")
-    accel_sd: float = Field(0.15, ge=0, description="m/s^2: unmodelled acceleration, adds to the covariance of "
+    accel_sd: float = Field(0.15, ge=0, le=MAX_SD_M, description="m/s^2: unmodelled acceleration, adds to the covariance of "
                             "a compensated fix (with the velocity's own uncertainty)")
 
 

@@ -89,6 +89,24 @@ def test_absurd_values_are_refused(tmp_path, capsys, old, new, expect, key):
     assert "(and " not in err   # one problem, not the members of a union that do not fit
 
 
+@pytest.mark.parametrize("text,old,new,expect", [
+    (UWB, "alpha: 0.5", "alpha: 1.0e-300", "filter: filter 'ukf': unscented transform needs alpha^2 (n + kappa) > 0"),
+    (UWB, "kappa: 0.0", "kappa: -1.0e+300", "filter: filter 'ukf': unscented transform needs alpha^2 (n + kappa) > 0"),
+    (UWB, "kappa: 0.0", "kappa: 1.0e+300", "sigma points at sqrt(alpha^2 (n + kappa)) = 5e+149 standard deviations"),
+    (UWB, "beta: 2.0", "beta: -1.0e+300", "zeroth sigma-point weight 1e+300"),
+    (ABPS, "alpha: 0.5 ", "alpha: 1.0e-6 ", "filter: filter 'srukf': zeroth sigma-point weight 1e+12"),
+    (ABPS, "range_sd: 0.05 ", "range_sd: 1.0e+300 ", "sensors.abps.preprocessor.range_sd: Input should be less than or "
+     "equal to 1000000"),
+    (UWB, "    role: measurement", "    role: measurement\n    time_offset: 1.0e+300", "sensors.uwb.time_offset: Input "
+     "should be less than or equal to 10000000000"),
+])
+def test_values_a_run_could_not_survive_are_refused(tmp_path, capsys, text, old, new, expect):
+    """Each of these passed validate and ended the run with exit 1 (found by scanning every number of the
+    shipped configs through 1e300, 1e-300, -1e300)."""
+    code, err, cfg = validate(tmp_path, capsys, edit(text, old, new))
+    assert code == 2 and len(err.splitlines()) == 1 and err.startswith(str(cfg)) and expect in err, err
+
+
 def test_a_range_sensor_without_noise_is_refused(tmp_path, capsys):
     """A range carries no covariance: without noise the run could use none of them."""
     bad = edit(UWB, "    noise: {sd: 0.1}          # m\n", "")
