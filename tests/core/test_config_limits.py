@@ -209,3 +209,17 @@ def test_filter_param_still_sets_yaml_values(tmp_path):
     assert main(["run", str(ROOT / "configs" / "example_2d.yaml"), "-q", "--filter-param", "alpha=0.3",
                  "--filter-param", "linear_prediction=never", "--summary-json", str(out)]) == 0
     assert json.loads(out.read_text())["filter"] == "ukf"
+
+
+@pytest.mark.parametrize("old,new,expect", [
+    ("  speed: 1.3 ", "  speed: .nan ", "Input should be a finite number"),
+    ("  B2: [20.0, 0.0]", "  B2: [20.0, .inf]", "Input should be a finite number"),
+    ("  speed: 1.3 ", "  speed: 1.3\n  speed: 2.0 ", "duplicate key 'speed'"),
+    ("seed: 1\n", "seed: 1\nx: " + "[" * 10_000 + "]" * 10_000 + "\n", "nested deeper than 64 levels"),
+])
+def test_scenarios_have_the_same_limits(tmp_path, capsys, old, new, expect):
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text(edit((ROOT / "scenarios" / "example_2d.yaml").read_text(), old, new))
+    assert main(["simulate", str(scenario), "-o", str(tmp_path / "x.log")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and expect in err and "Traceback" not in err, err
