@@ -17,6 +17,7 @@ plugin's ``Params`` model. Example::
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, Union
@@ -28,6 +29,10 @@ from fusion.api import (BuildContext, Component, ConfigError, Decoder, Filter, G
                         ProcessModel, Solver)
 from fusion.registry import Registry, default_registry
 from fusion.yamlsource import LocatedYAML, load_yaml, pydantic_errors
+
+
+SENSOR_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")   # as fusion.logformat parses a line's sensor
+RESERVED_SENSORS = ("truth", "reference")
 
 
 class _Strict(BaseModel):
@@ -321,11 +326,17 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
         filt = build_component(reg, "filter", spec.filter, fctx, doc, ["filter"])
     sensors: dict[str, SensorRuntime] = {}
     for sname, s in spec.sensors.items():
+        loc = ["sensors", sname]
+        where = doc.where(loc) if doc else f"sensors.{sname}"
+        if not SENSOR_NAME.match(sname):
+            raise ConfigError(f"{where}: {sname!r} can never name a log line's sensor (a letter or _, then letters, "
+                              "digits, _ . -)")
+        if sname in RESERVED_SENSORS:
+            raise ConfigError(f"{where}: {sname!r} lines are never fed to the filter (the log format reserves "
+                              f"{', '.join(RESERVED_SENSORS)}); name the sensor otherwise")
         if not s.enabled:
             continue
         sctx = BuildContext(layout, beacons, sname, base_dir)
-        loc = ["sensors", sname]
-        where = doc.where(loc) if doc else f"sensors.{sname}"
         decoder = build_component(reg, "decoder", s.decoder, sctx, doc, [*loc, "decoder"])
         pre = build_component(reg, "solver", s.preprocessor, sctx, doc, [*loc, "preprocessor"]) if s.preprocessor else None
         model = gate = R = None
@@ -348,6 +359,10 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
         raise ConfigError(f"{path or 'config'}: sensors: process {process.name!r} needs an input sensor (role: input)")
     if spec.initial.from_sensor and spec.initial.from_sensor not in sensors:
         raise ConfigError(f"{doc.where(['initial', 'from_sensor']) if doc else 'initial.from_sensor'}: no sensor {spec.initial.from_sensor!r}")
+    if spec.initial.from_sensor and sensors[spec.initial.from_sensor].role != "measurement":
+        raise ConfigError(f"{doc.where(['initial', 'from_sensor']) if doc else 'initial.from_sensor'}: sensor "
+                          f"{spec.initial.from_sensor!r} is an input; the initial position comes from a measurement "
+                          f"sensor ({', '.join(n for n, r in sensors.items() if r.role == 'measurement') or 'none'})")
     if spec.initial.align_s and not hasattr(process, "align"):
         raise ConfigError(f"{doc.where(['initial', 'align_s']) if doc else 'initial.align_s'}: process {process.name!r} cannot align itself")
     for i, name in enumerate(spec.evaluation.position or []):

@@ -223,3 +223,19 @@ def test_scenarios_have_the_same_limits(tmp_path, capsys, old, new, expect):
     assert main(["simulate", str(scenario), "-o", str(tmp_path / "x.log")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and expect in err and "Traceback" not in err, err
+
+
+@pytest.mark.parametrize("old,new,expect", [
+    ("  uwb:\n", "  'my uwb':\n", "'my uwb' can never name a log line's sensor"),
+    ("  uwb:\n", "  truth:\n", "'truth' lines are never fed to the filter"),
+])
+def test_sensor_names_a_log_can_carry(tmp_path, capsys, old, new, expect):
+    bad = edit(UWB, old, new)
+    code, err, cfg = validate(tmp_path, capsys, bad)
+    assert code == 2 and err.startswith(f"{cfg}:{line_of(bad, new.strip())}: sensors.") and expect in err, err
+
+
+def test_the_initial_fix_comes_from_a_measurement_sensor(tmp_path, capsys):
+    bad = edit(ABPS, "from_sensor: abps", "from_sensor: imu")
+    code, err, cfg = validate(tmp_path, capsys, bad)
+    assert code == 2 and f"{cfg}:{line_of(bad, 'from_sensor')}: initial.from_sensor: sensor 'imu' is an input" in err
