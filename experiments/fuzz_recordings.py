@@ -8,8 +8,11 @@ non-finite number, label, NUL, invalid UTF-8, random bytes, repeated line), and 
 happen: an internal error) and, for exit 0, runs whose counters show lines the mutation did not touch
 going missing (fusion.fuzzing.accounting_errors), and lists every exit-1 case with a reproducer.
 
-    python experiments/fuzz_recordings.py                 # 1000 trials, seed 0 (~3 min on one core)
-    python experiments/fuzz_recordings.py -n 200 --seed 3 --out /tmp/fuzz.md
+    python experiments/fuzz_recordings.py                 # 1000 trials + 1000 configs, seed 0 (~5 min, one core)
+    python experiments/fuzz_recordings.py -n 200 --configs 100 --seed 3 --out /tmp/fuzz.md
+
+Then the page's section "Mutated configs": 1-3 line mutations of a shipped config (fusion.fuzzing.mutate_config),
+``fusion validate``, and ``fusion run`` of those that pass; exit 1 must never happen there either.
 """
 from __future__ import annotations
 
@@ -25,7 +28,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from fusion.config import load_system  # noqa: E402
-from fusion.fuzzing import OPS, Recording, accounting_errors, field_index, mutate, run_cli  # noqa: E402
+from fusion.fuzzing import (CONFIG_OPS, OPS, Recording, accounting_errors, field_index, mutate,  # noqa: E402
+                            mutate_config, run_cli)
 
 TARGETS = (("configs/abps_ins.yaml", "recordings/abps_mine.log"),
            ("configs/uwb_pv_ukf.yaml", "recordings/uwb_route1.log"),
@@ -33,11 +37,48 @@ TARGETS = (("configs/abps_ins.yaml", "recordings/abps_mine.log"),
            ("configs/uwb_pv_ukf_line.yaml", "recordings/uwb_route1_line.log"))
 
 
+def fuzz_configs(n: int, seed: int, work: Path, recs: dict) -> tuple[collections.Counter, list[str]]:
+    """n mutated configs: validate, and run those that validate on the cut recordings."""
+    import contextlib
+    import io
+
+    from fusion.cli import main as fusion
+
+    rng = random.Random(seed + 1)
+    texts = []
+    for cfg, log in TARGETS:
+        cut = work / Path(log).name
+        cut.write_bytes(b"\n".join(recs[cfg].lines) + b"\n")
+        texts.append((cfg, (ROOT / cfg).read_text().replace("../recordings/", f"{work}/")))
+    codes: collections.Counter = collections.Counter()
+    failures = []
+    path = work / "config.yaml"
+    for _ in range(n):
+        name, text = texts[rng.randrange(len(texts))]
+        edits = [(rng.choice(CONFIG_OPS), rng.randrange(1 << 16), rng.randrange(1 << 16))
+                 for _ in range(rng.choice((1, 1, 2, 3)))]
+        for op, i, j in edits:
+            text = mutate_config(text, op, i, j)
+        path.write_text(text)
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            code = fusion(["validate", str(path)])
+            outcome = f"validate exit {code}"
+            if code == 0:
+                code = fusion(["run", str(path), "-q", "--no-progress"])
+                outcome = f"validate exit 0, run exit {code}"
+        codes[outcome] += 1
+        if code == 1:
+            failures.append(f"- `{name}` with {edits}: {err.getvalue().strip().splitlines()[-1][:300]}")
+    return codes, failures
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("-n", type=int, default=1000, help="trials (default 1000)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--until", type=float, default=40.0, help="s of each recording replayed (default 40)")
+    ap.add_argument("--configs", type=int, default=1000, help="mutated configs (default 1000)")
     ap.add_argument("--out", default=str(ROOT / "docs" / "results" / "fuzz_recordings.md"))
     args = ap.parse_args(argv)
     rng = random.Random(args.seed)
@@ -80,6 +121,9 @@ def main(argv: list[str] | None = None) -> int:
             if problems:
                 lost.append(f"- {where}: {'; '.join(problems)}")
     wall = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    cfg_codes, cfg_failures = fuzz_configs(args.configs, args.seed, work, recs)
+    cfg_wall = time.perf_counter() - t1
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     text = [
@@ -110,10 +154,24 @@ def main(argv: list[str] | None = None) -> int:
         "",
         *(lost or ["None."]),
         "",
+        "## Mutated configs",
+        "",
+        f"{args.configs} configs ({cfg_wall:.0f} s): a shipped config with 1-3 line mutations (fusion.fuzzing."
+        "mutate_config: a value replaced by a non-finite, overflowing, mistyped or bomb value, a line deleted, "
+        "duplicated, cut, bit-flipped, indented or swapped); `fusion validate`, then, when it passes, `fusion run` "
+        f"on the first {args.until:g} s of the recording.",
+        "",
+        "| outcome | configs |", "|---|---|",
+        *[f"| {k} | {v} |" for k, v in sorted(cfg_codes.items())],
+        "",
+        f"### Exit 1 ({len(cfg_failures)})",
+        "",
+        *(cfg_failures or ["None."]),
+        "",
     ]
     out.write_text("\n".join(text))
     print(f"{args.n} trials in {wall:.0f} s: exit codes {dict(sorted(codes.items()))}; {len(lost)} with lines lost; "
-          f"written to {out}")
+          f"{args.configs} configs: {dict(sorted(cfg_codes.items()))}; written to {out}")
     return 0
 
 
