@@ -220,7 +220,7 @@ def _noise_matrix(noise: NoiseSpec | float | list[float] | None, m: int, where: 
     if isinstance(noise, (int, float, list)):
         noise = NoiseSpec(sd=noise)
     if noise.R is not None:
-        R = np.asarray(noise.R, float)
+        R = _matrix(noise.R, f"{where}.R")
         if R.shape != (m, m):
             raise ConfigError(f"{where}.R: must be {m} x {m} for this measurement model, got {R.shape[0]} x {R.shape[1] if R.ndim > 1 else 1}")
         if not _positive_definite(R):
@@ -239,6 +239,14 @@ def _noise_matrix(noise: NoiseSpec | float | list[float] | None, m: int, where: 
                               "(float64: 1e-150 < sd < 1e150)")
         return np.diag(var)
     return None
+
+
+def _matrix(rows: list[list[float]], where: str) -> np.ndarray:
+    """A matrix from YAML rows; ConfigError for rows of different lengths."""
+    lengths = sorted({len(r) for r in rows})
+    if len(lengths) > 1:
+        raise ConfigError(f"{where}: rows of different lengths {lengths}; a matrix is a list of equal rows")
+    return np.asarray(rows, float).reshape(len(rows), lengths[0] if lengths else 0)
 
 
 def _positive_definite(A: np.ndarray) -> bool:
@@ -279,7 +287,7 @@ def _initial(spec: SystemSpec, process: ProcessModel, doc: LocatedYAML | None) -
             raise ConfigError(f"{where('mean', block.name)}: a quaternion needs a non-zero norm (e.g. [1, 0, 0, 0]), "
                               f"got {x0[lay[block.name]].tolist()}")
     if spec.initial.P is not None:
-        P0 = np.asarray(spec.initial.P, float)
+        P0 = _matrix(spec.initial.P, where("P"))
         if P0.ndim != 2 or P0.shape != (lay.n, lay.n):
             raise ConfigError(f"{where('P')}: must be {lay.n} x {lay.n} for the state {lay!r}, got {P0.shape}")
         big = np.flatnonzero(np.diagonal(P0) > MAX_INITIAL_SD ** 2)

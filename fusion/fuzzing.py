@@ -82,7 +82,7 @@ def keep_time(original: bytes, mutated: bytes) -> bytes:
 #: Values a YAML field may be mutated to: non-finite, overflowing, wrong type, wrong shape, aliases,
 #: tags PyYAML's safe loader refuses, deep nesting.
 CONFIG_VALUES = (".nan", ".inf", "-.inf", "nan", "1e308", "1.0e+308", "-1", "0", "-0.0", "1.0e-320", "9" * 400,
-                 "null", "~", "[]", "{}", "[1, 2, 3]", "[.nan, 1]", "[[1, 2], [3, 4]]", "'text'", "B9", "true",
+                 "null", "~", "[]", "{}", "[1, 2, 3]", "[.nan, 1]", "[[1, 2], [3, 4]]", "[[1, 2], [3]]", "[[]]", "[[1]]", "'text'", "B9", "true",
                  "{type: nope}", "{type: ukf, alpha: 2}", "*undefined", "&a [*a]", "!!python/object/apply:os.getcwd []",
                  "[" * 200 + "]" * 200, "{a: 1, a: 2}", "1e999", "0x1F", "2001-01-01", "'1e6'", "[1e200, 1e200]",
                  "{p: 1.0e+200, v: 1}", "-1e308")

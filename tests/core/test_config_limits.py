@@ -75,6 +75,9 @@ def test_non_finite_values_are_refused_with_file_line_field(tmp_path, capsys, te
     ("noise: {sd: 0.1}", "noise: {sd: 0.1, R: [[0.01]]}", "sensors.uwb.noise: Value error, give sd or R, not both",
      "noise:"),
     ("noise: {sd: 0.1}", "noise: {R: [[1, 0.5], [0.5, 1]]}", "sensors.uwb.noise.R: must be 1 x 1", "noise:"),
+    ("noise: {sd: 0.1}", "noise: {R: [[1, 2], [3]]}", "sensors.uwb.noise.R: rows of different lengths [1, 2]", "noise:"),
+    ("sd: {p: 1.0, v: 0.5}", "P: [[1, 0, 0, 0], [0, 1, 0], [0, 0, 1, 0], [0, 0, 0, 1]]",
+     "initial.P: rows of different lengths [3, 4]", "P: [["),
     ("model: range ", "model: {type: range, max_range: -1} ", "sensors.uwb.model.max_range: Input should be greater "
      "than 0", "model: {"),
 ])
