@@ -33,6 +33,7 @@ from fusion.yamlsource import LocatedYAML, load_yaml, pydantic_errors
 
 SENSOR_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")   # as fusion.logformat parses a line's sensor
 RESERVED_SENSORS = ("truth", "reference")
+BEACON_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.:\-/]*$")   # a label of fusion.logformat
 
 
 class _Strict(BaseModel):
@@ -137,6 +138,9 @@ class SystemSpec(_Strict):
         for name, pos in v.items():
             if len(pos) not in (2, 3):
                 raise ValueError(f"beacon {name!r} needs 2 or 3 coordinates, got {len(pos)}")
+            if not BEACON_NAME.match(name) or name.lower() in ("nan", "inf", "infinity"):
+                raise ValueError(f"beacon {name!r} can never be named by a log line (a label: a letter or _, "
+                                 "then letters, digits, _ . : - /)")
         return v
 
 

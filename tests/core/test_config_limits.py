@@ -238,6 +238,14 @@ def test_sensor_names_a_log_can_carry(tmp_path, capsys, old, new, expect):
     assert code == 2 and err.startswith(f"{cfg}:{line_of(bad, new.strip())}: sensors.") and expect in err, err
 
 
+@pytest.mark.parametrize("name", ["'B 1'", "'1'", "nan", "'-B1'"])
+def test_beacon_names_a_log_can_carry(tmp_path, capsys, name):
+    bad = edit(UWB, "  B2: [30.0, 0.0]", f"  {name}: [30.0, 0.0]")
+    code, err, cfg = validate(tmp_path, capsys, bad)
+    assert code == 2 and err.startswith(f"{cfg}:{line_of(bad, 'beacons:')}: beacons: Value error, beacon") and \
+        "can never be named by a log line" in err, err
+
+
 def test_the_initial_fix_comes_from_a_measurement_sensor(tmp_path, capsys):
     bad = edit(ABPS, "from_sensor: abps", "from_sensor: imu")
     code, err, cfg = validate(tmp_path, capsys, bad)
