@@ -76,7 +76,11 @@ def open_lines(path: str | Path) -> Iterator[str]:
         raise InputError(f"{p}: binary data, not a text log: {share:.0%} of its first {n} are in lines with NUL or "
                          f"control bytes or invalid UTF-8{bom}; a log is UTF-8 lines 't,sensor,v1,...' (a few bad "
                          "lines are only counted as malformed)")
-    with p.open("r", encoding="utf-8", errors="replace", newline=None) as fh:
+    # Lines end where the file's own line ends are: at LF (LF or CRLF files: a CR a noisy port sent mid-line
+    # then spoils only its line instead of splitting it in two, the second with a garbled time stamp), or
+    # at CR for a file without any LF (a device that ends lines with CR alone).
+    newline = "\n" if b"\n" in head else None
+    with p.open("r", encoding="utf-8", errors="replace", newline=newline) as fh:
         yield from bounded_lines(fh)
 
 

@@ -131,3 +131,20 @@ def test_a_fields_line_without_names_is_ignored(tmp_path, base):
     text = RECORDING.read_bytes().replace(b"# fields uwb beacon range", b"# fields uwb")
     assert b"# fields uwb\n" in text
     assert summary_of(tmp_path, text)["sensors"]["uwb"] == base["sensors"]["uwb"]
+
+
+def test_a_stray_cr_spoils_only_its_line(tmp_path, base):
+    """A CR inside a time stamp: one malformed line, not a line cut in two whose second half has a time
+    stamp of its own (here 0.0 s: late)."""
+    lines = RECORDING.read_bytes().split(b"\n")
+    i = uwb_line_index(lines, 20_000)
+    lines[i] = lines[i][:3] + b"\r" + lines[i][3:]
+    s = summary_of(tmp_path, b"\n".join(lines))["sensors"]["uwb"]
+    ref = base["sensors"]["uwb"]
+    assert (s["malformed"], s["late"], s["used"]) == (ref["malformed"] + 1, ref["late"], ref["used"] - 1)
+
+
+@pytest.mark.parametrize("eol", [b"\r\n", b"\r"], ids=["CRLF", "CR"])
+def test_crlf_and_cr_line_ends_replay_the_same(tmp_path, base, eol):
+    text = RECORDING.read_bytes().replace(b"\n", eol)
+    assert summary_of(tmp_path, text)["sensors"] == base["sensors"]
