@@ -37,7 +37,7 @@ TARGETS = (("configs/abps_ins.yaml", "recordings/abps_mine.log"),
            ("configs/uwb_pv_ukf_line.yaml", "recordings/uwb_route1_line.log"))
 
 
-def fuzz_configs(n: int, seed: int, work: Path, recs: dict) -> tuple[collections.Counter, list[str]]:
+def fuzz_configs(n: int, seed: int, work: Path, recs: dict) -> tuple[collections.Counter, list[str], list[str]]:
     """n mutated configs: validate, and run those that validate on the cut recordings."""
     import contextlib
     import io
@@ -51,7 +51,8 @@ def fuzz_configs(n: int, seed: int, work: Path, recs: dict) -> tuple[collections
         cut.write_bytes(b"\n".join(recs[cfg].lines) + b"\n")
         texts.append((cfg, (ROOT / cfg).read_text().replace("../recordings/", f"{work}/")))
     codes: collections.Counter = collections.Counter()
-    failures = []
+    failures: list[str] = []
+    refused: list[str] = []   # validated, then refused by the run: validate could have said so
     path = work / "config.yaml"
     for _ in range(n):
         name, text = texts[rng.randrange(len(texts))]
@@ -68,9 +69,12 @@ def fuzz_configs(n: int, seed: int, work: Path, recs: dict) -> tuple[collections
                 code = fusion(["run", str(path), "-q", "--no-progress"])
                 outcome = f"validate exit 0, run exit {code}"
         codes[outcome] += 1
+        last = (err.getvalue().strip().splitlines() or ["(no message)"])[-1][:300].replace(str(work), "<tmp>")
         if code == 1:
-            failures.append(f"- `{name}` with {edits}: {err.getvalue().strip().splitlines()[-1][:300]}")
-    return codes, failures
+            failures.append(f"- `{name}` with {edits}: {last}")
+        elif outcome == "validate exit 0, run exit 2":
+            refused.append(f"- `{name}` with {edits}: {last}")
+    return codes, failures, refused
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -122,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
                 lost.append(f"- {where}: {'; '.join(problems)}")
     wall = time.perf_counter() - t0
     t1 = time.perf_counter()
-    cfg_codes, cfg_failures = fuzz_configs(args.configs, args.seed, work, recs)
+    cfg_codes, cfg_failures, cfg_refused = fuzz_configs(args.configs, args.seed, work, recs)
     cfg_wall = time.perf_counter() - t1
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -167,6 +171,10 @@ def main(argv: list[str] | None = None) -> int:
         f"### Exit 1 ({len(cfg_failures)})",
         "",
         *(cfg_failures or ["None."]),
+        "",
+        f"### Validated, then refused by the run ({len(cfg_refused)})",
+        "",
+        *(cfg_refused or ["None."]),
         "",
     ]
     out.write_text("\n".join(text))
