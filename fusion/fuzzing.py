@@ -204,3 +204,40 @@ def accounting_errors(base: dict, mutated: dict, mutated_sensor: str | None, op:
             problems.append(f"{s}: received {got} (unmutated {want}), malformed {m.get('malformed')} "
                             f"(unmutated {b.get('malformed')})")
     return problems
+
+
+def check_refusals(component, messages) -> int:
+    """Feed ``messages`` to a decoder (``decode``), measurement model (``observe``) or solver (``feed``,
+    then ``flush``): each must be used or refused with MalformedMessage, never another exception, and
+    what comes out must be usable: an Observation's ``z`` finite and of its model's ``dim``, its ``R``
+    (if any) symmetric positive definite; a solver's or decoder's messages of finite numbers or labels.
+    Returns how many were refused. The contract a plugin author can run on a component of their own."""
+    import numpy as np
+
+    from fusion.api import MalformedMessage, Message, Observation
+
+    def usable(out) -> None:
+        if isinstance(out, Observation):
+            z = np.asarray(out.z, float)
+            assert z.shape == (out.model.dim,) and np.all(np.isfinite(z)), f"unusable z {out.z!r}"
+            if out.R is not None:
+                R = np.asarray(out.R, float)
+                assert R.shape == (z.size, z.size) and np.allclose(R, R.T), f"R {R!r} of z {z!r}"
+                np.linalg.cholesky(R)   # LinAlgError: not positive definite
+        elif isinstance(out, Message):
+            assert all(isinstance(v, str) or np.isfinite(v) for v in out.values), f"non-finite {out!r}"
+
+    call = getattr(component, "observe", None) or getattr(component, "decode", None) or component.feed
+    refused = 0
+    for msg in messages:
+        try:
+            out = call(msg)
+        except MalformedMessage:
+            refused += 1
+            continue
+        for item in out if isinstance(out, list) else [out]:
+            if item is not None:
+                usable(item)
+    for item in getattr(component, "flush", lambda: [])():
+        usable(item)
+    return refused

@@ -178,6 +178,8 @@ class RangeModel(MeasurementModel):
             z = np.array(vals[1::2], float)
         except (TypeError, ValueError):
             raise MalformedMessage(f"range expects numbers, got {vals[1::2]!r}") from None
+        if z.shape != (len(names),):   # a sequence where a number belongs (a message from another source)
+            raise MalformedMessage(f"range expects numbers, got {vals[1::2]!r}")
         if not np.all(np.isfinite(z)):
             raise MalformedMessage(f"non-finite range in {vals!r}")
         if np.any(z < 0):

@@ -93,7 +93,8 @@ def test_range_reasons_name_what_is_valid():
                            (("B1",), "'beacon range' pairs, got 1 value(s)"),
                            (("B1", float("nan")), "non-finite range"),
                            (("B1", -1.0), "negative range -1.0 m"),
-                           (("B1", 1.0, "B2", 2.0, "B1", 3.0), "beacon 'B1' twice in one message")]:
+                           (("B1", 1.0, "B2", 2.0, "B1", 3.0), "beacon 'B1' twice in one message"),
+                           (("B1", (1.0, 2.0)), "range expects numbers, got ((1.0, 2.0),)")]:
         with pytest.raises(MalformedMessage, match=reason.replace("(", r"\(").replace(")", r"\)")):
             model.observe(Message(1.0, "uwb", values))
 
