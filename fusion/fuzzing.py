@@ -207,8 +207,9 @@ def accounting_errors(base: dict, mutated: dict, mutated_sensor: str | None, op:
 
 
 def check_refusals(component, messages) -> int:
-    """Feed ``messages`` to a decoder (``decode``), measurement model (``observe``) or solver (``feed``,
-    then ``flush``): each must be used or refused with MalformedMessage, never another exception, and
+    """Feed ``messages`` to a decoder (``decode``), measurement model (``observe``), solver (``feed``, then
+    ``flush``) or process model (``input_from``): each must be used or refused with MalformedMessage
+    (RejectedMessage is one), never another exception, and
     what comes out must be usable: an Observation's ``z`` finite and of its model's ``dim``, its ``R``
     (if any) symmetric positive definite; a solver's or decoder's messages of finite numbers or labels.
     Returns how many were refused. The contract a plugin author can run on a component of their own."""
@@ -226,8 +227,11 @@ def check_refusals(component, messages) -> int:
                 np.linalg.cholesky(R)   # LinAlgError: not positive definite
         elif isinstance(out, Message):
             assert all(isinstance(v, str) or np.isfinite(v) for v in out.values), f"non-finite {out!r}"
+        elif isinstance(out, np.ndarray):   # a process model's input u
+            assert out.shape == (component.input_dim,) and np.all(np.isfinite(out)), f"unusable input {out!r}"
 
-    call = getattr(component, "observe", None) or getattr(component, "decode", None) or component.feed
+    call = (getattr(component, "observe", None) or getattr(component, "decode", None)
+            or getattr(component, "feed", None) or component.input_from)
     refused = 0
     for msg in messages:
         try:

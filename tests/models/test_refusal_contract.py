@@ -1,6 +1,6 @@
-"""Every built-in decoder, measurement model and solver, as the shipped configs wire them, uses or refuses
-(MalformedMessage) any message, never raises another exception, and hands on only usable output
-(fusion.fuzzing.check_refusals, issue 10 item 1)."""
+"""Every built-in decoder, measurement model, solver and input-driven process model, as the shipped
+configs wire them, uses or refuses (MalformedMessage) any message, never raises another exception, and
+hands on only usable output (fusion.fuzzing.check_refusals, issue 10 item 1)."""
 import copy
 from pathlib import Path
 
@@ -16,7 +16,8 @@ ROOT = Path(__file__).resolve().parents[2]
 SYSTEMS = {name: load_system(ROOT / "configs" / f"{name}.yaml") for name in ("abps_ins", "uwb_pv_ukf", "example_2d")}
 COMPONENTS = [(f"{cfg}.{sensor}.{part}", getattr(s, part)) for cfg, system in SYSTEMS.items()
               for sensor, s in system.sensors.items() for part in ("decoder", "preprocessor", "model")
-              if getattr(s, part) is not None]
+              if getattr(s, part) is not None] + [
+    (f"{cfg}.process", system.process) for cfg, system in SYSTEMS.items() if system.process.input_dim]
 
 numbers = st.one_of(st.floats(allow_nan=False, allow_infinity=False),
                     st.sampled_from([0.0, -0.0, -1.0, 1e308, -1e308, 1e300, 1e200, 1e-300, 5e-324, 2.5, 0.25]),
@@ -30,7 +31,8 @@ messages = st.lists(st.builds(Message, st.one_of(st.floats(0, 200), st.sampled_f
 
 
 @pytest.mark.parametrize("name,component", COMPONENTS, ids=[c[0] for c in COMPONENTS])
-@example(batch=[Message(1.0, "s", ("B1", (1.0, 2.0)), 1), Message(1.0, "s", (1.0, 2.0, None), 2)])
+@example(batch=[Message(1.0, "s", ("B1", (1.0, 2.0)), 1), Message(1.0, "s", (1.0, 2.0, None), 2),
+                Message(1.0, "s", ((1.0, 2.0),) * 6, 3)])
 @settings(max_examples=40, deadline=None, derandomize=True, database=None,
           suppress_health_check=[HealthCheck.too_slow])
 @given(batch=messages)
