@@ -116,6 +116,8 @@ class Position(MeasurementModel):
         MalformedMessage, with the reason, for another count, a value that is no finite number, a negative
         age or a covariance that is not positive definite."""
         z = message.floats()
+        if z.ndim != 1:   # sequences where numbers belong (a message from another source)
+            raise MalformedMessage(f"position expects numbers, got {message.values!r}")
         if not np.all(np.isfinite(z)):
             raise MalformedMessage(f"position: non-finite value in {message.values!r}")
         R = None

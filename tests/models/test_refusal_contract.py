@@ -32,7 +32,7 @@ messages = st.lists(st.builds(Message, st.one_of(st.floats(0, 200), st.sampled_f
 
 @pytest.mark.parametrize("name,component", COMPONENTS, ids=[c[0] for c in COMPONENTS])
 @example(batch=[Message(1.0, "s", ("B1", (1.0, 2.0)), 1), Message(1.0, "s", (1.0, 2.0, None), 2),
-                Message(1.0, "s", ((1.0, 2.0),) * 6, 3)])
+                Message(1.0, "s", ((1.0, 2.0),) * 6, 3), Message(1.0, "s", ((1.0, 0.0, 1.0),) * 3, 4)])
 @settings(max_examples=40, deadline=None, derandomize=True, database=None,
           suppress_health_check=[HealthCheck.too_slow])
 @given(batch=messages)
