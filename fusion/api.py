@@ -18,8 +18,12 @@ __all__ = [
     "Block", "StateLayout", "Belief", "Message", "Observation", "UpdateResult", "Event",
     "Estimate", "Params", "BuildContext", "Component", "ProcessModel", "MeasurementModel",
     "Filter", "Gate", "Decoder", "Solver", "Source", "Sink", "Simulator", "FusionError",
-    "ConfigError", "InputError", "MalformedMessage", "RejectedMessage", "KINDS",
+    "ConfigError", "InputError", "MalformedMessage", "RejectedMessage", "KINDS", "MAX_MAGNITUDE",
 ]
+
+#: Largest |value| a measurement may hold: beyond it its square (in an innovation's NIS, a range's
+#: geometry, a Gaussian update) overflows float64 (1.8e308), so no filter can use it: malformed.
+MAX_MAGNITUDE = 1e150
 
 KINDS = ("process", "measurement", "filter", "gate", "decoder", "solver", "source", "sink", "simulator")
 

@@ -8,7 +8,8 @@ import numpy as np
 from pydantic import Field
 
 from fusion import quaternion as quat
-from fusion.api import BuildContext, ConfigError, MalformedMessage, MeasurementModel, Message, Observation, Params
+from fusion.api import (MAX_MAGNITUDE, BuildContext, ConfigError, MalformedMessage, MeasurementModel, Message,
+                        Observation, Params)
 
 
 _SYM3 = np.array([[3, 4, 5], [4, 6, 7], [5, 7, 8]])   # indices into a 9-value fix of its symmetric covariance
@@ -120,6 +121,9 @@ class Position(MeasurementModel):
             raise MalformedMessage(f"position expects numbers, got {message.values!r}")
         if not np.all(np.isfinite(z)):
             raise MalformedMessage(f"position: non-finite value in {message.values!r}")
+        if np.any(np.abs(z) > MAX_MAGNITUDE):
+            raise MalformedMessage(f"position: a value beyond {MAX_MAGNITUDE:g} in {message.values!r} (its square "
+                                   "overflows float64)")
         R = None
         model: MeasurementModel = self
         if z.size == 10:

@@ -20,7 +20,8 @@ import numpy as np
 
 from pydantic import Field
 
-from fusion.api import Belief, ConfigError, Event, MalformedMessage, MeasurementModel, Message, Observation, Params
+from fusion.api import (MAX_MAGNITUDE, Belief, ConfigError, Event, MalformedMessage, MeasurementModel, Message,
+                        Observation, Params)
 
 
 class RangeModel(MeasurementModel):
@@ -187,6 +188,8 @@ class RangeModel(MeasurementModel):
         mx = self.params.max_range
         if mx is not None and np.any(z > mx):
             raise MalformedMessage(f"range {z.max()} m beyond max_range {mx} m")
+        if np.any(z > MAX_MAGNITUDE):
+            raise MalformedMessage(f"range {z.max()} m beyond {MAX_MAGNITUDE:g} (its square overflows float64)")
         return Observation(message.t, z, self._bind(names))
 
 

@@ -15,7 +15,7 @@ from scipy.linalg import cho_factor, cho_solve, qr, solve_triangular
 from scipy.linalg.lapack import dpotrf as _dpotrf, dpotrs as _dpotrs
 from fusion.chisquare import chi2
 
-from fusion.api import BuildContext, ConfigError, Event, MalformedMessage, Message, Params, Solver
+from fusion.api import MAX_MAGNITUDE, BuildContext, ConfigError, Event, MalformedMessage, Message, Params, Solver
 
 REASONS = ("too_few_beacons", "degenerate", "inconsistent")
 MAX_SD_M = 1e6   # m (m/s^2 for accel_sd): its square must stay finite through the fix covariance; no sensor is worse
@@ -332,6 +332,9 @@ class OlsTrilateration(Solver):
                 raise MalformedMessage(f"range to {label} is not a number: {rng!r}") from None
             if not np.isfinite(rng) or rng < 0:
                 raise MalformedMessage(f"range to {label} must be finite and >= 0, got {rng}")
+            if rng > MAX_MAGNITUDE:
+                raise MalformedMessage(f"range to {label} {rng} m beyond {MAX_MAGNITUDE:g} (its square overflows "
+                                       "eq. 25)")
             if self.params.max_range is not None and rng > self.params.max_range:  # type: ignore[attr-defined]
                 raise MalformedMessage(f"range to {label} {rng} m beyond max_range "
                                        f"{self.params.max_range} m")  # type: ignore[attr-defined]

@@ -167,16 +167,18 @@ def test_ols_feed_refuses_with_the_reason(abps_config, case):
     assert solver.flush() == []   # nothing of the refused message was gathered
 
 
-def test_ols_ranges_too_long_for_float64_give_no_fix_not_an_error():
+def test_ols_ranges_too_long_for_float64_are_malformed_or_give_no_fix():
     from fusion_plugins.solvers.ols_trilateration import OlsTrilateration
 
     beacons = {"B1": np.array([0.0, 0.0, 0.0]), "B2": np.array([10.0, 0.0, 0.0]), "B3": np.array([0.0, 10.0, 0.0])}
     solver = OlsTrilateration(OlsTrilateration.Params(refine_iterations=3), BuildContext(beacons=beacons))
+    with pytest.raises(MalformedMessage, match=r"range to B1 1e\+200 m beyond 1e\+150 \(its square overflows"):
+        solver.feed(Message(0.0, "abps", ("B1", 1e200)))
     out = []
-    for i, b in enumerate(beacons):
-        out += solver.feed(Message(0.1 * i, "abps", (b, 1e200)))
-    assert out == [] and solver.counters["inconsistent"] == 1
-    assert solver.events[-1].kind == "no_fix" and "1e+200" in solver.events[-1].detail
+    for i, b in enumerate(beacons):   # squares just representable: a fix, or no fix, never an exception
+        out += solver.feed(Message(0.1 * i, "abps", (b, 1e149 * (1 + i))))
+    assert all(np.all(np.isfinite(m.values)) for m in out)
+    assert solver.counters["fixes"] + solver.counters["inconsistent"] + solver.counters["degenerate"] == 1
 
 
 # ----------------------------------------------------------------------------- position and the line decoder
