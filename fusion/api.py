@@ -18,10 +18,14 @@ __all__ = [
     "Block", "StateLayout", "Belief", "Message", "Observation", "UpdateResult", "Event",
     "Estimate", "Params", "BuildContext", "Component", "ProcessModel", "MeasurementModel",
     "Filter", "Gate", "Decoder", "Solver", "Source", "Sink", "Simulator", "FusionError",
-    "ConfigError", "InputError", "MalformedMessage", "RejectedMessage", "KINDS", "ReadsBelief", "ReportsInfo",
+    "ConfigError", "InputError", "MalformedMessage", "RejectedMessage", "KINDS", "ReadsBelief", "ReportsInfo", "MAX_MAGNITUDE",
     "Importer", "ImportRequest", "Stream", "ImportedLog",
     "AlignsState", "UsesInput", "PseudoMeasurement",
 ]
+
+#: Largest |value| a measurement may hold: beyond it its square (in an innovation's NIS, a range's
+#: geometry, a Gaussian update) overflows float64 (1.8e308), so no filter can use it: malformed.
+MAX_MAGNITUDE = 1e150
 
 from fusion.kinds import KINDS  # noqa: E402
 
@@ -242,9 +246,11 @@ class Estimate:
 
 # --------------------------------------------------------------------------- components
 class Params(BaseModel):
-    """Base of every plugin's Params model: unknown keys are errors."""
+    """Base of every plugin's Params model: unknown keys are errors, and every float (nested in lists,
+    tuples and dicts too) must be finite: NaN or inf is an error naming the field. A field that means
+    something by inf says so in its description and opts out with ``Field(..., allow_inf_nan=True)``."""
 
-    model_config = ConfigDict(extra="forbid", arbitrary_types_allowed=True)
+    model_config = ConfigDict(extra="forbid", arbitrary_types_allowed=True, allow_inf_nan=False)
 
 
 @dataclass
@@ -330,6 +336,9 @@ class MeasurementModel(Component):
 
     kind: ClassVar[str] = "measurement"
     dim: int = 0
+    #: Whether ``observe`` can take R from the message itself (a fix with its covariance): False means the
+    #: sensor needs ``noise:`` in the config (``fusion validate`` checks it); None (default): not known.
+    carries_R: bool | None = None
 
     def h(self, x: np.ndarray) -> np.ndarray:
         """Predicted measurement (..., m) for states x (..., n)."""

@@ -39,6 +39,10 @@ def build_parser() -> argparse.ArgumentParser:
                 continue
             raise
         mod.register(sub)
+    for subparser in sub.choices.values():
+        # also after the subcommand (``fusion run C --debug``); SUPPRESS keeps a --debug given before it
+        subparser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                               help="show tracebacks for errors (as 'fusion --debug COMMAND')")
     return parser
 
 

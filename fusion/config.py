@@ -17,12 +17,13 @@ plugin's ``Params`` model. Example::
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, Union
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from fusion.api import (BuildContext, Component, ConfigError, Decoder, Filter, Gate, MeasurementModel,
                         ProcessModel, Solver)
@@ -31,8 +32,30 @@ from fusion.registry import Registry, default_registry
 from fusion.yamlsource import LocatedYAML, load_yaml, pydantic_errors
 
 
+SENSOR_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")   # as fusion.logformat parses a line's sensor
+RESERVED_SENSORS = ("truth", "reference")
+BEACON_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.:\-/]*$")   # a label of fusion.logformat
+
+
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    """Unknown keys are errors; every float (nested ones too) must be finite, NaN and inf are errors."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+#: Largest initial standard deviation (in the block's SI unit: m, m/s, rad, ...). The first update leaves a
+#: posterior variance of about the measurement's, computed as P0 - K S K^T; it keeps no digit once P0 / R
+#: passes 1 / eps = 4.5e15 (float64). 1e6 against a 1 cm sensor is that ratio (1e16); measured on
+#: configs/uwb_pv_ukf.yaml (0.1 m ranges), the EKF still converges at sd 1e7 and diverges at 1e8 (1046
+#: non-positive-definite repairs). No physical prior is wider: 1e6 m is a continent, 1e6 m/s is 30x orbital
+#: speed.
+MAX_INITIAL_SD = 1e6
+#: Fastest fixed-rate output (Hz): each output costs a prediction and a row (~200 B of CSV); beyond the
+#: fastest sensor (an IMU at 100 Hz-1 kHz) more rows carry no information (1 kHz over an hour: 3.6 M rows).
+MAX_OUTPUT_RATE_HZ = 1000.0
+#: Largest |time_offset| (s): Unix time is 1.7e9 s, so an offset between time bases fits; 1e10 s (317
+#: years) is no clock's.
+MAX_TIME_OFFSET_S = 1e10
 
 
 ComponentSpec = Union[str, dict[str, Any]]
@@ -44,6 +67,12 @@ class NoiseSpec(_Strict):
     sd: float | list[float] | None = None
     R: list[list[float]] | None = None
 
+    @model_validator(mode="after")
+    def _one_of(self) -> "NoiseSpec":
+        if self.sd is not None and self.R is not None:
+            raise ValueError("give sd or R, not both (sd: standard deviations, R: the full covariance)")
+        return self
+
 
 class SensorSpec(_Strict):
     role: Literal["input", "measurement"] = "measurement"
@@ -52,7 +81,8 @@ class SensorSpec(_Strict):
     model: ComponentSpec | None = None
     noise: NoiseSpec | float | list[float] | None = None
     gate: ComponentSpec | None = None
-    time_offset: float = 0.0
+    time_offset: float = Field(0.0, ge=-MAX_TIME_OFFSET_S, le=MAX_TIME_OFFSET_S, description="s added to the "
+                               "sensor's time stamps (a known latency, or a clock's offset)")
     max_gap: float | None = Field(None, gt=0.0, description="input sensors: report a gap between samples "
                                   "longer than this (s)")
     recovery: RecoverySpec | None = Field(None, description="recover from a lock-out (fusion.recovery); off by default")
@@ -74,7 +104,7 @@ class InitialSpec(_Strict):
 class SchedulerSpec(_Strict):
     max_latency: float = Field(0.0, ge=0.0, description="reorder buffer length, s")
     late_policy: Literal["drop", "replay"] = "drop"
-    history: int = Field(500, ge=1, description="beliefs kept for replay")
+    history: int = Field(500, ge=1, le=100_000, description="beliefs kept for replay")
     future_s: float = Field(5.0, gt=0.0, allow_inf_nan=False,
                             description="s a stamp may be ahead of (or behind) the newest accepted time before it "
                                         "is held as a wild stamp or a clock jump (fusion.clock)")
@@ -86,7 +116,8 @@ class SchedulerSpec(_Strict):
 
 class OutputSpec(_Strict):
     on_update: bool = True
-    rate_hz: float | None = Field(None, gt=0.0)
+    rate_hz: float | None = Field(None, gt=0.0, le=MAX_OUTPUT_RATE_HZ, description="fixed-rate outputs by "
+                                  "prediction, Hz (at most MAX_OUTPUT_RATE_HZ)")
 
 
 class EvaluationSpec(_Strict):
@@ -127,6 +158,9 @@ class SystemSpec(_Strict):
         for name, pos in v.items():
             if len(pos) not in (2, 3):
                 raise ValueError(f"beacon {name!r} needs 2 or 3 coordinates, got {len(pos)}")
+            if not BEACON_NAME.match(name) or name.lower() in ("nan", "inf", "infinity"):
+                raise ValueError(f"beacon {name!r} can never be named by a log line (a label: a letter or _, "
+                                 "then letters, digits, _ . : - /)")
         return v
 
 
@@ -196,7 +230,7 @@ def build_component(registry: Registry, kind: str, spec: ComponentSpec, ctx: Bui
     except ValidationError as exc:
         if doc is not None:
             raise pydantic_errors(doc, exc, loc) from None
-        raise ConfigError(f"{where}: {exc}") from None
+        raise ConfigError(f"{where}: {pydantic_errors(None, exc, data=params)}") from None
     try:
         return cls(p, ctx)
     except ConfigError as exc:
@@ -211,10 +245,10 @@ def _noise_matrix(noise: NoiseSpec | float | list[float] | None, m: int, where: 
     if isinstance(noise, (int, float, list)):
         noise = NoiseSpec(sd=noise)
     if noise.R is not None:
-        R = np.asarray(noise.R, float)
+        R = _matrix(noise.R, f"{where}.R")
         if R.shape != (m, m):
             raise ConfigError(f"{where}.R: must be {m} x {m} for this measurement model, got {R.shape[0]} x {R.shape[1] if R.ndim > 1 else 1}")
-        if not np.allclose(R, R.T) or np.any(np.linalg.eigvalsh(0.5 * (R + R.T)) <= 0):
+        if not _positive_definite(R):
             raise ConfigError(f"{where}.R: must be symmetric positive definite")
         return R
     if noise.sd is not None:
@@ -223,8 +257,32 @@ def _noise_matrix(noise: NoiseSpec | float | list[float] | None, m: int, where: 
             raise ConfigError(f"{where}.sd: needs 1 or {m} values for this measurement model, got {sd.size}")
         if np.any(sd <= 0):
             raise ConfigError(f"{where}.sd: standard deviations must be > 0")
-        return np.diag(np.broadcast_to(sd, (m,)) ** 2)
+        with np.errstate(over="ignore", under="ignore"):
+            var = np.broadcast_to(sd, (m,)) ** 2
+        if not (np.all(np.isfinite(var)) and np.all(var > 0)):
+            raise ConfigError(f"{where}.sd: {sd.tolist()} squared is not a positive finite variance "
+                              "(float64: 1e-150 < sd < 1e150)")
+        return np.diag(var)
     return None
+
+
+def _matrix(rows: list[list[float]], where: str) -> np.ndarray:
+    """A matrix from YAML rows; ConfigError for rows of different lengths."""
+    lengths = sorted({len(r) for r in rows})
+    if len(lengths) > 1:
+        raise ConfigError(f"{where}: rows of different lengths {lengths}; a matrix is a list of equal rows")
+    return np.asarray(rows, float).reshape(len(rows), lengths[0] if lengths else 0)
+
+
+def _positive_definite(A: np.ndarray) -> bool:
+    """A symmetric positive definite (and finite: a Cholesky factor exists)."""
+    if not (np.all(np.isfinite(A)) and np.allclose(A, A.T)):
+        return False
+    try:
+        np.linalg.cholesky(A)
+    except np.linalg.LinAlgError:
+        return False
+    return bool(np.all(np.linalg.eigvalsh(A) > 0))
 
 
 def _fill_blocks(target: np.ndarray, values: dict[str, Any], layout, where) -> None:
@@ -249,10 +307,19 @@ def _initial(spec: SystemSpec, process: ProcessModel, doc: LocatedYAML | None) -
         if block.kind == "quaternion":
             x0[lay[block.name].start] = 1.0
     _fill_blocks(x0, spec.initial.mean, lay, lambda name: where("mean", name))
+    for block in lay.blocks:
+        if block.kind == "quaternion" and not np.linalg.norm(x0[lay[block.name]]) > 1e-6:
+            raise ConfigError(f"{where('mean', block.name)}: a quaternion needs a non-zero norm (e.g. [1, 0, 0, 0]), "
+                              f"got {x0[lay[block.name]].tolist()}")
     if spec.initial.P is not None:
-        P0 = np.asarray(spec.initial.P, float)
-        if P0.shape != (lay.n, lay.n):
+        P0 = _matrix(spec.initial.P, where("P"))
+        if P0.ndim != 2 or P0.shape != (lay.n, lay.n):
             raise ConfigError(f"{where('P')}: must be {lay.n} x {lay.n} for the state {lay!r}, got {P0.shape}")
+        big = np.flatnonzero(np.diagonal(P0) > MAX_INITIAL_SD ** 2)
+        if big.size:
+            raise ConfigError(f"{where('P')}: variance {np.diagonal(P0)[big[0]]:g} of {lay.names[big[0]]} above "
+                              f"{MAX_INITIAL_SD ** 2:g} (sd {MAX_INITIAL_SD:g}): the filter would lose every digit "
+                              "of the first update")
     else:
         sd = np.ones(lay.n)
         _fill_blocks(sd, spec.initial.sd, lay, lambda name: where("sd", name))
@@ -261,8 +328,16 @@ def _initial(spec: SystemSpec, process: ProcessModel, doc: LocatedYAML | None) -
             raise ConfigError(f"{where('sd')}: no standard deviation for block(s) {missing}")
         if np.any(sd <= 0):
             raise ConfigError(f"{where('sd')}: standard deviations must be > 0")
+        big = np.flatnonzero(sd > MAX_INITIAL_SD)
+        if big.size:
+            name = next(b.name for b in lay.blocks if lay[b.name].start <= big[0] < lay[b.name].stop)
+            raise ConfigError(f"{where('sd', name)}: {sd[big[0]]:g} is above {MAX_INITIAL_SD:g}: with a measurement "
+                              "of 1 cm sd the first update would keep no digit (P0 / R > 1 / eps); no prior "
+                              "is that wide")
         P0 = np.diag(sd ** 2)
-    if not np.allclose(P0, P0.T) or np.any(np.linalg.eigvalsh(0.5 * (P0 + P0.T)) <= 0):
+        if not np.all(np.diagonal(P0) > 0):
+            raise ConfigError(f"{where('sd')}: standard deviations below 1e-150 square to a zero variance")
+    if not _positive_definite(P0):
         raise ConfigError(f"{where('P')}: initial covariance must be symmetric positive definite")
     return x0, P0
 
@@ -277,15 +352,24 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
     process = build_component(reg, "process", spec.process, ctx, doc, ["process"])
     assert isinstance(process, ProcessModel)
     layout = process.layout
-    fspec = filter_override if filter_override is not None else spec.filter
-    filt = build_component(reg, "filter", fspec, BuildContext(layout, beacons, None, base_dir), doc, ["filter"])
+    fctx = BuildContext(layout, beacons, None, base_dir)
+    if filter_override is not None:  # from the command line: no file line to name
+        filt = build_component(reg, "filter", filter_override, fctx, None, ["filter (--filter/--filter-param)"])
+    else:
+        filt = build_component(reg, "filter", spec.filter, fctx, doc, ["filter"])
     sensors: dict[str, SensorRuntime] = {}
     for sname, s in spec.sensors.items():
+        loc = ["sensors", sname]
+        where = doc.where(loc) if doc else f"sensors.{sname}"
+        if not SENSOR_NAME.match(sname):
+            raise ConfigError(f"{where}: {sname!r} can never name a log line's sensor (a letter or _, then letters, "
+                              "digits, _ . -)")
+        if sname in RESERVED_SENSORS:
+            raise ConfigError(f"{where}: {sname!r} lines are never fed to the filter (the log format reserves "
+                              f"{', '.join(RESERVED_SENSORS)}); name the sensor otherwise")
         if not s.enabled:
             continue
         sctx = BuildContext(layout, beacons, sname, base_dir)
-        loc = ["sensors", sname]
-        where = doc.where(loc) if doc else f"sensors.{sname}"
         decoder = build_component(reg, "decoder", s.decoder, sctx, doc, [*loc, "decoder"])
         pre = build_component(reg, "solver", s.preprocessor, sctx, doc, [*loc, "preprocessor"]) if s.preprocessor else None
         model = gate = R = None
@@ -294,6 +378,9 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
                 raise ConfigError(f"{where}: a measurement sensor needs 'model: NAME'")
             model = build_component(reg, "measurement", s.model, sctx, doc, [*loc, "model"])
             R = _noise_matrix(s.noise, model.dim, doc.where([*loc, "noise"]) if doc else f"{where}.noise")
+            if R is None and model.carries_R is False:
+                raise ConfigError(f"{where}: a measurement sensor needs 'noise:' (sd or R): its model "
+                                  f"{model.name!r} takes no covariance from its messages")
             gate = build_component(reg, "gate", s.gate, sctx, doc, [*loc, "gate"]) if s.gate else None
         elif process.input_dim == 0:
             raise ConfigError(f"{where}.role: 'input' but process {process.name!r} takes no control input")
@@ -318,6 +405,10 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
         raise ConfigError(f"{path or 'config'}: sensors: process {process.name!r} needs an input sensor (role: input)")
     if spec.initial.from_sensor and spec.initial.from_sensor not in sensors:
         raise ConfigError(f"{doc.where(['initial', 'from_sensor']) if doc else 'initial.from_sensor'}: no sensor {spec.initial.from_sensor!r}")
+    if spec.initial.from_sensor and sensors[spec.initial.from_sensor].role != "measurement":
+        raise ConfigError(f"{doc.where(['initial', 'from_sensor']) if doc else 'initial.from_sensor'}: sensor "
+                          f"{spec.initial.from_sensor!r} is an input; the initial position comes from a measurement "
+                          f"sensor ({', '.join(n for n, r in sensors.items() if r.role == 'measurement') or 'none'})")
     if spec.initial.align_s and not hasattr(process, "align"):
         raise ConfigError(f"{doc.where(['initial', 'align_s']) if doc else 'initial.align_s'}: process {process.name!r} cannot align itself")
     for i, name in enumerate(spec.evaluation.position or []):

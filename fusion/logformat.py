@@ -8,7 +8,8 @@ are header metadata (``# scenario: uwb_route1``). A raw NMEA sentence may follow
 ``t,gps,$GPGGA,...*HH`` (the checksum is then the sentence's own and is checked by the ``nmea`` decoder).
 
 Fields parse as float when they look numeric; tokens that start with a letter or ``$`` are labels (a
-beacon name) kept as strings. ``nan``/``inf`` and anything else that is neither is malformed.
+beacon name) kept as strings. ``nan``/``inf`` and anything else that is neither is malformed, and so is
+a line holding binary junk (a NUL or another control character, or U+FFFD where a byte was not UTF-8).
 """
 from __future__ import annotations
 
@@ -53,6 +54,7 @@ class Header:
     fields: dict[str, tuple[str, ...]] = field(default_factory=dict)
     meta: dict[str, str] = field(default_factory=dict)
     repeating: set[str] = field(default_factory=set)  # sensors whose fields repeat as a group (``...``)
+    beacons: dict[str, tuple[float, ...]] = field(default_factory=dict)  # '# beacon B1: x y z' (fusion simulate)
 
 
 def parse_comment(text: str, header: Header) -> None:
@@ -60,7 +62,7 @@ def parse_comment(text: str, header: Header) -> None:
     body = text[1:].strip()
     if body.startswith("fields "):
         parts = body.split()
-        if len(parts) >= 2:
+        if len(parts) >= 3:  # '# fields SENSOR' without names says nothing (a cut line): ignored
             names = parts[2:]
             if len(names) > 1 and names[-1] == "...":
                 names = names[:-1]
@@ -69,9 +71,33 @@ def parse_comment(text: str, header: Header) -> None:
                 header.repeating.discard(parts[1])
             header.fields[parts[1]] = tuple(names)
         return
+    if body.startswith("beacon "):
+        b = _BEACON.match(body)
+        if b:
+            try:
+                header.beacons[b.group(1)] = tuple(float(v) for v in b.group(2).split())
+            except ValueError:
+                pass
+            return
     m = re.match(r"^([A-Za-z_][A-Za-z0-9_\-]*)\s*:\s*(.*)$", body)
     if m:
         header.meta[m.group(1)] = m.group(2)
+
+
+_BEACON = re.compile(r"^beacon\s+([A-Za-z_][A-Za-z0-9_.\-]*)\s*:\s*(.*)$")
+
+
+def read_header(lines: Iterable[str], max_lines: int = 10_000) -> Header:
+    """The metadata of the ``#`` lines before the first message (at most ``max_lines`` lines read)."""
+    header = Header()
+    for n, raw in enumerate(lines):
+        text = raw.strip().lstrip("\ufeff")
+        if not text:
+            continue
+        if not text.startswith("#") or n >= max_lines:
+            break
+        parse_comment(text, header)
+    return header
 
 
 _GOOD_SENSORS: set[str] = set()  # names already checked against _SENSOR (the regex costs ~1 us a line)
@@ -82,7 +108,20 @@ def parse_line(text: str, lineno: int | None = None) -> Message:
     return _parse_stripped(text.strip(), lineno)
 
 
+#: Ends a line a source cut because it was too long (fusion.sources.recording.bounded_lines): a
+#: noncharacter, never in text, so the line is malformed rather than a shorter line that parses.
+OVERLONG = "\uffff"
+_BINARY = re.compile(r"[\x00-\x08\x0e-\x1f\x7f\ufffd\uffff]")  # control characters; U+FFFD: a byte that was not UTF-8
+
+
 def _parse_stripped(line: str, lineno: int | None) -> Message:
+    if "\ufffd" in line or (not line.isprintable() and _BINARY.search(line)):  # isprintable: ~0.1 us, no regex
+        bad = _BINARY.search(line)
+        c = bad.group()  # type: ignore[union-attr]
+        if c == OVERLONG:
+            raise MalformedMessage(f"line longer than {bad.start()} characters (skipped to its end)")  # type: ignore[union-attr]
+        what = "invalid UTF-8" if c == "\ufffd" else f"control byte 0x{ord(c):02x}"
+        raise MalformedMessage(f"binary data in the line ({what} at column {bad.start() + 1})")  # type: ignore[union-attr]
     parts = line.split(",")
     if len(parts) < 3:
         raise MalformedMessage("expected 't,sensor,value,...'")

@@ -253,7 +253,8 @@ class Scheduler:
                 return
         else:
             batch, self._pending = pending, []
-        yield from self._inputs(batch, until)
+        if batch:  # nothing pending: nothing to integrate (a measurement right after a flush)
+            yield from self._inputs(batch, until)
 
     def _process(self, msg: Message) -> Iterator[Estimate | Event]:
         if not self._replaying:
@@ -507,7 +508,9 @@ class Scheduler:
         yield from self._predict_to(obs.t)
         R = obs.R if obs.R is not None else sensor.R
         if R is None:
-            raise MalformedMessage(f"sensor {sensor.name!r} has no noise R in the config and its message carries none")
+            yield self._bad(sensor, msg, MalformedMessage(
+                f"sensor {sensor.name!r} has no noise R in the config and its message carries none"))
+            return
         if R.shape[0] != len(obs.z) and len(obs.z) % R.shape[0] == 0:
             R = np.kron(np.eye(len(obs.z) // R.shape[0]), R)  # R per item (a range) for a message of several
         t0 = time.perf_counter()

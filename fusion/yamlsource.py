@@ -1,12 +1,119 @@
 """YAML loading that remembers where each value came from, so errors can name the file and line."""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any, Sequence
 
 import yaml
 
 from fusion.api import ConfigError
+
+
+#: Deepest nesting of a YAML document, counted after alias expansion: a system config nests ~5 levels;
+#: the bound keeps the recursive composer (and pydantic after it) far from Python's recursion limit.
+MAX_DEPTH = 64
+#: Most values a document may expand to through aliases ("billion laughs": 9 aliases of 9 aliases of ...
+#: is 10 lines of YAML and 387 million values for pydantic to walk).
+MAX_VALUES = 100_000
+_MERGE = "tag:yaml.org,2002:merge"
+
+
+class _Loader(yaml.SafeLoader):
+    """SafeLoader that refuses, with the line, a duplicate key, nesting deeper than MAX_DEPTH, a recursive
+    alias and a document expanding to more than MAX_VALUES values."""
+
+    def __init__(self, stream: str):
+        super().__init__(stream)
+        self._depth = 0
+
+    def compose_node(self, parent, index):  # type: ignore[override]
+        self._depth += 1
+        try:
+            if self._depth > MAX_DEPTH:
+                raise yaml.composer.ComposerError(None, None, f"nested deeper than {MAX_DEPTH} levels",
+                                                  self.peek_event().start_mark)
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def compose_mapping_node(self, anchor):  # type: ignore[override]
+        node = super().compose_mapping_node(anchor)
+        seen: dict[Any, int] = {}
+        for key, _ in node.value:
+            if not isinstance(key, yaml.ScalarNode) or key.tag == _MERGE:
+                continue
+            try:
+                k = (type(v := self.construct_object(key)), v)
+                hash(k)
+            except (yaml.YAMLError, TypeError):
+                k = (key.tag, key.value)
+            if k in seen:
+                raise yaml.composer.ComposerError(
+                    None, None, f"duplicate key {key.value!r} (first at line {seen[k]}; a later one would "
+                    "silently replace it)", key.start_mark)
+            seen[k] = key.start_mark.line + 1
+        return node
+
+
+def _check_expansion(root: yaml.Node) -> None:
+    """ComposerError when aliases make the document recursive, deeper than MAX_DEPTH or larger than
+    MAX_VALUES values once expanded (each node is visited once: aliases share their node)."""
+    size: dict[int, tuple[int, int]] = {}
+    active: set[int] = set()
+
+    def walk(node: yaml.Node, level: int) -> tuple[int, int]:
+        if id(node) in size:
+            return size[id(node)]
+        if id(node) in active:
+            raise yaml.composer.ComposerError(None, None, "recursive alias (a value that contains itself)",
+                                              node.start_mark)
+        if level > MAX_DEPTH:
+            raise yaml.composer.ComposerError(None, None, f"nested deeper than {MAX_DEPTH} levels (through "
+                                              "aliases)", node.start_mark)
+        active.add(id(node))
+        n, depth = 1, 1
+        if isinstance(node, yaml.SequenceNode):
+            children = node.value
+        elif isinstance(node, yaml.MappingNode):
+            children = [c for kv in node.value for c in kv]
+        else:
+            children = []
+        for child in children:
+            cn, cd = walk(child, level + 1)
+            n, depth = n + cn, max(depth, cd + 1)
+            if n > MAX_VALUES:
+                raise yaml.composer.ComposerError(None, None, f"expands to more than {MAX_VALUES} values "
+                                                  "(aliases of aliases?)", node.start_mark)
+        if depth > MAX_DEPTH:
+            raise yaml.composer.ComposerError(None, None, f"nested deeper than {MAX_DEPTH} levels (through "
+                                              "aliases)", node.start_mark)
+        active.discard(id(node))
+        size[id(node)] = (n, depth)
+        return n, depth
+
+    walk(root, 1)
+
+
+def parse_yaml(text: str) -> tuple[Any, yaml.Node | None]:
+    """(data, root node) of one YAML document; yaml.YAMLError (with its mark) for a syntax error, a
+    duplicate key, nesting deeper than MAX_DEPTH, a recursive alias or an expansion over MAX_VALUES."""
+    loader = _Loader(text)
+    try:
+        root = loader.get_single_node()
+        if root is None:
+            return None, None
+        _check_expansion(root)
+        return loader.construct_document(root), root
+    finally:
+        loader.dispose()
+
+
+def yaml_problem(exc: yaml.YAMLError) -> tuple[int | None, str]:
+    """(1-based line or None, what is wrong) of a YAML error, for one-line messages."""
+    mark = getattr(exc, "problem_mark", None)
+    problem = getattr(exc, "problem", None) or str(exc).replace("\n", " ")
+    return (mark.line + 1 if mark is not None else None), problem
 
 
 class LocatedYAML:
@@ -57,26 +164,67 @@ def load_yaml(path: str | Path) -> LocatedYAML:
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{p}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-        data = yaml.safe_load(text)
+        data, root = parse_yaml(text)
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = f":{mark.line + 1}" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or str(exc)
-        raise ConfigError(f"{p}{line}: invalid YAML: {problem}") from None
+        line, problem = yaml_problem(exc)
+        raise ConfigError(f"{p}{f':{line}' if line else ''}: invalid YAML: {problem}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: expected a mapping of keys at the top level, got {type(data).__name__}")
     return LocatedYAML(p, data, root)
 
 
-def pydantic_errors(doc: LocatedYAML, exc: Any, prefix: Sequence[Any] = ()) -> ConfigError:
-    """Turn a pydantic ValidationError into one ConfigError naming file:line, field path and problem."""
+_TYPE_TAG = re.compile(r"^(float|int|str|bool|none|list|dict|tuple|set|literal|union|nullable)(\[.*\])?$|^function-")
+
+
+def _field_path(data: Any, loc: Sequence[Any]) -> list[Any]:
+    """The YAML path of a pydantic error location: without the names pydantic gives the members of a
+    union (``float``, ``list[float]``) and its validators (``function-after[...]``), unless the data has
+    such a key there."""
+    out: list[Any] = []
+    for part in loc:
+        if isinstance(part, str) and _TYPE_TAG.match(part) and not (isinstance(data, dict) and part in data):
+            continue
+        out.append(part)
+        if isinstance(data, dict):
+            data = data.get(part)
+        elif isinstance(data, list) and isinstance(part, int) and 0 <= part < len(data):
+            data = data[part]
+        else:
+            data = None
+    return out
+
+
+def _shape_mismatch(err: dict) -> bool:
+    """An error that only says the value has another type than one member of a union (``float_type``,
+    ``list_type``, ``float_parsing``): less telling than a member whose shape fits and whose value fails."""
+    return err["type"].endswith(("_type", "_parsing")) and err["type"] != "literal_error"
+
+
+def pydantic_errors(doc: LocatedYAML | None, exc: Any, prefix: Sequence[Any] = (), data: Any = None) -> ConfigError:
+    """Turn a pydantic ValidationError into one ConfigError naming file:line (when ``doc`` is given; else
+    the field path only, for values from the command line), field path and problem (the most telling
+    error first: a value of the right shape that fails a bound before a type mismatch with another member
+    of a union). ``data``: the validated input when there is no doc."""
     lines = []
-    for err in exc.errors():
-        loc = [*prefix, *[p for p in err["loc"] if not (isinstance(p, str) and p.startswith("function-"))]]
+    if doc is not None:
+        data = doc.data
+    else:
+        prefix, data = (), data
+    for p in prefix:
+        data = data.get(p) if isinstance(data, dict) else (data[p] if isinstance(data, list) and isinstance(p, int)
+                                                             and 0 <= p < len(data) else None)
+    errors = sorted(exc.errors(), key=_shape_mismatch)  # stable: document order otherwise
+    telling = [tuple(_field_path(data, e["loc"])) for e in errors if not _shape_mismatch(e)]
+    for err in errors:
+        path = _field_path(data, err["loc"])
+        if _shape_mismatch(err) and any(t[:len(path)] == tuple(path) for t in telling):
+            continue  # another member of the union fits this value's shape and says what is wrong
+        loc = [*prefix, *path]
         msg = err["msg"]
         if err["type"] == "extra_forbidden":
             msg = "unknown key"
-        lines.append(f"{doc.where(loc)}: {msg}")
+        line = f"{doc.where(loc) if doc is not None else '.'.join(map(str, loc))}: {msg}"
+        if line not in lines:
+            lines.append(line)
     more = f" (and {len(lines) - 1} more: " + "; ".join(lines[1:4]) + ")" if len(lines) > 1 else ""
     return ConfigError(lines[0] + more)

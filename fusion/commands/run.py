@@ -41,26 +41,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def filter_override(config: str | Path, name: str | None, params: list[str]) -> Any:
-    """The filter spec after --filter/--filter-param (None when neither is given). Only --filter-param
-    without --filter reads the config, to start from its own filter spec."""
-    if name is None and not params:
-        return None
-    import yaml
+    """The filter spec after --filter/--filter-param (fusion.overrides, imported when used)."""
+    from fusion.overrides import filter_override as _override
 
-    from fusion.yamlsource import load_yaml
-
-    base: dict[str, Any]
-    if name is not None:
-        base = {"type": name}
-    else:
-        own = load_yaml(config).data.get("filter", "ekf")
-        base = {"type": own} if isinstance(own, str) else dict(own)
-    for item in params:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise ConfigError(f"--filter-param {item!r}: expected KEY=VALUE")
-        base[key.strip()] = yaml.safe_load(value)
-    return base
+    return _override(config, name, params)
 
 
 class EventNotes:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import traceback
 
 from fusion.errors import FusionError
 
@@ -16,8 +17,33 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _check_recording(path: str, system, rec) -> None:
+    from fusion.errors import ConfigError, InputError
+    from fusion.logformat import read_header
+    from fusion.sources.recording import open_lines
+    from fusion.yamlsource import load_yaml
+
+    """The recording is a log (not binary) and every beacon its header declares (``# beacon B5: x y z``, as
+    ``fusion simulate`` writes) is in the config's ``beacons:``, when the config has beacons: a range to a
+    beacon the config lacks would be malformed at every cycle."""
+    lines = open_lines(rec)
+    try:
+        header = read_header(lines)
+    except InputError as exc:   # a directory, empty, binary: no log to replay
+        raise ConfigError(f"{load_yaml(path).where(['recording'])}: {exc}") from None
+    finally:
+        lines.close()  # type: ignore[attr-defined]
+    missing = [b for b in header.beacons if b not in system.beacons]
+    if system.beacons and missing:
+        where = load_yaml(path).where(["beacons"])
+        shown = ", ".join(f"{b}: {list(header.beacons[b])}" for b in missing)
+        raise ConfigError(f"{where}: the recording {rec.name} declares beacon(s) the config does not define "
+                          f"({shown}); their ranges would all be malformed. Defined: {sorted(system.beacons)}")
+
+
 def run(args: argparse.Namespace) -> int:
     from fusion.config import load_system
+    from fusion.yamlsource import load_yaml
 
     bad = 0
     for path in args.files:
@@ -25,9 +51,13 @@ def run(args: argparse.Namespace) -> int:
             system = load_system(path)
             rec = system.recording
             if rec is not None and not rec.exists():
-                raise FusionError(f"{path}: recording: {rec} does not exist")
+                raise FusionError(f"{load_yaml(path).where(['recording'])}: {rec} does not exist")
+            if rec is not None:
+                _check_recording(path, system, rec)
         except FusionError as exc:
             bad += 1
+            if getattr(args, "debug", False):
+                traceback.print_exc()
             print(f"{exc}", file=sys.stderr)
             continue
         sensors = ", ".join(f"{n} ({s.role})" for n, s in system.sensors.items())

@@ -14,13 +14,14 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from fusion.api import ConfigError
+from fusion.yamlsource import parse_yaml
 
 _LABEL = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 _SENSOR = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)   # every float finite, nested ones too
 
 
 Vec = list[float]
@@ -208,7 +209,7 @@ def load_scenario(path: str | Path) -> tuple[Scenario, str]:
 def parse_scenario(text: str, where: str = "<scenario>") -> Scenario:
     """Validate scenario YAML text (the name defaults to the file stem)."""
     try:
-        data = yaml.safe_load(text)
+        data, _ = parse_yaml(text)   # duplicate keys, nesting and alias bombs are errors with the line
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         at = f" (line {mark.line + 1})" if mark is not None else ""

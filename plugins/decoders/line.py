@@ -5,23 +5,35 @@ is read; this decoder optionally checks the number of values and that they are n
 """
 from __future__ import annotations
 
+from pydantic import Field
+
 from fusion.api import Decoder, MalformedMessage, Message, Params
 
 
 class LineDecoder(Decoder):
     """The log format's own fields, unchanged (``t,sensor,v1,v2,...``).
 
-    Params: ``count``: expected number of values (None: any); ``numeric``: every value must be a number."""
+    Params: ``count``: expected number of values (None: any); ``numeric``: every value must be a number
+    (else labels pass). A number must be finite. A message that breaks any of these is malformed
+    (MalformedMessage with the reason)."""
 
     name = "line"
 
     class Params(Params):
-        count: int | None = None
+        count: int | None = Field(None, ge=0)
         numeric: bool = False
 
     def decode(self, message: Message) -> Message | None:
         if self.params.count is not None and len(message.values) != self.params.count:
             raise MalformedMessage(f"expected {self.params.count} values, got {len(message.values)}")
-        if self.params.numeric and any(isinstance(v, str) for v in message.values):
-            raise MalformedMessage(f"expected numbers, got {message.values!r}")
+        numeric = self.params.numeric
+        for i, v in enumerate(message.values):
+            # fusion.logformat parses only finite numbers and labels; a message from elsewhere may hold a NaN
+            if v.__class__ is str:
+                if not numeric:
+                    continue
+            elif isinstance(v, (int, float)) and v - v == 0.0:
+                continue
+            raise MalformedMessage(f"value {i + 1}: expected a finite number{'' if numeric else ' or a label'}, "
+                                   f"got {v!r}")
         return message

@@ -24,6 +24,12 @@ from fusion.api import Params
 
 __all__ = ["SigmaPoints", "UnscentedParams"]
 
+#: Sigma points at most this many standard deviations from the mean (sqrt(alpha^2 (n + kappa))).
+MAX_SPREAD = 1e3
+#: Largest |W_m^0|, |W_c^0|: the weights sum to 1, so a weighted sum of points loses log10(|W|) of its 16
+#: digits to cancellation; 1e10 keeps 6 (alpha = 1e-3 gives ~1e6, DESIGN.md "Performance notes").
+MAX_WEIGHT = 1e10
+
 
 class UnscentedParams(Params):
     """Scaled unscented transform parameters (paper 000 Algorithm 1 notes, paper 001 eqs. 12-13), the
@@ -56,6 +62,15 @@ class SigmaPoints:
         if not c > 0.0:
             raise ValueError(f"unscented transform needs alpha^2 (n + kappa) > 0; got alpha={alpha}, "
                              f"kappa={kappa}, n={n}: choose kappa > {-n}")
+        if c > MAX_SPREAD ** 2:
+            raise ValueError(f"sigma points at sqrt(alpha^2 (n + kappa)) = {math.sqrt(c):.3g} standard deviations "
+                             f"(alpha={alpha}, kappa={kappa}, n={n}); at most {MAX_SPREAD:g}: beyond, they sample "
+                             "the models where the Gaussian has no mass")
+        w0 = max(abs(lam / c), abs(lam / c + 1.0 - alpha * alpha + beta))
+        if not w0 <= MAX_WEIGHT:
+            raise ValueError(f"zeroth sigma-point weight {w0:.3g} (alpha={alpha}, beta={beta}, kappa={kappa}, n={n}) "
+                             f"beyond {MAX_WEIGHT:g}: a weighted mean would keep no 6 digits (raise alpha, or bring "
+                             "beta near 2)")
         self.n, self.alpha, self.beta, self.kappa, self.lam = n, alpha, beta, kappa, lam
         self.eta = math.sqrt(c)
         self.w = 1.0 / (2.0 * c)

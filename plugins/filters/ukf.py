@@ -27,6 +27,8 @@ class SigmaPointFilter(KalmanBase):
         self._mode = self.params.linear_prediction
         self._augmented = bool(getattr(self.params, "augmented", False))
         self._batch_inputs = bool(self.params.batch_inputs)
+        if self.context.layout is not None:   # wired for a state: bad alpha/beta/kappa are a config error
+            self.sigma_points(self.context.layout.n)
 
     def sigma_points(self, n: int) -> SigmaPoints:
         """Weights and deviation pattern for dimension n (cached)."""

@@ -8,7 +8,8 @@ import numpy as np
 from pydantic import Field
 
 from fusion import quaternion as quat
-from fusion.api import BuildContext, ConfigError, MalformedMessage, MeasurementModel, Message, Observation, Params
+from fusion.api import (MAX_MAGNITUDE, BuildContext, ConfigError, MalformedMessage, MeasurementModel, Message,
+                        Observation, Params)
 
 
 _SYM3 = np.array([[3, 4, 5], [4, 6, 7], [5, 7, 8]])   # indices into a 9-value fix of its symmetric covariance
@@ -66,6 +67,7 @@ class Position(MeasurementModel):
         if self.dim > np_:
             raise ConfigError(f"position: dim {self.dim} but the state's p block has {np_} elements")
         self.n = layout.n
+        self.carries_R = bool(p.use_fix_covariance)   # a 9- or 10-value fix carries its covariance
         self._v = layout["v"] if "v" in layout and layout["v"].stop - layout["v"].start >= self.dim else None
         self.lever_arm = np.asarray(p.lever_arm, dtype=float)
         qblocks = [b.name for b in layout.blocks if b.kind == "quaternion"]
@@ -111,10 +113,17 @@ class Position(MeasurementModel):
 
     def observe(self, message: Message) -> Observation | None:
         """Observation of a fix message: ``dim`` (or 3) coordinates, or 9 values with the covariance, or 10:
-        the covariance and the fix's age (s: the position is of that long before the message time)."""
+        the covariance and the fix's age (s: the position is of that long before the message time).
+        MalformedMessage, with the reason, for another count, a value that is no finite number, a negative
+        age or a covariance that is not positive definite."""
         z = message.floats()
+        if z.ndim != 1:   # sequences where numbers belong (a message from another source)
+            raise MalformedMessage(f"position expects numbers, got {message.values!r}")
         if not np.all(np.isfinite(z)):
             raise MalformedMessage(f"position: non-finite value in {message.values!r}")
+        if np.any(np.abs(z) > MAX_MAGNITUDE):
+            raise MalformedMessage(f"position: a value beyond {MAX_MAGNITUDE:g} in {message.values!r} (its square "
+                                   "overflows float64)")
         R = None
         model: MeasurementModel = self
         if z.size == 10:
@@ -129,6 +138,11 @@ class Position(MeasurementModel):
             cov = z[_SYM3]                      # the upper triangle x y z cxx cxy cxz cyy cyz czz, mirrored
             if self.params.use_fix_covariance:  # type: ignore[attr-defined]
                 R = cov[:self.dim, :self.dim]
+                try:                            # a covariance a filter cannot factor: no use as R
+                    np.linalg.cholesky(R)
+                except np.linalg.LinAlgError:
+                    raise MalformedMessage(f"position: the fix's covariance {R.tolist()} (m^2) is not positive "
+                                           "definite") from None
             z = z[:3]
         elif z.size not in (self.dim, 3) or z.size < self.dim:
             raise MalformedMessage(f"position expects {self.dim} coordinates (or 9 values: x y z and the "

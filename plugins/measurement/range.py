@@ -26,7 +26,8 @@ import numpy as np
 
 from pydantic import Field
 
-from fusion.api import Belief, ConfigError, Event, MalformedMessage, MeasurementModel, Message, Observation, Params
+from fusion.api import (MAX_MAGNITUDE, Belief, ConfigError, Event, MalformedMessage, MeasurementModel, Message,
+                        Observation, Params)
 from fusion.quaternion import rotate, rotate_jacobian
 
 
@@ -43,11 +44,13 @@ class RangeModel(MeasurementModel):
     Params: ``beacons``: the beacons this sensor may range to (default: all); ``tag_z``: the tag's height
     (m, same frame as the beacons) used when the state is 2-D and the beacons are 3-D; ``calibration``:
     per-beacon ``bias`` (m) and ``scale`` (measured = scale x distance + bias); ``lever_arm``: the tag's
-    position in the body frame (m, FRD; needs the attitude block ``q``); ``gdop_warn`` and
+    position in the body frame (m, FRD; needs the attitude block ``q``); ``max_range``: the sensor's longest
+    range (m), a longer one is malformed; ``gdop_warn`` and
     ``mirror_warn_sigma``: thresholds of ``check`` (see the module docstring)."""
 
     name = "range"
     dim = 1
+    carries_R = False   # a range message has no covariance: R is the sensor's noise
 
     class Params(Params):
         beacons: list[str] | None = None
@@ -56,6 +59,8 @@ class RangeModel(MeasurementModel):
                                                           "(m) and scale; measured = scale x distance + bias")
         lever_arm: list[float] | None = Field(None, min_length=3, max_length=3, description="m, body FRD: the "
                                               "tag's offset from the body origin (needs the attitude block q)")
+        max_range: float | None = Field(None, gt=0.0, description="m: a longer range is malformed (not "
+                                        "physical for the sensor; None: no limit)")
         gdop_warn: float | None = Field(10.0, gt=0.0, description="check(): warn when the GDOP of the beacons "
                                         "at the estimated position exceeds this (None: never)")
         mirror_warn_sigma: float | None = Field(3.0, gt=0.0, description="check(): with beacons on one line "
@@ -75,6 +80,10 @@ class RangeModel(MeasurementModel):
         unknown = [b for b in names if b not in ctx.beacons]
         if unknown:
             raise ConfigError(f"range: unknown beacon(s) {unknown}; the config defines {sorted(ctx.beacons)}")
+        short = [b for b in names if len(ctx.beacons[b]) < self._dp]
+        if short:
+            raise ConfigError(f"range: beacon(s) {short} have {len(ctx.beacons[short[0]])} coordinates but the "
+                              f"state position is {self._dp}-D")
         self._known = frozenset(names)
         uncal = sorted(set(self.params.calibration) - self._known)
         if uncal:
@@ -199,21 +208,36 @@ class RangeModel(MeasurementModel):
         return ev
 
     def observe(self, message: Message) -> Observation | None:
+        """Observation of ``beacon range [beacon range ...]`` (m). MalformedMessage, with the reason, for
+        a wrong field count, a beacon that is no name or not one of this sensor's, a range that is not a
+        finite number >= 0 or is beyond ``max_range``."""
         vals = message.values
         if len(vals) < 2 or len(vals) % 2:
-            raise MalformedMessage(f"range expects 'beacon range' pairs, got {len(vals)} values")
+            raise MalformedMessage(f"range expects 'beacon range' pairs, got {len(vals)} value(s) {vals!r}")
         names = tuple(vals[0::2])
         for b in names:
             if not isinstance(b, str):
-                raise MalformedMessage(f"range expects a beacon name, got {b!r}")
+                raise MalformedMessage(f"range expects a beacon name, got {b!r} (fields 'beacon range', "
+                                       f"beacons {', '.join(sorted(self._known))})")
             if b not in self._known:
                 raise MalformedMessage(f"unknown beacon {b!r} (known: {', '.join(sorted(self._known))})")
+        if len(names) > 1 and len(set(names)) != len(names):   # (also bounds a message to one range a beacon)
+            raise MalformedMessage(f"beacon {next(b for b in names if names.count(b) > 1)!r} twice in one message")
         try:
             z = np.array(vals[1::2], float)
-        except ValueError:
+        except (TypeError, ValueError):
             raise MalformedMessage(f"range expects numbers, got {vals[1::2]!r}") from None
+        if z.shape != (len(names),):   # a sequence where a number belongs (a message from another source)
+            raise MalformedMessage(f"range expects numbers, got {vals[1::2]!r}")
+        if not np.all(np.isfinite(z)):
+            raise MalformedMessage(f"non-finite range in {vals!r}")
         if np.any(z < 0):
-            raise MalformedMessage(f"negative range {z.min()}")
+            raise MalformedMessage(f"negative range {z.min()} m")
+        mx = self.params.max_range
+        if mx is not None and np.any(z > mx):
+            raise MalformedMessage(f"range {z.max()} m beyond max_range {mx} m")
+        if np.any(z > MAX_MAGNITUDE):
+            raise MalformedMessage(f"range {z.max()} m beyond {MAX_MAGNITUDE:g} (its square overflows float64)")
         return Observation(message.t, z, self._bind(names))
 
 

@@ -402,6 +402,8 @@ class Ins(ProcessModel):
             u = np.array(vals, dtype=float)
         except (TypeError, ValueError):
             raise MalformedMessage(f"expected numbers, got {vals!r}") from None
+        if u.shape != (6,):                          # sequences for numbers (a message from another source)
+            raise MalformedMessage(f"expected numbers, got {vals!r}")
         ax, ay, az, gx, gy, gz = u.tolist()          # plain floats: these checks cost ~1 us, numpy's ~10
         total = ax + ay + az + gx + gy + gz
         if total - total != 0.0:                     # a nan or an inf among them

@@ -15,12 +15,13 @@ from typing import Any, Callable, ClassVar, Literal, Sequence
 import numpy as np
 from pydantic import Field
 
-from fusion.api import Belief, BuildContext, ConfigError, Event, MalformedMessage, Message, Params, Solver
+from fusion.api import MAX_MAGNITUDE, Belief, BuildContext, ConfigError, Event, MalformedMessage, Message, Params, Solver
 from fusion_plugins.solvers.firing_schedule import FiringSchedule
 from fusion_plugins.solvers.ols_linear import _condition, _ols_fit, _solve_linear
 from fusion_plugins.solvers.range_fix import Cycle, Fit, NoFix, consensus, inflate, weighted_fix
 
 REASONS = ("too_few_beacons", "degenerate", "inconsistent", "ambiguous")
+MAX_SD_M = 1e6   # m (m/s^2 for accel_sd): its square must stay finite through the fix covariance; no sensor is worse
 __all__ = ["NoFix", "trilaterate", "pack_fix", "unpack_fix", "OlsParams", "OlsTrilateration"]
 
 
@@ -135,9 +136,11 @@ class OlsParams(Params):
 
     dim: Literal[2, 3] = Field(2, description="2: the mine case (height z known to z_sd), 3: x y z from the ranges")
     z: float = Field(0.0, description="receiver height (m, navigation frame) assumed in 2-D")
-    z_sd: float = Field(0.1, ge=0, description="sd (m) of that height: a range error shared by a cycle in the fix "
+    z_sd: float = Field(0.1, ge=0, le=MAX_SD_M, description="sd (m) of that height: a range error shared by a cycle in the fix "
                         "covariance (refine > 0; the prior with solve_height) and the sd of the fix's z")
-    range_sd: float = Field(0.05, gt=0, description="range noise sd (m)")
+    range_sd: float = Field(0.05, gt=0, le=MAX_SD_M, description="range noise sd (m)")
+    max_range: float | None = Field(None, gt=0, description="m: a longer range is malformed (not physical "
+                                    "for the sensor; None: no limit)")
     firing_period: float | None = Field(None, gt=0, description="s: the beacons' firing period, which decides the "
                                         "cycles (None: learnt from the stream)")
     speed_of_sound: float | None = Field(None, gt=0, description="m/s: ultrasonic time of flight; the emission "
@@ -158,7 +161,7 @@ class OlsParams(Params):
                                       "filter's predicted velocity (fusion.api.ReadsBelief; not in the paper)")
     velocity_sd: float = Field(0.05, ge=0, description="m/s: receiver velocity the state's v does not carry (a "
                                "lever arm turning), added to the filter's velocity uncertainty")
-    accel_sd: float = Field(0.5, ge=0, description="m/s^2: acceleration within a cycle (unmodelled)")
+    accel_sd: float = Field(0.5, ge=0, le=MAX_SD_M, description="m/s^2: acceleration within a cycle (unmodelled)")
     lever_arm: tuple[float, float, float] | None = Field(None, description="receiver in the body frame (m, FRD), "
                                                          "as the position model's: with compensation the "
                                                          "fix starts from the belief's receiver position")
@@ -220,6 +223,9 @@ class OlsTrilateration(Solver):
                               f"{sorted(self.context.beacons)}")
         self.beacon_positions = {n: self._pad(self.context.beacons[n]) for n in names}
         self.min_beacons = p.min_beacons if p.min_beacons is not None else p.dim + 1
+        if self.min_beacons > len(self.beacon_positions):
+            raise ConfigError(f"ols_trilateration: min_beacons {self.min_beacons} but only "
+                              f"{len(self.beacon_positions)} beacon(s): no cycle could ever give a fix")
         if self.min_beacons < p.dim + 1:
             raise ConfigError(f"ols_trilateration: min_beacons {self.min_beacons} < {p.dim + 1} needed for a {p.dim}-D fix")
         self._v: slice | None = None
@@ -269,7 +275,14 @@ class OlsTrilateration(Solver):
                 raise MalformedMessage(f"range to {label} is not a number: {rng!r}") from None
             if not np.isfinite(rng) or rng < 0:
                 raise MalformedMessage(f"range to {label} must be finite and >= 0, got {rng}")
+            if rng > MAX_MAGNITUDE:
+                raise MalformedMessage(f"range to {label} {rng} m beyond {MAX_MAGNITUDE:g} (its square overflows)")
+            if self.params.max_range is not None and rng > self.params.max_range:  # type: ignore[attr-defined]
+                raise MalformedMessage(f"range to {label} {rng} m beyond max_range "
+                                       f"{self.params.max_range} m")  # type: ignore[attr-defined]
             pairs.append((label, rng))
+        if len(pairs) > 1 and len({label for label, _ in pairs}) != len(pairs):
+            raise MalformedMessage(f"beacon named twice in one message {vals!r}")
         self._sensor, self._line = message.sensor, message.line
         out: list[Message] = []
         for label, rng in pairs:
@@ -312,17 +325,25 @@ class OlsTrilateration(Solver):
         try:
             if len(names) < self.min_beacons:
                 raise NoFix("too_few_beacons", f"{len(names)} beacon(s) {names}, need {self.min_beacons}")
-            pos, cov, info = trilaterate(
-                B, ranges, dim=p.dim, z=p.z, z_sd=p.z_sd, sigma=p.range_sd, reference=p.reference,
-                qr_condition=p.qr_condition, degenerate_condition=p.degenerate_condition,
-                refine=p.refine_iterations, consistency_probability=p.consistency_probability,
-                max_outliers=p.max_outliers, min_beacons=self.min_beacons,
-                offsets=None if Pv is None else times - t_m, velocity_cov=Pv,
-                accel_sd=p.accel_sd if Pv is not None else 0.0, solve_height=p.solve_height,
-                inflate_misfit=p.inflate_misfit, start=start if p.refine_iterations else None)
+            with np.errstate(over="ignore", invalid="ignore"):    # overflowing ranges: caught just below
+                pos, cov, info = trilaterate(
+                    B, ranges, dim=p.dim, z=p.z, z_sd=p.z_sd, sigma=p.range_sd, reference=p.reference,
+                    qr_condition=p.qr_condition, degenerate_condition=p.degenerate_condition,
+                    refine=p.refine_iterations, consistency_probability=p.consistency_probability,
+                    max_outliers=p.max_outliers, min_beacons=self.min_beacons,
+                    offsets=None if Pv is None else times - t_m, velocity_cov=Pv,
+                    accel_sd=p.accel_sd if Pv is not None else 0.0, solve_height=p.solve_height,
+                    inflate_misfit=p.inflate_misfit, start=start if p.refine_iterations else None)
+            if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(cov))):
+                raise NoFix("inconsistent", f"the fix is not finite (ranges {ranges.tolist()} m)")
         except NoFix as exc:
             self.counters[exc.reason] += 1
             self.events.append(Event(t_end, "no_fix", self._sensor, str(exc)))
+            return []
+        except (np.linalg.LinAlgError, ValueError) as exc:  # numbers no fix can come from (not finite)
+            self.counters["inconsistent"] += 1
+            self.events.append(Event(t_end, "no_fix", self._sensor, f"inconsistent: no fix from ranges "
+                                     f"{ranges.tolist()} m: {exc}"))
             return []
         for j in info["rejected"]:
             self.counters["outliers_removed"] += 1
