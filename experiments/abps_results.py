@@ -93,7 +93,7 @@ def run(changes: dict | None = None) -> dict:
         blocks[name] = np.array([float(e[i:i + k] @ np.linalg.solve(C[i:i + k, i:i + k], e[i:i + k]))
                                  for _, e, _, C, *_ in rows])
         i += k
-    return {"system": system, "summary": summary, "result": result, "cpu_s": cpu, "t": t, "E": E, "SD": SD,
+    return {"system": system, "summary": summary, "result": result, "estimates": kept.estimates, "cpu_s": cpu, "t": t, "E": E, "SD": SD,
             "nees": nees, "blocks": blocks, "nis": np.array([r[4] for r in rows]),
             "X": np.array([r[5] for r in rows]), "truth": truth}
 
@@ -390,10 +390,10 @@ def main(argv=None) -> None:
         results.append((label, r, scores(r)))
         sc = results[-1][2]
         print(f"{label}: horizontal RMSE {sc['h_rmse']:.4f} m, NEES {sc['nees_mean']:.1f}, CPU {r['cpu_s']:.2f} s")
-    xa = np.array([e.belief.x for e in results[0][1]["result"]["estimates"]])
-    xb = np.array([e.belief.x for e in results[1][1]["result"]["estimates"]])
-    sa = np.array([e.belief.sd for e in results[0][1]["result"]["estimates"]])
-    sb = np.array([e.belief.sd for e in results[1][1]["result"]["estimates"]])
+    xa = np.array([e.belief.x for e in results[0][1]["estimates"]])
+    xb = np.array([e.belief.x for e in results[1][1]["estimates"]])
+    sa = np.array([e.belief.sd for e in results[0][1]["estimates"]])
+    sb = np.array([e.belief.sd for e in results[1][1]["estimates"]])
     ukf_diff = (float(np.abs(xa - xb).max()), float(np.abs(sa - sb).max()))
     figures(results[0][1])
     routes = abps_routes.study(3 if args.quick else 10)
