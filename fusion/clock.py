@@ -101,6 +101,12 @@ class ClockGuard:
         self.busy = bool(self._held or self.offsets)
         return out, events
 
+    def on_base(self, sensor: str) -> None:
+        """Note a message of ``sensor`` known to be on the base with nothing held and no offset (the
+        caller's fast path: what ``admit`` would do then, without its result lists)."""
+        self._alive += 1
+        self._alive_by[sensor] = self._alive
+
     def _drop(self, sensor: str, why: str) -> list[Event]:
         held = self._held.pop(sensor, None)
         if held is None:

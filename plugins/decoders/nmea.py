@@ -32,8 +32,6 @@ import math
 from typing import Any, ClassVar
 
 import numpy as np
-import pymap3d
-import pynmea2
 from pydantic import Field, field_validator
 
 from fusion.api import BuildContext, Decoder, MalformedMessage, Message, Params, RejectedMessage
@@ -150,6 +148,8 @@ class NmeaDecoder(Decoder):
         text = message.values[0].strip()
         if not text.startswith("$"):
             raise MalformedMessage(f"nmea: not an NMEA sentence: {text[:40]!r}")
+        import pynmea2  # at first use: every installed plugin module is imported at start-up
+
         try:
             return pynmea2.parse(text, check=True)
         except pynmea2.ChecksumError as exc:
@@ -158,6 +158,8 @@ class NmeaDecoder(Decoder):
             raise MalformedMessage(f"nmea: cannot parse {text[:40]!r}: {exc.args[0] if exc.args else exc}") from None
 
     def _fix(self, message: Message, epoch: dict[str, Any]) -> Message | None:
+        import pymap3d  # at first use (start-up stays cheap for configs without GPS)
+
         p: NmeaParams = self.params  # type: ignore[assignment]
         gga = epoch["GGA"]
         quality = int(_num(gga.gps_qual)) if math.isfinite(_num(gga.gps_qual)) else 0
