@@ -7,7 +7,7 @@ import pytest
 
 from import_helpers import Recording, fusion_import, need_px4_log, one_error_line
 
-pyulog = pytest.importorskip("pyulog")
+import pyulog  # noqa: E402  a dependency: a missing one is a failure, not a skip
 
 
 @pytest.fixture(scope="module")

@@ -276,7 +276,7 @@ def test_matches_simulator_noise_free_truth(integration, tol):
     truth on a turning, sloping route (trapezoidal: under 1 cm; the paper's Euler p update drifts
     by O(dt) per unit time). Each rate sample is held over its interval (as the scheduler does), so
     the attitude lags by dt/2 |w| inside a turn (~0.2 deg here) and catches up after it."""
-    simulate = pytest.importorskip("fusion.simulate.engine")
+    import fusion.simulate.engine as simulate
     from fusion.logformat import iter_messages
     from fusion.simulate.scenario import parse_scenario
 

@@ -125,10 +125,10 @@ def test_accuracy_bar_with_noise(route):
     3,   # the third biased fix passes the gate (NIS 14.5 < 16.3): the config's lock-out recovery re-sets p
 ])
 def test_biased_cycles_do_not_lock_the_filter_out(route, tmp_path, cycles):
-    """Finding 5's precondition (the recovery itself is issue 10's): cycles whose ranges are all from a
-    receiver 0.4 m to the side of the truth (consistent with each other, so no range test can refuse them).
-    One such cycle is refused by the gate and the fixes resume: no stretch of 2 s without an accepted fix,
-    the route error back under the bar. Three in a row lock the filter out today (xfail, for issue 10)."""
+    """Finding 5: cycles whose ranges are all from a receiver 0.4 m to the side of the truth (consistent with
+    each other, so no range test can refuse them). One such cycle is refused by the gate and the fixes
+    resume; three in a row would lock the filter out, and the config's lock-out recovery (fusion/recovery.py)
+    re-sets it: either way no stretch of 2 s without an accepted fix, the route error back under the bar."""
     logs, data = route
     system = _system(data)
     result, _ = _run(system, logs["off"])

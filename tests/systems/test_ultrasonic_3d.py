@@ -53,8 +53,6 @@ def test_iekf_on_fresh_walks(tmp_path, seed, first_fire):
 
 
 def test_pose_config_on_its_recording(tmp_path):
-    if not POSE.exists():
-        pytest.skip("pose config not written yet")
     s = _cli(tmp_path, POSE)
     assert s["errors"]["position_rmse_m"] < 0.08
     assert s["errors"]["attitude_rmse_deg"] < 15.0
