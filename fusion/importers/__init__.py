@@ -1,15 +1,17 @@
 """Built-in importers of ``fusion import`` (PX4 ULog, ArduPilot DataFlash, CSV by a mapping file),
 registered as plugins of kind ``importer`` like any other: a third party adds a format the same way.
-Each importer imports its reader library (pyulog, pymavlink) at first use, so start-up stays fast."""
+Each importer imports its reader library (pyulog, pymavlink) at first use, and the importers are
+registered lazily (imported when ``fusion import`` lists or uses them), so start-up stays fast."""
 from fusion import hookimpl
+
+IMPORTERS = {
+    "ulog": "fusion.importers.ulog:UlogImporter",
+    "dataflash": "fusion.importers.dataflash:DataflashImporter",
+    "csv": "fusion.importers.csvmap:CsvImporter",
+}
 
 
 @hookimpl
 def fusion_register_components(registry):
-    from fusion.importers.csvmap import CsvImporter
-    from fusion.importers.dataflash import DataflashImporter
-    from fusion.importers.ulog import UlogImporter
-
-    registry.add(UlogImporter)
-    registry.add(DataflashImporter)
-    registry.add(CsvImporter)
+    for name, target in IMPORTERS.items():
+        registry.add_lazy("importer", name, target)
