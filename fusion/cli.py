@@ -20,6 +20,8 @@ from fusion import __version__  # noqa: E402
 from fusion.errors import FusionError  # noqa: E402
 
 COMMANDS = ("run", "validate", "plugins", "simulate", "tui", "import_")  # import_: `fusion import`
+# Commands that import numpy and scipy.linalg: numpy's unused submodules are deferred for them (start-up).
+NUMERIC_COMMANDS = ("run", "validate", "tui", "simulate", "import")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -53,6 +55,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        if args.command in NUMERIC_COMMANDS:
+            from fusion.lazy_imports import defer_unused_numpy_modules
+
+            defer_unused_numpy_modules()
         return int(args.func(args) or 0)
     except FusionError as exc:
         if args.debug:

@@ -115,6 +115,8 @@ _BINARY = re.compile(r"[\x00-\x08\x0e-\x1f\x7f\ufffd\uffff]")  # control charact
 
 
 def _parse_stripped(line: str, lineno: int | None) -> Message:
+    # The hot path of every replay (one call a line): each check below is the cheapest that decides it,
+    # and the message is built with tuple.__new__ (NamedTuple's own __new__ is a Python-level frame).
     if "\ufffd" in line or (not line.isprintable() and _BINARY.search(line)):  # isprintable: ~0.1 us, no regex
         bad = _BINARY.search(line)
         c = bad.group()  # type: ignore[union-attr]
@@ -122,24 +124,26 @@ def _parse_stripped(line: str, lineno: int | None) -> Message:
             raise MalformedMessage(f"line longer than {bad.start()} characters (skipped to its end)")  # type: ignore[union-attr]
         what = "invalid UTF-8" if c == "\ufffd" else f"control byte 0x{ord(c):02x}"
         raise MalformedMessage(f"binary data in the line ({what} at column {bad.start() + 1})")  # type: ignore[union-attr]
-    parts = line.split(",")
-    if len(parts) < 3:
+    head = line.split(",", 2)
+    if len(head) < 3:
         raise MalformedMessage("expected 't,sensor,value,...'")
+    t_text, sensor, rest = head
     try:
-        t = float(parts[0])
+        t = float(t_text)
     except ValueError:
-        raise MalformedMessage(f"bad time {parts[0].strip()!r}") from None
+        raise MalformedMessage(f"bad time {t_text.strip()!r}") from None
     if t - t != 0.0:
-        raise MalformedMessage(f"non-finite time {parts[0].strip()!r}")
-    sensor = parts[1]
+        raise MalformedMessage(f"non-finite time {t_text.strip()!r}")
     if sensor not in _GOOD_SENSORS:
+        raw_sensor = sensor
         sensor = sensor.strip()
         if not _SENSOR.match(sensor):
             raise MalformedMessage(f"bad sensor name {sensor!r}")
-        if len(_GOOD_SENSORS) < 1000 and sensor == parts[1]:
+        if len(_GOOD_SENSORS) < 1000 and sensor == raw_sensor:
             _GOOD_SENSORS.add(sensor)
-    if parts[2][:1] == "$" or parts[2].lstrip().startswith("$"):
-        return Message(t, sensor, (line.split(",", 2)[2].strip(),), lineno)
+    if "$" in rest and rest.lstrip()[:1] == "$":
+        return _new_message(Message, (t, sensor, (rest.strip(),), lineno))
+    parts = rest.split(",")
     if "*" in parts[-1]:
         m = _CHECKSUM.search(line)
         if not m:
@@ -148,16 +152,19 @@ def _parse_stripped(line: str, lineno: int | None) -> Message:
         if checksum(body) != m.group(1).upper():
             raise MalformedMessage(f"bad checksum *{m.group(1)} (computed *{checksum(body)})")
         parts[-1] = parts[-1][: parts[-1].rindex("*")]
-    if len(parts) == 3 and not parts[2].strip():
-        raise MalformedMessage("no values")
     try:  # fast path: all numbers
-        values = tuple(map(float, parts[2:]))
+        values = tuple(map(float, parts))
     except ValueError:
-        return Message(t, sensor, tuple([_field(tok) for tok in parts[2:]]), lineno)
+        if len(parts) == 1 and not parts[0].strip():
+            raise MalformedMessage("no values") from None
+        return _new_message(Message, (t, sensor, tuple([_field(tok) for tok in parts]), lineno))
     total = sum(values)
     if total - total != 0.0:  # a nan or inf among them (or an overflowing sum: checked one by one)
-        return Message(t, sensor, tuple([_field(tok) for tok in parts[2:]]), lineno)
-    return Message(t, sensor, values, lineno)
+        return _new_message(Message, (t, sensor, tuple([_field(tok) for tok in parts]), lineno))
+    return _new_message(Message, (t, sensor, values, lineno))
+
+
+_new_message = tuple.__new__
 
 
 def format_value(v: float | str) -> str:
