@@ -29,10 +29,11 @@ import math
 import sys
 import time
 from contextlib import contextmanager
-from typing import Any, Iterator
+from typing import TYPE_CHECKING, Any, Iterator
 
-from rich.console import Console
-from rich.table import Table
+if TYPE_CHECKING:  # rich is imported when something is printed: ``fusion run -q`` never loads it (start-up)
+    from rich.console import Console
+    from rich.table import Table
 
 __all__ = ["print_summary", "progress", "Ticker"]
 
@@ -64,8 +65,20 @@ def _num(v: Any, fmt: str = ".4g") -> str:
     return format(f, fmt) if math.isfinite(f) else str(f)
 
 
+def _table(*args: Any, **kwargs: Any) -> Table:
+    from rich.table import Table
+
+    return Table(*args, **kwargs)
+
+
+def _console(**kwargs: Any) -> Console:
+    from rich.console import Console
+
+    return Console(**kwargs)
+
+
 def _kv_table(title: str) -> Table:
-    t = Table(title=title, title_justify="left", title_style="bold", show_header=False, box=None,
+    t = _table(title=title, title_justify="left", title_style="bold", show_header=False, box=None,
               pad_edge=False, padding=(0, 2, 0, 0))
     t.add_column(style="cyan", no_wrap=True)
     t.add_column()
@@ -94,7 +107,7 @@ def _run_table(s: dict) -> Table:
 
 
 def _sensors_table(sensors: dict) -> Table:
-    t = Table(title="Sensors", title_justify="left", title_style="bold")
+    t = _table(title="Sensors", title_justify="left", title_style="bold")
     t.add_column("sensor", style="cyan")
     for c in _SENSOR_COLUMNS:
         t.add_column(c, justify="right")
@@ -109,7 +122,7 @@ def _sensors_table(sensors: dict) -> Table:
 
 
 def _errors_table(errors: dict) -> Table:
-    t = Table(title="Errors against truth", title_justify="left", title_style="bold",
+    t = _table(title="Errors against truth", title_justify="left", title_style="bold",
               caption=f"over {errors['samples']:,} estimates" if "samples" in errors else None,
               caption_justify="left")
     t.add_column("metric", style="cyan")
@@ -131,7 +144,7 @@ def _errors_table(errors: dict) -> Table:
 
 
 def _consistency_table(c: dict) -> Table:
-    t = Table(title="Consistency (95% chi-square interval)", title_justify="left", title_style="bold")
+    t = _table(title="Consistency (95% chi-square interval)", title_justify="left", title_style="bold")
     t.add_column("statistic", style="cyan")
     t.add_column("dof", justify="right")
     t.add_column("mean", justify="right")
@@ -153,7 +166,7 @@ def _pct(v: Any) -> str:
 
 def print_summary(summary: dict, console: Console | None = None) -> None:
     """Print ``summary`` (DESIGN.md "Outputs") as readable tables; see the module docstring."""
-    console = console if console is not None else Console()
+    console = console if console is not None else _console()
     console.print(_run_table(summary))
     if summary.get("sensors"):
         console.print()
@@ -239,10 +252,11 @@ class Ticker:
 def progress(end_t: float | None, enabled: bool | None = None, *, start_t: float | None = None,
              console: Console | None = None, delay_s: float = 2.0) -> Iterator[Ticker]:
     """A progress bar for a replay up to sensor time ``end_t`` (s); see the module docstring."""
-    if console is None:
-        console = Console(stderr=True)
     if enabled is None:
+        console = console if console is not None else _console(stderr=True)
         enabled = sys.stdout.isatty() and console.is_terminal
+    elif enabled and console is None:
+        console = _console(stderr=True)
     ticker = Ticker(end_t, bool(enabled), start_t, console, delay_s)
     try:
         yield ticker
