@@ -80,7 +80,9 @@ def _sensors(values: list[str] | None) -> frozenset[str] | None:
 
 def run(args: argparse.Namespace) -> int:
     from fusion.api import ImportRequest
-    from fusion.importers.writer import check_output, write_log
+    from fusion.importers.flight import prepare
+    from fusion.importers.writer import write_log
+    from fusion.outputs import check_outputs
     from fusion.registry import default_registry
 
     for opt in ("start", "end"):
@@ -105,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
                               f"(it writes: {', '.join(cls.sensors)})")
     if args.map and cls.name != "csv":
         raise ConfigError(f"--map: a mapping file applies to CSV files, not to {cls.name!r} logs")
-    check_output(args.output, [str(src)] + ([args.map] if args.map else []), args.force)
+    check_outputs({"-o": args.output}, [str(src)] + ([args.map] if args.map else []), force=args.force)
     request = ImportRequest(start=args.start, end=args.end, sensors=sensors, mapping=args.map,
                             allow_partial=args.partial)
     try:
@@ -124,6 +126,9 @@ def run(args: argparse.Namespace) -> int:
         if args.start is not None or args.end is not None:
             span = f" between --start {args.start} and --end {args.end}"
         raise InputError(f"{src}: no samples to write{span}" + (f" ({'; '.join(log.notes)})" if log.notes else ""))
+    log.streams = streams
+    prepare(log)          # one origin for the GPS and the reference; the onboard attitude to start in flight
+    streams = [s for s in log.streams if len(s)]
     if args.gps == "nmea":
         from fusion.importers.nmea import as_nmea
         streams = [as_nmea(s, log.meta.get("start_utc")) if s.sensor.rstrip("0123456789") == "gps" and

@@ -1,7 +1,7 @@
 """Measurement ``gps``: a loosely coupled GPS fix, local-NED position and horizontal velocity (paper 002 eqs. 6, 10)."""
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 import numpy as np
 from pydantic import Field
@@ -22,6 +22,10 @@ class GpsParams(Params):
     use_velocity: bool = Field(True, description="fuse the RMC/VTG velocity (False: position only)")
     lever_arm: tuple[float, float, float] = Field((0.0, 0.0, 0.0), description="antenna position in the body "
                                                   "frame (m, FRD); enters the position only")
+    accuracy: Literal["dop", "receiver"] = Field("dop", description="dop: the sds above scaled by the DOPs; "
+                                                 "receiver: the receiver's own 1-sd accuracies (hacc, vacc of a "
+                                                 "12-value fix, decoder gps_fields) with the sds above as floors, "
+                                                 "as PX4 EKF2 does")
 
 
 class Gps(MeasurementModel):
@@ -83,15 +87,24 @@ class Gps(MeasurementModel):
         return H
 
     def position_from(self, z: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """Position block (3,) that makes the predicted antenna position equal z[:3] at attitude x."""
-        z = np.asarray(z, dtype=float)[:3]
-        if self._q is None:
-            return z.copy()
-        return z - quat.rotate(np.asarray(x, float)[self._q], self.lever_arm)
+        """Position block (3,) that makes the predicted antenna position equal z[:3] at attitude x; for a
+        fix with velocity (5,), the position followed by z's north/east velocity (the scheduler's initial
+        fix fills the state's first len(z) elements, p then vn ve)."""
+        z = np.array(z, dtype=float)
+        out = z if z.size == 5 else z[:3]
+        if self._q is not None:
+            out[:3] -= quat.rotate(np.asarray(x, float)[self._q], self.lever_arm)
+        return out
 
-    def R_of(self, hdop: float, vdop: float, averaged: float, velocity: bool) -> np.ndarray:
+    def R_of(self, hdop: float, vdop: float, averaged: float, velocity: bool,
+             hacc: float = np.nan, vacc: float = np.nan) -> np.ndarray:
         """Diagonal R (m^2, m^2/s^2) of one fix."""
         p: GpsParams = self.params  # type: ignore[assignment]
+        if p.accuracy == "receiver":
+            sh = max(p.horizontal_sd, hacc) if np.isfinite(hacc) and hacc > 0 else p.horizontal_sd
+            sv = max(p.vertical_sd, vacc) if np.isfinite(vacc) and vacc > 0 else p.vertical_sd
+            var = [sh ** 2] * 2 + [sv ** 2] + ([p.velocity_sd ** 2] * 2 if velocity else [])
+            return np.diag(np.asarray(var) / max(averaged, 1.0))
         kh = kv = 1.0
         if p.hdop_scaling and np.isfinite(hdop) and hdop > 0:
             kh = hdop / p.hdop_ref
@@ -103,17 +116,22 @@ class Gps(MeasurementModel):
 
     def observe(self, message: Message) -> Observation | None:
         """Observation of a decoded fix ``pn pe pd vn ve hdop vdop satellites quality averaged``
-        (the ``nmea`` decoder's output); 3 or 5 plain values are a fix with the nominal sds."""
+        (the ``nmea`` decoder's output; ``gps_fields`` adds the receiver's ``hacc vacc``, m); 3 or 5 plain
+        values are a fix with the nominal sds."""
         v = message.floats()
-        if v.size == 10:
+        hacc = vacc = np.nan
+        if v.size == 12:
+            z, hdop, vdop, averaged, hacc, vacc = v[:5], v[5], v[6], v[9], v[10], v[11]
+        elif v.size == 10:
             z, hdop, vdop, averaged = v[:5], v[5], v[6], v[9]
         elif v.size in (3, 5):
             z, hdop, vdop, averaged = v, np.nan, np.nan, 1.0
         else:
-            raise MalformedMessage(f"gps expects a decoded fix of 10 values (nmea decoder) or 3/5 values, got {v.size}")
+            raise MalformedMessage(f"gps expects a decoded fix of 10 values (nmea decoder), 12 (gps_fields) or "
+                                   f"3/5 values, got {v.size}")
         if not np.all(np.isfinite(z[:3])):
             raise MalformedMessage(f"gps: non-finite position in {message.values!r}")
         with_v = self.velocity and z.size == 5 and bool(np.all(np.isfinite(z[3:5])))
         model = self if with_v or not self.velocity else self.position_only()
         z = z[:5] if with_v else z[:3]
-        return Observation(message.t, z.copy(), model, self.R_of(hdop, vdop, averaged, with_v))
+        return Observation(message.t, z.copy(), model, self.R_of(hdop, vdop, averaged, with_v, hacc, vacc))
