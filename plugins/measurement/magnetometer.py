@@ -66,6 +66,9 @@ class MagnetometerParams(FieldParams):
         "config", description="config: the field above; alignment: estimated over initial.align_s as the mean "
         "sample rotated to NED by the attitude the alignment set before this sensor's turn (a sensor listed "
         "earlier, e.g. the onboard estimator's first attitude: docs/import.md); needs align: none")
+    max_heading_sd_deg: float = Field(10.0, gt=0, description="field_source: alignment: the field is estimated "
+                                      "only if the aligned attitude's heading sd (from P0) is at most this; "
+                                      "else every sample is rejected, saying why")
 
     @model_validator(mode="after")
     def _not_circular(self):
@@ -104,6 +107,7 @@ class Magnetometer(MeasurementModel):
         if self.params.field_source == "config":  # type: ignore[attr-defined]
             self._set_field(self.params.field())  # type: ignore[attr-defined]
         self._aligned = False      # set by align_state: the static start is over
+        self._heading_sd: float | None = None   # deg, field_source: alignment: of the attitude it rotated by
 
     def _set_field(self, m: np.ndarray) -> None:
         self.m_n = m / np.linalg.norm(m) if self.direction_only else np.asarray(m, dtype=float)
@@ -141,8 +145,14 @@ class Magnetometer(MeasurementModel):
         method = self.params.align  # type: ignore[attr-defined]
         self._aligned = True
         if self.params.field_source == "alignment" and observations:  # type: ignore[attr-defined]
+            from fusion_plugins.measurement.attitude import error_to_quaternion
+
             q0 = np.asarray(x0, dtype=float)[self._q]
-            self._set_field(np.mean(quat.rotate(q0, np.array([o.z for o in observations])), axis=0))
+            G = error_to_quaternion(q0 / np.linalg.norm(q0))          # G^T G = I / 4
+            P_theta = 16.0 * G.T @ np.asarray(P0, float)[self._q, self._q] @ G
+            self._heading_sd = float(np.degrees(np.sqrt(max(P_theta[2, 2], 0.0))))
+            if self._heading_sd <= self.params.max_heading_sd_deg:  # type: ignore[attr-defined]
+                self._set_field(np.mean(quat.rotate(q0, np.array([o.z for o in observations])), axis=0))
             return x0, P0
         if method == "none" or not observations:
             return x0, P0
@@ -182,6 +192,11 @@ class Magnetometer(MeasurementModel):
         if self._aligned and not self.params.updates:  # type: ignore[attr-defined]
             return None
         if self.m_n is None and self._aligned:
+            if self._heading_sd is not None:
+                raise RejectedMessage(
+                    f"magnetometer: field_source: alignment: the attitude the alignment set has a heading sd of "
+                    f"{self._heading_sd:.0f} deg (> max_heading_sd_deg {self.params.max_heading_sd_deg:g}): "  # type: ignore[attr-defined]
+                    "nothing gave it a heading (no initial_attitude line in the log? docs/import.md)")
             raise RejectedMessage("magnetometer: field_source: alignment found no magnetometer sample in the "
                                   "alignment window (initial.align_s): the reference field is unknown")
         z = message.floats()
