@@ -106,7 +106,7 @@ def test_field_rules_are_one_exit_2_line(tmp_path, capsys, model, expect):
 
 def test_field_from_alignment_refuses_an_attitude_without_a_heading():
     """No attitude source before the magnetometer (no initial_attitude line): the aligned attitude's heading
-    is the config's guess (q sd 0.1: about 11 deg); the field is not estimated from it, and every sample is
+    is the config's guess (the configs' q sd 0.5: about 57 deg); the field is not estimated from it, and every sample is
     rejected, saying why."""
     from fusion_plugins.measurement.attitude import covariance_in_state
 
