@@ -24,9 +24,14 @@ by the file's suffix (.ulg, .bin, .csv), or --format. Times are seconds from the
 EPILOG = """\
 examples:
   fusion import flight.ulg -o flight.log
-  fusion import 00000042.BIN -o flight.log --start 120 --end 300 --sensors imu gps mag
-  fusion import uwb_run3.csv --map docs/examples/uwb_dataset.yaml -o uwb_run3.log
-  fusion run configs/my_vehicle.yaml --input flight.log
+  fusion run configs/px4_ins_gps_mag.yaml --input flight.log          # agreement with PX4's EKF2
+  fusion import 00000042.BIN -o flight.log --start 120 --end 300
+  fusion run configs/ardupilot_ins_gps_mag.yaml --input flight.log    # agreement with ArduPilot's EKF3
+  fusion import uwb_run3.csv --map docs/examples/uwb_dataset/mapping.yaml -o uwb_run3.log
+
+A flight log's recording has one origin, the first GPS fix with a 3-D fix and >= 6 satellites: the
+reference positions are re-expressed about it, and one 'initial_attitude' line (the onboard attitude at
+the first reference time) lets a config start in flight (docs/import.md).
 
 importers available (--format NAME): see `fusion plugins --kind importer`; docs/import.md describes
 each format, the mapping file and what a reference is.

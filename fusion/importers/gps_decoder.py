@@ -11,6 +11,10 @@ decoder turns each into the message the ``gps`` measurement model reads::
 position in m, NED about the origin (paper 002 eqs. 5-6, by pymap3d on WGS84 with the ellipsoidal height
 ``alt + geoid``), velocity north/east in m/s, HDOP (VDOP not logged: nan), satellites, fix type as the
 quality, 1 fix averaged, and the receiver's own accuracies (the ``gps`` model's ``accuracy: receiver``).
+The first fix, the origin, carries its position only (velocity nan), as the ``nmea`` decoder's origin fix,
+and so do the fixes of the next ``position_only_s`` seconds: the filter's initial position
+(``initial.from_sensor``) is the latest fix before its start, and the scheduler takes a position from it;
+the fixes after bring the velocity.
 
 The origin is the config's ``origin``, else the first accepted fix (the recording's header ``origin``, to
 which ``fusion import`` also refers the reference: docs/import.md), so a flight log started in the air
@@ -47,6 +51,9 @@ class GpsFieldsParams(Params):
 
     origin: Origin | None = Field(None, description="origin of the local NED frame; None: the first accepted fix")
     min_fix: int = Field(MIN_FIX, ge=1, description="lowest fix type used (2: 2-D, 3: 3-D, 4: DGPS, 5/6: RTK)")
+    position_only_s: float = Field(0.0, ge=0, description="s after the origin fix during which fixes carry "
+                                   "their position only (velocity nan): set it >= initial.align_s, the "
+                                   "filter's initial fix (the latest before the start) being a position")
     min_satellites: int = Field(MIN_SATELLITES, ge=0, description="fewer satellites: rejected (PX4 EKF2_REQ_NSATS default 6)")
 
 
@@ -61,7 +68,7 @@ class GpsFieldsDecoder(Decoder):
         p: GpsFieldsParams = self.params  # type: ignore[assignment]
         self.origin: tuple[float, float, float] | None = None   # lat deg, lon deg, ellipsoidal height m
         self.origin_source = "config" if p.origin is not None else "the first accepted fix"
-        self._geoid0: float | None = None
+        self._t0 = 0.0                                          # s, time of the origin fix
         self.counters: dict[str, int] = {"fixes": 0, "rejected": 0}
 
     def info(self) -> dict[str, Any]:
@@ -94,11 +101,14 @@ class GpsFieldsDecoder(Decoder):
                                   f"{p.min_fix}, satellites >= {p.min_satellites})")
         h = alt + geoid                                   # ellipsoidal height (m)
         if self.origin is None:
+            self._t0 = message.t
             if p.origin is not None:
                 self.origin = (p.origin.lat_deg, p.origin.lon_deg, p.origin.alt_m + geoid)
             else:
                 self.origin = (lat, lon, h)
         self.counters["fixes"] += 1
         n, e, d = pymap3d.geodetic2ned(lat, lon, h, *self.origin)
+        if message.t - self._t0 <= p.position_only_s:   # the origin fix (and the initial window's): position
+            vn = ve = math.nan
         return Message(message.t, message.sensor, (float(n), float(e), float(d), vn, ve, hdop, math.nan, nsat,
                                                    fix, 1.0, hacc, vacc), message.line)

@@ -38,7 +38,10 @@ class Gps(MeasurementModel):
     epoch without velocity (no RMC/VTG, or ``use_velocity: false``) is a position-only observation.
     R is diagonal, built per fix: ``horizontal_sd``, ``vertical_sd``, ``velocity_sd`` scaled by the
     dilution of precision when ``hdop_scaling`` (the receiver's own accuracy figure), divided by N for a
-    fix averaged over N epochs (the decoder's origin fix). Jacobian analytic.
+    fix averaged over N epochs (the decoder's origin fix); with ``accuracy: receiver`` (a fix from the
+    ``gps_fields`` decoder, which carries the receiver's 1-sd ``hacc vacc``) the sds are
+    ``max(horizontal_sd, hacc)``, ``max(vertical_sd, vacc)``, as PX4 EKF2 and ArduPilot EKF3 use their
+    GPS noise parameters as floors. Jacobian analytic.
     """
 
     name: ClassVar[str] = "gps"
@@ -87,14 +90,11 @@ class Gps(MeasurementModel):
         return H
 
     def position_from(self, z: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """Position block (3,) that makes the predicted antenna position equal z[:3] at attitude x; for a
-        fix with velocity (5,), the position followed by z's north/east velocity (the scheduler's initial
-        fix fills the state's first len(z) elements, p then vn ve)."""
-        z = np.array(z, dtype=float)
-        out = z if z.size == 5 else z[:3]
-        if self._q is not None:
-            out[:3] -= quat.rotate(np.asarray(x, float)[self._q], self.lever_arm)
-        return out
+        """Position block (3,) that makes the predicted antenna position equal z[:3] at attitude x."""
+        z = np.asarray(z, dtype=float)[:3]
+        if self._q is None:
+            return z.copy()
+        return z - quat.rotate(np.asarray(x, float)[self._q], self.lever_arm)
 
     def R_of(self, hdop: float, vdop: float, averaged: float, velocity: bool,
              hacc: float = np.nan, vacc: float = np.nan) -> np.ndarray:

@@ -20,19 +20,23 @@ LAYOUT = StateLayout.parse("p:3 v:3 q:4:quaternion ba:3 bw:3")
 LAT, LON, ALT, GEOID = 63.4170622, 10.4082151, 66.814, 39.952
 
 
-def _fix(lat, lon, alt, fix=3, nsat=12, geoid=GEOID, vn=1.0, ve=-2.0, hacc=1.5, vacc=3.0):
-    return Message(1.0, "gps", (lat, lon, alt, vn, ve, 0.3, hacc, vacc, 0.8, fix, nsat, geoid))
+def _fix(lat, lon, alt, fix=3, nsat=12, geoid=GEOID, vn=1.0, ve=-2.0, hacc=1.5, vacc=3.0, t=1.0):
+    return Message(t, "gps", (lat, lon, alt, vn, ve, 0.3, hacc, vacc, 0.8, fix, nsat, geoid))
 
 
 def test_gps_fields_first_fix_is_the_origin_and_later_fixes_are_ned():
     dec = GpsFieldsDecoder(GpsFieldsDecoder.Params())
     first = dec.decode(_fix(LAT, LON, ALT))
     assert first.values[:3] == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
+    assert all(math.isnan(v) for v in first.values[3:5])          # the origin fix: position only
     lat, lon, h = pymap3d.ned2geodetic(30.0, -40.0, 5.0, LAT, LON, ALT + GEOID)
-    out = dec.decode(_fix(lat, lon, h - GEOID))
+    out = dec.decode(_fix(lat, lon, h - GEOID, t=1.2))
     assert out.values[:3] == pytest.approx((30.0, -40.0, 5.0), abs=1e-6)
     assert out.values[3:5] == (1.0, -2.0) and out.values[10:] == (1.5, 3.0)
     assert dec.info()["origin"]["lat_deg"] == LAT
+    windowed = GpsFieldsDecoder(GpsFieldsDecoder.Params(position_only_s=0.5))
+    first, inside, after = (windowed.decode(_fix(LAT, LON, ALT, t=t)) for t in (1.0, 1.4, 1.6))
+    assert math.isnan(inside.values[3]) and after.values[3:5] == (1.0, -2.0)
 
 
 def test_gps_fields_rejects_weak_fixes_and_refuses_other_layouts():
