@@ -66,6 +66,9 @@ def prepare(log: ImportedLog) -> None:
     gps = next((s for s in log.streams if s.sensor == "gps" and len(s)), None)
     ref = next((s for s in log.streams if s.sensor == "reference" and len(s)), None)
     origin = gps_origin(gps) if gps is not None else None
+    if gps is not None and tuple(gps.fields) not in LAYOUTS.values():
+        log.notes.append(f"gps: fields {' '.join(gps.fields)} are not a layout the gps_fields decoder reads "
+                         "(the real-vehicle configs): import with --gps nmea and use the nmea decoder")
     if origin is not None:
         log.meta["origin"] = f"{origin[1]:.9f} {origin[2]:.9f} {origin[3]:.3f}"
         log.meta["origin_source"] = (f"the first GPS fix with fix type >= {MIN_FIX} and >= {MIN_SATELLITES} "

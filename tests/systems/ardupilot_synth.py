@@ -12,7 +12,6 @@ SITL home (CMAC, -35.363 149.165): declination 12.3 deg, inclination -65.8 deg, 
 The vehicle is moving from the first sample (no static period)."""
 from __future__ import annotations
 
-import math
 import sys
 from pathlib import Path
 
@@ -122,5 +121,6 @@ def write_bin(path: str | Path, seed: int = 11) -> dict[str, np.ndarray]:
 
 
 if __name__ == "__main__":
-    write_bin(sys.argv[1] if len(sys.argv) > 1 else "ardupilot_synthetic.bin")
-    print(math.nan if False else "written")
+    out = sys.argv[1] if len(sys.argv) > 1 else "ardupilot_synthetic.bin"
+    write_bin(out)
+    print(f"wrote {out}")
