@@ -6,15 +6,18 @@ cholupdate), jacobian.py (vectorised central differences).
 """
 from fusion import hookimpl
 
+# name -> module:class, registered lazily: a module is imported when a config asks for its component
+# (start-up: a run imports the few plugins it uses, not all of them).
+FILTERS = {
+    "kf": "fusion_plugins.filters.kf:KalmanFilter",
+    "ekf": "fusion_plugins.filters.ekf:ExtendedKalmanFilter",
+    "iekf": "fusion_plugins.filters.iekf:IteratedExtendedKalmanFilter",
+    "ukf": "fusion_plugins.filters.ukf:UnscentedKalmanFilter",
+    "srukf": "fusion_plugins.filters.srukf:SquareRootUnscentedKalmanFilter",
+}
+
 
 @hookimpl
 def fusion_register_components(registry):
-    from .ekf import ExtendedKalmanFilter
-    from .iekf import IteratedExtendedKalmanFilter
-    from .kf import KalmanFilter
-    from .srukf import SquareRootUnscentedKalmanFilter
-    from .ukf import UnscentedKalmanFilter
-
-    for cls in (KalmanFilter, ExtendedKalmanFilter, IteratedExtendedKalmanFilter, UnscentedKalmanFilter,
-                SquareRootUnscentedKalmanFilter):
-        registry.add(cls)
+    for name, target in FILTERS.items():
+        registry.add_lazy("filter", name, target)

@@ -1,24 +1,21 @@
 """Built-in measurement: each module holds one component; this module registers them."""
 from fusion import hookimpl
 
+# name -> module:class, registered lazily: a module is imported when a config asks for its component
+# (start-up: a run imports the few plugins it uses, not all of them).
+MEASUREMENTS = {
+    "range": "fusion_plugins.measurement.range:RangeModel",
+    "position": "fusion_plugins.measurement.position:Position",
+    "arrival_time": "fusion_plugins.measurement.arrival_time:ArrivalTime",
+    "direction": "fusion_plugins.measurement.direction:Direction",
+    "gps": "fusion_plugins.measurement.gps:Gps",
+    "magnetometer": "fusion_plugins.measurement.magnetometer:Magnetometer",
+    "attitude": "fusion_plugins.measurement.attitude:Attitude",
+    "quat_norm": "fusion_plugins.measurement.quat_norm:QuatNorm",
+}
+
 
 @hookimpl
 def fusion_register_components(registry):
-    from fusion_plugins.measurement.range import RangeModel
-    from fusion_plugins.measurement.position import Position
-    from fusion_plugins.measurement.arrival_time import ArrivalTime
-    from fusion_plugins.measurement.direction import Direction
-
-    from fusion_plugins.measurement.gps import Gps
-    from fusion_plugins.measurement.magnetometer import Magnetometer
-    from fusion_plugins.measurement.attitude import Attitude
-    from fusion_plugins.measurement.quat_norm import QuatNorm
-
-    registry.add(RangeModel)
-    registry.add(Position)
-    registry.add(ArrivalTime)
-    registry.add(Direction)
-    registry.add(Gps)
-    registry.add(Magnetometer)
-    registry.add(Attitude)
-    registry.add(QuatNorm)
+    for name, target in MEASUREMENTS.items():
+        registry.add_lazy("measurement", name, target)

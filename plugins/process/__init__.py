@@ -1,15 +1,17 @@
 """Built-in process: each module holds one component; this module registers them."""
 from fusion import hookimpl
 
+# name -> module:class, registered lazily: a module is imported when a config asks for its component
+# (start-up: a run imports the few plugins it uses, not all of them).
+PROCESSES = {
+    "pv": "fusion_plugins.process.pv:ConstantVelocity",
+    "ins": "fusion_plugins.process.ins:Ins",
+    "firing_clock": "fusion_plugins.process.firing_clock:FiringClock",
+    "static_orientation": "fusion_plugins.process.static_orientation:StaticOrientation",
+}
+
 
 @hookimpl
 def fusion_register_components(registry):
-    from fusion_plugins.process.pv import ConstantVelocity
-    from fusion_plugins.process.ins import Ins
-    from fusion_plugins.process.firing_clock import FiringClock
-    from fusion_plugins.process.static_orientation import StaticOrientation
-
-    registry.add(ConstantVelocity)
-    registry.add(Ins)
-    registry.add(FiringClock)
-    registry.add(StaticOrientation)
+    for name, target in PROCESSES.items():
+        registry.add_lazy("process", name, target)

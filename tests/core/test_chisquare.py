@@ -1,14 +1,56 @@
+"""fusion.chisquare (written in plain Python for start-up) against scipy.stats.chi2, an independent
+implementation (Cephes' igam/igamc and their inverse)."""
+import math
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from scipy import stats
 
 from fusion.chisquare import chi2
 
+TAILS = np.array([1e-12, 1e-6, 1e-4, 0.001, 0.01, 0.025, 0.05, 0.1, 0.3, 0.5, 0.7, 0.9, 0.95, 0.975, 0.99,
+                  0.999, 0.9999, 1 - 1e-9])
+# Small dof (gates: 1-4), a state's (15, 16, 22), and NEES / NIS sums over a run (up to 10^5).
+DOFS = [0.5, 1, 2, 3, 4, 5, 9, 15, 16, 22, 29, 30, 31, 100, 1000, 5100, 75000, 100000]
 
-@pytest.mark.parametrize("k", [1, 2, 3, 4, 15, 16])
-def test_matches_scipy_stats(k):
-    p = np.array([1e-4, 0.025, 0.5, 0.95, 0.975, 0.999])
-    np.testing.assert_allclose(chi2.ppf(p, k), stats.chi2.ppf(p, k), rtol=1e-10)
-    x = np.array([0.01, 1.0, 5.0, 30.0])
-    np.testing.assert_allclose(chi2.cdf(x, k), stats.chi2.cdf(x, k), rtol=1e-10)
-    np.testing.assert_allclose(chi2.sf(x, k), stats.chi2.sf(x, k), rtol=1e-10)
+
+@pytest.mark.parametrize("k", DOFS)
+def test_quantiles_match_scipy(k):
+    np.testing.assert_allclose(chi2.ppf(TAILS, k), stats.chi2.ppf(TAILS, k), rtol=1e-13)
+
+
+@pytest.mark.parametrize("k", DOFS)
+def test_cdf_and_sf_match_scipy_in_both_tails(k):
+    x = np.concatenate([stats.chi2.ppf(TAILS, k), [0.01, 1.0, 5.0, 30.0, float(k)]])
+    for ours, ref in ((chi2.cdf, stats.chi2.cdf), (chi2.sf, stats.chi2.sf)):
+        want = ref(x, k)
+        keep = want > 1e-290  # not underflowed
+        np.testing.assert_allclose(np.asarray(ours(x, k))[keep], want[keep], rtol=2e-11)
+
+
+def test_quantile_inverts_cdf_on_a_dense_grid():
+    rng = np.random.default_rng(7)
+    for k in rng.uniform(0.3, 400, 40):
+        for p in rng.uniform(0, 1, 10):
+            assert chi2.cdf(chi2.ppf(p, k), k) == pytest.approx(p, rel=1e-12, abs=1e-15)
+
+
+def test_scalars_give_floats_and_edges():
+    assert isinstance(chi2.ppf(0.95, 3), float)
+    assert chi2.ppf(0.0, 3) == 0.0 and chi2.ppf(1.0, 3) == math.inf
+    assert math.isnan(chi2.ppf(1.5, 3))
+    assert chi2.cdf(0.0, 2) == 0.0 and chi2.sf(0.0, 2) == 1.0
+    assert chi2.cdf(math.inf, 2) == 1.0
+    assert chi2.cdf(2.0, 2) == pytest.approx(1 - math.exp(-1.0), rel=1e-15)  # closed form for k = 2
+    with pytest.raises(ValueError, match="degrees of freedom"):
+        chi2.ppf(0.5, 0)
+    shaped = chi2.ppf(np.full((2, 3), 0.5), 4)
+    assert shaped.shape == (2, 3)
+
+
+def test_does_not_import_scipy():
+    code = "import sys, fusion.chisquare as c; c.chi2.ppf(0.99, 3); c.chi2.sf(9.0, 2); print('scipy' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"
