@@ -9,6 +9,7 @@ Two commands each, as a user runs them (`fusion import LOG -o OUT.log`, `fusion 
   (tests/systems/ardupilot_synth.py: its "onboard EKF" is the simulator's truth, so its agreement is the
   error against the truth), started both ways (the onboard attitude; Improved TRIAD with the field in the
   config).
+It also rewrites recordings/flight_synthetic.log (the synthetic .bin imported: the configs' own recording).
 """
 from __future__ import annotations
 
@@ -34,6 +35,7 @@ sys.path.insert(0, str(ROOT / "tests" / "importers"))
 PX4_LOG = Path(os.environ.get("FUSION_TEST_LOGS", ROOT.parent / "shared" / "logs")) / "px4_sample_log_small.ulg"
 PAGE = ROOT / "docs" / "results" / "real_logs.md"
 FIG = ROOT / "docs" / "results" / "real_logs"
+RECORDING = ROOT / "recordings" / "flight_synthetic.log"
 
 from fusion.cli import main  # noqa: E402
 from fusion.quaternion import to_euler  # noqa: E402
@@ -121,6 +123,16 @@ def _plot(px4: dict | None, ap: dict) -> None:
     fig.savefig(FIG / "agreement.png", dpi=90)
 
 
+def _write_recording(bin_path: Path) -> None:
+    """recordings/flight_synthetic.log: the synthetic .bin imported, the configs' own `recording:` (so
+    `fusion run configs/px4_ins_gps_mag.yaml` runs as is; the two autopilots' imports share one layout)."""
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        assert main(["import", str(bin_path), "-o", str(RECORDING), "--force"]) == 0
+    text = RECORDING.read_text(encoding="utf-8").replace(f"# source: {bin_path.name} ",
+                                                         "# source: tests/systems/ardupilot_synth.py ")
+    RECORDING.write_text(text, encoding="utf-8")
+
+
 def main_() -> int:
     from ardupilot_synth import FIELD, write_bin
 
@@ -128,6 +140,7 @@ def main_() -> int:
         work = Path(d)
         px4 = _run(PX4_LOG, ROOT / "configs" / "px4_ins_gps_mag.yaml", work, "px4") if PX4_LOG.is_file() else None
         write_bin(work / "synthetic.bin")
+        _write_recording(work / "synthetic.bin")
         ap = _run(work / "synthetic.bin", ROOT / "configs" / "ardupilot_ins_gps_mag.yaml", work, "ap")
         cfg = yaml.safe_load((ROOT / "configs" / "ardupilot_ins_gps_mag.yaml").read_text())
         cfg["sensors"]["initial_attitude"]["enabled"] = False
@@ -143,7 +156,8 @@ def main_() -> int:
     rows.append(_row("the same, started by Improved TRIAD (field from the config)", triad))
     _plot(px4, ap)
     PAGE.write_text(PAGE_TEXT.format(table="\n".join(rows)), encoding="utf-8")
-    print(f"wrote {PAGE.relative_to(ROOT)} and {(FIG / 'agreement.png').relative_to(ROOT)}")
+    print(f"wrote {PAGE.relative_to(ROOT)}, {(FIG / 'agreement.png').relative_to(ROOT)} and "
+          f"{RECORDING.relative_to(ROOT)}")
     return 0
 
 

@@ -143,22 +143,22 @@ def test_ardupilot_errors_against_the_simulated_truth_itself(ardupilot_run):
     assert rmse < math.sqrt(2 * GPS_SD["horizontal_sd"] ** 2 + GPS_SD["vertical_sd"] ** 2)
 
 
-def test_ardupilot_config_starts_by_triad_with_the_field_from_the_config(tmp_path):
+def test_ardupilot_config_starts_by_triad_with_the_field_from_the_config(ardupilot_run, tmp_path):
     """The other documented start: no reference attitude, Improved TRIAD on the first 0.2 s with the
     World Magnetic Model field in the config. The vehicle accelerates then (up to 2 m/s^2: a tilt of up to
     atan(2 / g) = 11.5 deg in the levelled attitude), so the bound is on the run after 10 s, by which the
     GPS has corrected the tilt: the same 2 deg as the start from the reference."""
     import yaml
-    from ardupilot_synth import FIELD, write_bin
+    from ardupilot_synth import FIELD
 
-    write_bin(tmp_path / "s.bin")
+    synthetic = ardupilot_run[1].parent / "synthetic.bin"
     cfg = yaml.safe_load(ARDUPILOT.read_text())
     cfg["sensors"]["initial_attitude"]["enabled"] = False
     cfg["sensors"]["mag"]["model"] = {"type": "magnetometer", "align": "improved_triad", **FIELD}
     cfg["evaluation"] = {"settle_s": 10.0}
     path = tmp_path / "triad.yaml"
     path.write_text(yaml.safe_dump(cfg))
-    summary, _, _ = _import_and_run(tmp_path / "s.bin", path, tmp_path)
+    summary, _, _ = _import_and_run(synthetic, path, tmp_path)
     assert "initial_attitude" not in summary["sensors"]       # disabled: the reference is not used at all
     assert summary["agreement"]["attitude_rmse_deg"] < 2.0
 
