@@ -123,24 +123,14 @@ def _plot(px4: dict | None, ap: dict) -> None:
     fig.savefig(FIG / "agreement.png", dpi=90)
 
 
-def _write_recording(bin_path: Path) -> None:
-    """recordings/flight_synthetic.log: the synthetic .bin imported, the configs' own `recording:` (so
-    `fusion run configs/px4_ins_gps_mag.yaml` runs as is; the two autopilots' imports share one layout)."""
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-        assert main(["import", str(bin_path), "-o", str(RECORDING), "--force"]) == 0
-    text = RECORDING.read_text(encoding="utf-8").replace(f"# source: {bin_path.name} ",
-                                                         "# source: tests/systems/ardupilot_synth.py ")
-    RECORDING.write_text(text, encoding="utf-8")
-
-
 def main_() -> int:
-    from ardupilot_synth import FIELD, write_bin
+    from ardupilot_synth import FIELD, import_as_recording, write_bin
 
     with tempfile.TemporaryDirectory() as d:
         work = Path(d)
         px4 = _run(PX4_LOG, ROOT / "configs" / "px4_ins_gps_mag.yaml", work, "px4") if PX4_LOG.is_file() else None
         write_bin(work / "synthetic.bin")
-        _write_recording(work / "synthetic.bin")
+        import_as_recording(work / "synthetic.bin", RECORDING)
         ap = _run(work / "synthetic.bin", ROOT / "configs" / "ardupilot_ins_gps_mag.yaml", work, "ap")
         cfg = yaml.safe_load((ROOT / "configs" / "ardupilot_ins_gps_mag.yaml").read_text())
         cfg["sensors"]["initial_attitude"]["enabled"] = False
@@ -164,7 +154,8 @@ def main_() -> int:
 PAGE_TEXT = """\
 # The real-vehicle configs on flight logs
 
-Regenerate: `python experiments/real_logs.py` (about 15 s). Each row is two commands, as in
+Regenerate: `python experiments/real_logs.py` (about 15 s; it also rewrites `recordings/flight_synthetic.log`,
+the synthetic flight imported, which both configs replay without `--input`). Each row is two commands, as in
 [docs/import.md](../import.md): `fusion import LOG -o OUT.log`, then `fusion run CONFIG --input OUT.log`.
 
 - **PX4**: `configs/px4_ins_gps_mag.yaml` on the real log `../shared/logs/px4_sample_log_small.ulg` (pyulog's

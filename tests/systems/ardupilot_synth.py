@@ -120,6 +120,22 @@ def write_bin(path: str | Path, seed: int = 11) -> dict[str, np.ndarray]:
     return {"t": truth[:, 0] + 1.0, "p": truth[:, 1:4], "v": truth[:, 4:7], "q": truth[:, 7:11]}
 
 
+def import_as_recording(bin_path: str | Path, out: str | Path) -> None:
+    """``fusion import`` of the synthetic .bin to ``out``, its source line naming this generator (the
+    shipped recordings/flight_synthetic.log, the real-vehicle configs' own recording, is exactly this)."""
+    import contextlib
+    import io
+
+    from fusion.cli import main
+
+    bin_path, out = Path(bin_path), Path(out)
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        assert main(["import", str(bin_path), "-o", str(out), "--force"]) == 0
+    text = out.read_text(encoding="utf-8").replace(f"# source: {bin_path.name} ",
+                                                   "# source: tests/systems/ardupilot_synth.py ")
+    out.write_text(text, encoding="utf-8")
+
+
 if __name__ == "__main__":
     out = sys.argv[1] if len(sys.argv) > 1 else "ardupilot_synthetic.bin"
     write_bin(out)

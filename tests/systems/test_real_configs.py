@@ -177,3 +177,13 @@ def test_px4_config_without_the_reference_attitude_says_why_the_magnetometer_is_
     # used: only the samples of the 0.2 s alignment window (10 at 49 Hz at most), every later one rejected
     assert mag["used"] <= 10 and mag["rejected"] == mag["received"] - mag["used"] > 0
     assert "no initial_attitude line" in capsys.readouterr().err
+
+
+def test_shipped_recording_is_the_synthetic_flight_regenerated(ardupilot_run, tmp_path):
+    """recordings/flight_synthetic.log (the configs' own recording) is byte for byte the synthetic .bin
+    imported: regenerate it with python experiments/real_logs.py."""
+    from ardupilot_synth import import_as_recording
+
+    out = tmp_path / "regenerated.log"
+    import_as_recording(ardupilot_run[1].parent / "synthetic.bin", out)
+    assert out.read_bytes() == (ROOT / "recordings" / "flight_synthetic.log").read_bytes()
