@@ -24,9 +24,14 @@ by the file's suffix (.ulg, .bin, .csv), or --format. Times are seconds from the
 EPILOG = """\
 examples:
   fusion import flight.ulg -o flight.log
-  fusion import 00000042.BIN -o flight.log --start 120 --end 300 --sensors imu gps mag
-  fusion import uwb_run3.csv --map docs/examples/uwb_dataset.yaml -o uwb_run3.log
-  fusion run configs/my_vehicle.yaml --input flight.log
+  fusion run configs/px4_ins_gps_mag.yaml --input flight.log          # agreement with PX4's EKF2
+  fusion import 00000042.BIN -o flight.log --start 120 --end 300
+  fusion run configs/ardupilot_ins_gps_mag.yaml --input flight.log    # agreement with ArduPilot's EKF3
+  fusion import uwb_run3.csv --map docs/examples/uwb_dataset/mapping.yaml -o uwb_run3.log
+
+A flight log's recording has one origin, the first GPS fix with a 3-D fix and >= 6 satellites: the
+reference positions are re-expressed about it, and one 'initial_attitude' line (the onboard attitude at
+the first reference time) lets a config start in flight (docs/import.md).
 
 importers available (--format NAME): see `fusion plugins --kind importer`; docs/import.md describes
 each format, the mapping file and what a reference is.
@@ -80,7 +85,9 @@ def _sensors(values: list[str] | None) -> frozenset[str] | None:
 
 def run(args: argparse.Namespace) -> int:
     from fusion.api import ImportRequest
-    from fusion.importers.writer import check_output, write_log
+    from fusion.importers.flight import prepare
+    from fusion.importers.writer import write_log
+    from fusion.outputs import check_outputs
     from fusion.registry import default_registry
 
     for opt in ("start", "end"):
@@ -105,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
                               f"(it writes: {', '.join(cls.sensors)})")
     if args.map and cls.name != "csv":
         raise ConfigError(f"--map: a mapping file applies to CSV files, not to {cls.name!r} logs")
-    check_output(args.output, [str(src)] + ([args.map] if args.map else []), args.force)
+    check_outputs({"-o": args.output}, [str(src)] + ([args.map] if args.map else []), force=args.force)
     request = ImportRequest(start=args.start, end=args.end, sensors=sensors, mapping=args.map,
                             allow_partial=args.partial)
     try:
@@ -124,6 +131,9 @@ def run(args: argparse.Namespace) -> int:
         if args.start is not None or args.end is not None:
             span = f" between --start {args.start} and --end {args.end}"
         raise InputError(f"{src}: no samples to write{span}" + (f" ({'; '.join(log.notes)})" if log.notes else ""))
+    log.streams = streams
+    prepare(log)          # one origin for the GPS and the reference; the onboard attitude to start in flight
+    streams = [s for s in log.streams if len(s)]
     if args.gps == "nmea":
         from fusion.importers.nmea import as_nmea
         streams = [as_nmea(s, log.meta.get("start_utc")) if s.sensor.rstrip("0123456789") == "gps" and

@@ -102,7 +102,6 @@ class DataflashImporter(Importer):
             streams += [s for s in got if request.wants(s.sensor)]
             if not got:
                 missing.append(fam)
-        gps0 = next((s for s in streams if s.sensor == "gps" and len(s)), None)
         utc = _start_utc(rows.get("GPS"))
         if utc:
             log.meta["start_utc"] = utc
@@ -112,9 +111,8 @@ class DataflashImporter(Importer):
                 missing.append("reference (ATT, XKF1/NKF1/EKF1)")
             else:
                 streams.append(ref)
-            if origin is not None:
-                log.meta["origin"] = f"{origin[0]:.7f} {origin[1]:.7f} {origin[2]:.2f}"
-                log.meta["origin_source"] = "the EKF origin (ORGN type 0)"
+                if origin is not None:   # fusion.importers.flight refers the reference to the first fix
+                    ref.meta["ekf_origin"] = f"{origin[0]:.7f} {origin[1]:.7f} {origin[2]:.2f}"
         att = rows.get("ATT")
         mag0 = next((s for s in streams if s.sensor == "mag" and len(s)), None)
         if att is not None and mag0 is not None:
@@ -123,10 +121,6 @@ class DataflashImporter(Importer):
             if f is not None:
                 mag0.meta["earth_field_ned"] = " ".join(f"{v:.3f}" for v in f)
                 mag0.meta["earth_field_source"] = "mean of the samples rotated to NED by ATT (uT)"
-        if "origin" not in log.meta and gps0 is not None:
-            v = gps0.values[0]
-            log.meta["origin"] = f"{v[0]:.7f} {v[1]:.7f} {v[2]:.2f}"
-            log.meta["origin_source"] = "the first GPS fix imported"
         if missing:
             asked = [m for m in missing if request.sensors is not None and m.split()[0] in request.sensors]
             if asked:

@@ -126,7 +126,6 @@ class UlogImporter(Importer):
                 streams.append(make_stream("imu", ("ax", "ay", "az", "gx", "gy", "gz"), t_imu, v, request,
                                            meta={"units": "m/s^2 (specific force) rad/s, body FRD",
                                                  "topic": "sensor_combined"}, notes=notes))
-        gps_first = None
         if request.wants("gps"):
             d = _first(ulog, TOPICS["gps"])
             if d is None:
@@ -134,8 +133,6 @@ class UlogImporter(Importer):
             else:
                 s = _gps(d, tcol(d), request, notes)
                 streams.append(s)
-                if len(s):
-                    gps_first = s.values[0, :3]
                 if "time_utc_usec" in d.data:
                     utc = np.asarray(d.data["time_utc_usec"], np.int64)
                     ok = np.flatnonzero(utc > 0)
@@ -171,14 +168,9 @@ class UlogImporter(Importer):
                 s, origin = _reference(lpos, att, tcol, request, notes)
                 if s is not None:
                     streams.append(s)
-                if origin is not None:
-                    log.meta["origin"] = f"{origin[0]:.9f} {origin[1]:.9f} {origin[2]:.3f}"
-                    log.meta["origin_source"] = "the EKF's local origin (vehicle_local_position ref_lat ref_lon ref_alt)"
+                    if origin is not None:   # fusion.importers.flight refers the reference to the first fix
+                        s.meta["ekf_origin"] = f"{origin[0]:.9f} {origin[1]:.9f} {origin[2]:.3f}"
         _field_from_reference(streams, _first(ulog, ("vehicle_attitude",)) if request.wants("mag") else None, tcol)
-        if "origin" not in log.meta and gps_first is not None:
-            log.meta["origin"] = f"{gps_first[0]:.9f} {gps_first[1]:.9f} {gps_first[2]:.3f}"
-            log.meta["origin_source"] = ("the first GPS fix imported (the EKF's local frame is not tied to the "
-                                         "globe in this log)")
         for m in ulog.logged_messages:
             t = (int(m.timestamp) - t0) / 1e6
             if (request.start is None or t >= request.start) and (request.end is None or t <= request.end):

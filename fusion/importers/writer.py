@@ -1,21 +1,17 @@
 """Write an ImportedLog in the fusion log format: header, ``# fields`` lines, messages in time order.
 
-Outputs are written to a temporary name in the same folder and renamed (never half a file under the final
-name); an existing file is replaced only with ``force``, the input never; a FIFO, a device or ``-``
-(stdout) is streamed to as it is.
+Written through fusion.outputs like every command's outputs: a temporary name in the same folder renamed
+when complete (never half a file under the final name); an existing file is replaced only with ``force``,
+an input never; a FIFO, a device or ``-`` (stdout) is streamed to as it is.
 """
 from __future__ import annotations
 
 import heapq
-import os
-import stat
-import sys
-from pathlib import Path
-from typing import IO, Iterator
+from typing import Iterator
 
 import numpy as np
 
-from fusion.api import ConfigError, ImportedLog, InputError, Stream
+from fusion.api import ConfigError, ImportedLog, Stream
 from fusion.importers.common import F32
 from fusion.logformat import _SENSOR
 
@@ -80,67 +76,37 @@ def render(log: ImportedLog) -> Iterator[str]:
         yield line + "\n"
 
 
-def _same_file(a: Path, b: Path) -> bool:
-    try:
-        return os.path.samefile(a, b)
-    except OSError:
-        return a.resolve() == b.resolve()
-
-
-def check_output(output: str, inputs: list[str], force: bool = False) -> str:
-    """How ``output`` will be written: ``stdout``, ``stream`` (an existing FIFO or device) or ``file``
-    (through a temporary name). InputError for an input, an existing file without ``force``, a folder, or a
-    missing parent folder (checked before a long import, and again before writing)."""
-    if output == "-":
-        return "stdout"
-    out = Path(output)
-    if out.exists():
-        for src in inputs:
-            if _same_file(out, Path(src)):
-                raise InputError(f"{out}: is an input of this import; choose another output")
-        mode = out.stat().st_mode
-        if stat.S_ISFIFO(mode) or stat.S_ISCHR(mode):
-            return "stream"
-        if out.is_dir():
-            raise InputError(f"{out}: is a folder")
-        if not force:
-            raise InputError(f"{out}: exists; pass --force to replace it")
-    parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
-        raise InputError(f"{out}: folder {parent} does not exist")
-    return "file"
-
-
 def write_log(log: ImportedLog, output: str, inputs: list[str], force: bool = False) -> tuple[int, int]:
-    """Write ``log`` to ``output`` (``-``: stdout). Returns (message lines, bytes). Refuses (InputError) to
-    write over any of ``inputs``, or over an existing regular file without ``force``."""
-    how = check_output(output, inputs, force)
-    if how == "stdout":
-        return _write_to(sys.stdout, log)
-    out = Path(output)
-    if how == "stream":
-        with open(out, "w", encoding="utf-8", newline="\n") as fh:
-            return _write_to(fh, log)
-    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}")
+    """Write ``log`` to ``output`` (``-``: stdout) through fusion.outputs (the outputs of every command:
+    checked against the ``inputs`` and ``force`` first, then a temporary name renamed when complete, a FIFO
+    or device written in place). Returns (message lines, characters). A failed write (disk full) leaves
+    no partial file and is one FusionError line."""
+    from fusion.outputs import OutputFile, check_outputs
+
+    check_outputs({"-o": output}, inputs, force=force)
+    out = OutputFile(output, "w", what="recording")
     try:
-        with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
-            counts = _write_to(fh, log)
-        os.replace(tmp, out)
-    except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        raise InputError(f"{out}: cannot write: {exc.strerror or exc}") from None
+        counts = _write_to(out, log)
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        out.discard()
         raise
+    out.close()
     return counts
 
 
-def _write_to(fh: IO[str], log: ImportedLog) -> tuple[int, int]:
+def _write_to(out, log: ImportedLog, chunk: int = 1 << 16) -> tuple[int, int]:
     n = size = 0
+    buf: list[str] = []
+    held = 0
     for line in render(log):
-        fh.write(line)
+        buf.append(line)
+        held += len(line)
         size += len(line)
         if line[0] != "#":
             n += 1
-    fh.flush()
+        if held >= chunk:
+            out.write("".join(buf))
+            buf, held = [], 0
+    if buf:
+        out.write("".join(buf))
     return n, size

@@ -1,7 +1,7 @@
 """Measurement ``gps``: a loosely coupled GPS fix, local-NED position and horizontal velocity (paper 002 eqs. 6, 10)."""
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 import numpy as np
 from pydantic import Field
@@ -22,6 +22,10 @@ class GpsParams(Params):
     use_velocity: bool = Field(True, description="fuse the RMC/VTG velocity (False: position only)")
     lever_arm: tuple[float, float, float] = Field((0.0, 0.0, 0.0), description="antenna position in the body "
                                                   "frame (m, FRD); enters the position only")
+    accuracy: Literal["dop", "receiver"] = Field("dop", description="dop: the sds above scaled by the DOPs; "
+                                                 "receiver: the receiver's own 1-sd accuracies (hacc, vacc of a "
+                                                 "12-value fix, decoder gps_fields) with the sds above as floors, "
+                                                 "as PX4 EKF2 does")
 
 
 class Gps(MeasurementModel):
@@ -34,7 +38,10 @@ class Gps(MeasurementModel):
     epoch without velocity (no RMC/VTG, or ``use_velocity: false``) is a position-only observation.
     R is diagonal, built per fix: ``horizontal_sd``, ``vertical_sd``, ``velocity_sd`` scaled by the
     dilution of precision when ``hdop_scaling`` (the receiver's own accuracy figure), divided by N for a
-    fix averaged over N epochs (the decoder's origin fix). Jacobian analytic.
+    fix averaged over N epochs (the decoder's origin fix); with ``accuracy: receiver`` (a fix from the
+    ``gps_fields`` decoder, which carries the receiver's 1-sd ``hacc vacc``) the sds are
+    ``max(horizontal_sd, hacc)``, ``max(vertical_sd, vacc)``, as PX4 EKF2 and ArduPilot EKF3 use their
+    GPS noise parameters as floors. Jacobian analytic.
     """
 
     name: ClassVar[str] = "gps"
@@ -89,9 +96,15 @@ class Gps(MeasurementModel):
             return z.copy()
         return z - quat.rotate(np.asarray(x, float)[self._q], self.lever_arm)
 
-    def R_of(self, hdop: float, vdop: float, averaged: float, velocity: bool) -> np.ndarray:
+    def R_of(self, hdop: float, vdop: float, averaged: float, velocity: bool,
+             hacc: float = np.nan, vacc: float = np.nan) -> np.ndarray:
         """Diagonal R (m^2, m^2/s^2) of one fix."""
         p: GpsParams = self.params  # type: ignore[assignment]
+        if p.accuracy == "receiver":
+            sh = max(p.horizontal_sd, hacc) if np.isfinite(hacc) and hacc > 0 else p.horizontal_sd
+            sv = max(p.vertical_sd, vacc) if np.isfinite(vacc) and vacc > 0 else p.vertical_sd
+            var = [sh ** 2] * 2 + [sv ** 2] + ([p.velocity_sd ** 2] * 2 if velocity else [])
+            return np.diag(np.asarray(var) / max(averaged, 1.0))
         kh = kv = 1.0
         if p.hdop_scaling and np.isfinite(hdop) and hdop > 0:
             kh = hdop / p.hdop_ref
@@ -103,17 +116,22 @@ class Gps(MeasurementModel):
 
     def observe(self, message: Message) -> Observation | None:
         """Observation of a decoded fix ``pn pe pd vn ve hdop vdop satellites quality averaged``
-        (the ``nmea`` decoder's output); 3 or 5 plain values are a fix with the nominal sds."""
+        (the ``nmea`` decoder's output; ``gps_fields`` adds the receiver's ``hacc vacc``, m); 3 or 5 plain
+        values are a fix with the nominal sds."""
         v = message.floats()
-        if v.size == 10:
+        hacc = vacc = np.nan
+        if v.size == 12:
+            z, hdop, vdop, averaged, hacc, vacc = v[:5], v[5], v[6], v[9], v[10], v[11]
+        elif v.size == 10:
             z, hdop, vdop, averaged = v[:5], v[5], v[6], v[9]
         elif v.size in (3, 5):
             z, hdop, vdop, averaged = v, np.nan, np.nan, 1.0
         else:
-            raise MalformedMessage(f"gps expects a decoded fix of 10 values (nmea decoder) or 3/5 values, got {v.size}")
+            raise MalformedMessage(f"gps expects a decoded fix of 10 values (nmea decoder), 12 (gps_fields) or "
+                                   f"3/5 values, got {v.size}")
         if not np.all(np.isfinite(z[:3])):
             raise MalformedMessage(f"gps: non-finite position in {message.values!r}")
         with_v = self.velocity and z.size == 5 and bool(np.all(np.isfinite(z[3:5])))
         model = self if with_v or not self.velocity else self.position_only()
         z = z[:5] if with_v else z[:3]
-        return Observation(message.t, z.copy(), model, self.R_of(hdop, vdop, averaged, with_v))
+        return Observation(message.t, z.copy(), model, self.R_of(hdop, vdop, averaged, with_v, hacc, vacc))

@@ -7,7 +7,8 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from fusion import quaternion as quat
-from fusion.api import BuildContext, ConfigError, MalformedMessage, MeasurementModel, Message, Observation, Params
+from fusion.api import (BuildContext, ConfigError, MalformedMessage, MeasurementModel, Message, Observation, Params,
+                        RejectedMessage)
 
 
 def earth_field(declination_deg: float, inclination_deg: float, intensity: float) -> np.ndarray:
@@ -29,8 +30,14 @@ class FieldParams(Params):
     @model_validator(mode="after")
     def _one_way(self):
         angles = (self.declination_deg, self.inclination_deg, self.intensity)
+        if getattr(self, "field_source", "config") == "alignment":
+            if self.field_ned is not None or any(a is not None for a in angles):
+                raise ValueError("field_source: alignment estimates the field: give no field_ned, "
+                                 "declination_deg, inclination_deg or intensity")
+            return self
         if self.field_ned is None and any(a is None for a in angles):
-            raise ValueError("give field_ned, or declination_deg, inclination_deg and intensity")
+            raise ValueError("give field_ned, or declination_deg, inclination_deg and intensity (a World "
+                             "Magnetic Model value for the place and date), or field_source: alignment")
         if self.field_ned is not None and any(a is not None for a in angles):
             raise ValueError("give field_ned or the declination/inclination/intensity, not both")
         if self.field_ned is not None and not np.any(self.field_ned):
@@ -55,6 +62,20 @@ class MagnetometerParams(FieldParams):
                           "only aligns, as 'without magnetometer' in paper 002 sec. 5)")
     align_accel_sd: float = Field(0.01, gt=0, description="sd (m/s^2) of the static mean specific force beyond "
                                   "the state's accelerometer-bias uncertainty (vibration, residual tilt)")
+    field_source: Literal["config", "alignment"] = Field(
+        "config", description="config: the field above; alignment: estimated over initial.align_s as the mean "
+        "sample rotated to NED by the attitude the alignment set before this sensor's turn (a sensor listed "
+        "earlier, e.g. the onboard estimator's first attitude: docs/import.md); needs align: none")
+    max_heading_sd_deg: float = Field(10.0, gt=0, description="field_source: alignment: the field is estimated "
+                                      "only if the aligned attitude's heading sd (from P0) is at most this; "
+                                      "else every sample is rejected, saying why")
+
+    @model_validator(mode="after")
+    def _not_circular(self):
+        if self.field_source == "alignment" and self.align != "none":
+            raise ValueError(f"field_source: alignment takes the attitude from elsewhere; align: {self.align} "
+                             "would take it from the field it estimates (set align: none)")
+        return self
 
 
 _FLIP = np.array([1.0, -1.0, -1.0, -1.0])
@@ -81,18 +102,28 @@ class Magnetometer(MeasurementModel):
             raise ConfigError("magnetometer needs a state with an attitude quaternion block 'q'")
         self._q = layout["q"]
         self.n = layout.n
-        m = self.params.field()  # type: ignore[attr-defined]
         self.direction_only = bool(self.params.direction_only)  # type: ignore[attr-defined]
-        self.m_n = m / np.linalg.norm(m) if self.direction_only else m
+        self.m_n: np.ndarray | None = None      # field_source: alignment: set by align_state
+        if self.params.field_source == "config":  # type: ignore[attr-defined]
+            self._set_field(self.params.field())  # type: ignore[attr-defined]
         self._aligned = False      # set by align_state: the static start is over
+        self._heading_sd: float | None = None   # deg, field_source: alignment: of the attitude it rotated by
+
+    def _set_field(self, m: np.ndarray) -> None:
+        self.m_n = m / np.linalg.norm(m) if self.direction_only else np.asarray(m, dtype=float)
 
     def h(self, x: np.ndarray) -> np.ndarray:
         """Predicted field (..., 3) in the body frame for states x (..., n)."""
+        if self.m_n is None:
+            raise ConfigError("magnetometer: field_source: alignment needs initial.align_s > 0 (the field is "
+                              "estimated over the alignment window)")
         q = np.asarray(x, dtype=float)[..., self._q]
         return quat.rotate(q * _FLIP, self.m_n)
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         """dh/dx (3, n) at x (n,)."""
+        if self.m_n is None:
+            self.h(x)
         q = np.asarray(x, dtype=float)[self._q]
         H = np.zeros((3, self.n))
         H[:, self._q] = quat.rotate_jacobian(q * _FLIP, self.m_n) * _FLIP
@@ -113,6 +144,16 @@ class Magnetometer(MeasurementModel):
 
         method = self.params.align  # type: ignore[attr-defined]
         self._aligned = True
+        if self.params.field_source == "alignment" and observations:  # type: ignore[attr-defined]
+            from fusion_plugins.measurement.attitude import error_to_quaternion
+
+            q0 = np.asarray(x0, dtype=float)[self._q]
+            G = error_to_quaternion(q0 / np.linalg.norm(q0))          # G^T G = I / 4
+            P_theta = 16.0 * G.T @ np.asarray(P0, float)[self._q, self._q] @ G
+            self._heading_sd = float(np.degrees(np.sqrt(max(P_theta[2, 2], 0.0))))
+            if self._heading_sd <= self.params.max_heading_sd_deg:  # type: ignore[attr-defined]
+                self._set_field(np.mean(quat.rotate(q0, np.array([o.z for o in observations])), axis=0))
+            return x0, P0
         if method == "none" or not observations:
             return x0, P0
         layout = self.context.layout
@@ -150,6 +191,14 @@ class Magnetometer(MeasurementModel):
         """Observation of a sample ``mx my mz`` (FRD); None after the static start with ``updates: false``."""
         if self._aligned and not self.params.updates:  # type: ignore[attr-defined]
             return None
+        if self.m_n is None and self._aligned:
+            if self._heading_sd is not None:
+                raise RejectedMessage(
+                    f"magnetometer: field_source: alignment: the attitude the alignment set has a heading sd of "
+                    f"{self._heading_sd:.0f} deg (> max_heading_sd_deg {self.params.max_heading_sd_deg:g}): "  # type: ignore[attr-defined]
+                    "nothing gave it a heading (no initial_attitude line in the log? docs/import.md)")
+            raise RejectedMessage("magnetometer: field_source: alignment found no magnetometer sample in the "
+                                  "alignment window (initial.align_s): the reference field is unknown")
         z = message.floats()
         if z.shape != (3,) or not np.all(np.isfinite(z)):
             raise MalformedMessage(f"magnetometer expects 3 finite values (mx my mz), got {message.values!r}")

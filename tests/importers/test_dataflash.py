@@ -103,7 +103,14 @@ def test_reference_from_lowest_ekf_core_with_att_quaternion(imported):
     rec, v, _ = imported
     assert rec.header.fields["reference"] == ("px", "py", "pz", "vx", "vy", "vz", "qw", "qx", "qy", "qz")
     val = rec.values("reference")
-    np.testing.assert_allclose(val[:, :3], v["pos"], rtol=1e-6, atol=1e-5)   # core 0, not core 1 (+100 m)
+    # positions re-expressed about the recording's origin, the first accepted GPS fix (fix 3, 12 satellites:
+    # the fourth sample), from the EKF's own origin (ORGN) by WGS84 (fusion.importers.flight)
+    import pymap3d
+    k = int(np.flatnonzero(v["status"] >= 3)[0])
+    fix0 = (v["lat"][k], v["lon"][k], v["alt"][k])
+    geo = pymap3d.ned2geodetic(*v["pos"].T, *ORIGIN)
+    expected = np.column_stack(pymap3d.geodetic2ned(*geo, *fix0))
+    np.testing.assert_allclose(val[:, :3], expected, rtol=1e-6, atol=1e-3)   # core 0, not core 1 (+100 m)
     np.testing.assert_allclose(val[:, 3:6], v["vel"], rtol=1e-6, atol=1e-6)
     rpy = np.round(v["rpy"], 2)   # the log holds centidegrees
     q = Rotation.from_euler("ZYX", np.radians(rpy[:, ::-1])).as_quat()[:, [3, 0, 1, 2]]   # body-to-NED, w first
@@ -111,7 +118,9 @@ def test_reference_from_lowest_ekf_core_with_att_quaternion(imported):
     sign = np.sign(np.sum(q * got, axis=1))[:, None]
     np.testing.assert_allclose(got, q * sign, atol=1e-7)
     lat, lon, alt = map(float, rec.header.meta["origin"].split())
-    assert (lat, lon) == pytest.approx(ORIGIN[:2], abs=1e-9) and alt == pytest.approx(ORIGIN[2], abs=0.006)
+    assert (lat, lon) == pytest.approx(fix0[:2], abs=1e-9) and alt == pytest.approx(fix0[2], abs=0.006)
+    frame = next(c for c in rec.comments if c.startswith("# reference frame:"))
+    assert "ORGN" not in rec.header.meta["origin_source"] and "-35.3632621" in frame
 
 
 def test_values_equal_what_pymavlink_reads(imported):

@@ -2,6 +2,8 @@
 pyulog reads from the same file directly, and the unit conversions by their definitions."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -95,7 +97,12 @@ def test_reference_is_the_ekf_output_with_only_its_valid_elements(px4):
             keep &= lp[f].astype(bool)
     t = rec.times("reference")
     np.testing.assert_allclose(t, _t(ulog, lp)[keep], atol=1e-6)
-    np.testing.assert_allclose(rec.column("reference", "pz"), lp["z"][keep], rtol=1e-7)
+    # not tied to the globe in this log: re-expressed about the recording's origin (the first GPS fix with a
+    # 3-D fix and >= 6 satellites) by the EKF's own position then (fusion.importers.flight)
+    ok = (rec.column("gps", "fix") >= 3) & (rec.column("gps", "nsat") >= 6)
+    t_fix0 = rec.times("gps")[ok][0]
+    z = lp["z"][keep].astype(float)
+    np.testing.assert_allclose(rec.column("reference", "pz"), z - np.interp(t_fix0, t, z), rtol=1e-6, atol=2e-6)
     np.testing.assert_allclose(rec.column("reference", "vz"), lp["vz"][keep], rtol=1e-7)
     att = _data(ulog, "vehicle_attitude")
     ta = _t(ulog, att)
@@ -279,3 +286,13 @@ def test_earth_field_in_ned_from_the_onboard_attitude(tmp_path):
     rec = Recording(tmp_path / "f.log")
     line = next(c for c in rec.comments if c.startswith("# mag earth_field_ned:"))
     np.testing.assert_allclose([float(x) for x in line.split(":")[1].split()], m_n * 100.0, atol=2e-3)
+
+
+def test_full_disk_is_one_error_and_leaves_no_file(tmp_path, capsys):
+    """The importer writes through fusion.outputs: /dev/full (a device, written in place) fails in one line."""
+    src = need_px4_log()
+    if not Path("/dev/full").exists():
+        pytest.skip("no /dev/full on this system")
+    assert fusion_import(src, "-o", "/dev/full", "--sensors", "imu") == 2
+    line = one_error_line(capsys)
+    assert "/dev/full" in line and "space" in line.lower()
