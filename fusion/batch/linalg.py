@@ -1,0 +1,84 @@
+"""Stacked dense linear algebra for batched filters: Cholesky with repair by mask, QR square roots,
+symmetric solves. numpy's ``linalg`` gufuncs call LAPACK once per stack (potrf, geqrf, syevd, gesv)
+from C: no Python loop over the N matrices.
+
+A stack that holds a non-positive-definite matrix makes ``np.linalg.cholesky`` raise for the whole
+stack; then the failing ones are found by LAPACK dpotrf one by one (the same test as the single
+filters' ``cholesky_lower``; only on that rare path) and repaired together, the eigenvalues clipped as in
+``plugins.filters.linalg.recover_factor``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from fusion_plugins.filters.linalg import cholesky_lower
+
+__all__ = ["sym", "T", "chol_repair", "recover_factors", "qr_lower", "psd_sqrt_rows", "solve_spd"]
+
+
+def T(A: np.ndarray) -> np.ndarray:
+    """Transpose of the last two axes (a view)."""
+    return np.swapaxes(A, -1, -2)
+
+
+def sym(P: np.ndarray) -> np.ndarray:
+    """(P + P^T) / 2 over a stack (..., n, n)."""
+    return (P + T(P)) * 0.5
+
+
+def recover_factors(P: np.ndarray, rel_floor: float = 1e-12) -> np.ndarray:
+    """Lower factors (k, n, n) of the nearest positive-definite matrices to P (k, n, n): symmetrise,
+    clip eigenvalues to ``max(rel_floor max|eig|, sqrt(tiny))``, re-factorise (as recover_factor).
+
+    Raises FloatingPointError when a P holds NaN or inf."""
+    P = sym(np.asarray(P, dtype=float))
+    if not np.isfinite(P).all():
+        raise FloatingPointError("covariance holds NaN or inf; cannot recover a positive-definite factor")
+    w, V = np.linalg.eigh(P)
+    floor = np.maximum(rel_floor * np.abs(w).max(axis=-1, keepdims=True), np.finfo(float).tiny ** 0.5)
+    w = np.maximum(w, floor)
+    return np.linalg.cholesky(sym((V * w[..., None, :]) @ T(V)))
+
+
+def chol_repair(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Lower Cholesky factors L (N, n, n) of P (N, n, n), repairing the non-positive-definite ones.
+
+    Returns ``(L, bad, repaired)``: ``bad`` (N,) bool marks the repaired ones; ``repaired`` is P with
+    those replaced by L L^T (None when none was bad)."""
+    try:
+        return np.linalg.cholesky(P), np.zeros(P.shape[0], bool), None
+    except np.linalg.LinAlgError:
+        pass
+    bad = np.array([not cholesky_lower(np.asarray(p, order="F"))[1] for p in P])   # rare path only
+    L = np.empty_like(P)
+    good = ~bad
+    if good.any():
+        L[good] = np.linalg.cholesky(P[good])
+    L[bad] = recover_factors(P[bad])
+    rep = P.copy()
+    rep[bad] = L[bad] @ T(L[bad])
+    return L, bad, rep
+
+
+def qr_lower(A: np.ndarray) -> np.ndarray:
+    """Lower-triangular L (N, n, n), non-negative diagonal, with L L^T = A^T A for A (N, k, n), k >= n:
+    the transposed R of the stacked economy QR (paper 000 Algorithm 1, ``qr{.}``)."""
+    R = np.linalg.qr(A, mode="r")
+    s = np.sign(np.diagonal(R, axis1=-2, axis2=-1))
+    s = np.where(s == 0.0, 1.0, s)
+    return T(R * s[..., :, None])
+
+
+def psd_sqrt_rows(Q: np.ndarray) -> np.ndarray:
+    """Row square roots B (..., n, n), B^T B = Q, of symmetric positive semi-definite Q (..., n, n):
+    ``sqrt(max(w, 0)) V^T`` of the eigen-decomposition (valid for singular Q too). Any row square root
+    gives the same QR factor downstream (to rounding)."""
+    w, V = np.linalg.eigh(sym(Q))
+    return np.sqrt(np.maximum(w, 0.0))[..., :, None] * T(V)
+
+
+def solve_spd(S: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """S^-1 B for symmetric positive-definite S (N, m, m) and B (N, m, k); m = 1 as a division."""
+    if S.shape[-1] == 1:
+        return B / S
+    return np.linalg.solve(S, B)
