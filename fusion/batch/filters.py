@@ -17,7 +17,7 @@ import numpy as np
 from fusion.api import ConfigError, Gate
 
 from .belief import BatchBelief, BatchUpdate
-from .linalg import T, chol_repair, psd_sqrt_rows, qr_lower, solve_spd, sym
+from .linalg import T, cholesky, mm, psd_sqrt_rows, qr_lower, recover_factors, sigma_deviations, sigma_points, solve_spd, sym
 from .models import batch_F, batch_H, batch_Q, batch_R
 
 __all__ = ["BatchFilter", "BatchKF", "BatchEKF", "BatchUKF", "BatchSRUKF", "make_batch_filter", "batch_capable"]
@@ -57,9 +57,14 @@ class BatchFilter:
             rep = np.where(ok, P[:, 0, 0], np.maximum(P[:, 0, 0], floor))[:, None, None]
             self._count("not_positive_definite", ~ok)
             return np.sqrt(rep), rep
-        L, bad, rep = chol_repair(P)
-        if rep is not None:
-            self._count("not_positive_definite", bad)
+        L, ok = cholesky(P)
+        if ok.all():
+            return L, None
+        bad = ~ok
+        self._count("not_positive_definite", bad)
+        L[bad] = recover_factors(P[bad])
+        rep = P.copy()
+        rep[bad] = L[bad] @ T(L[bad])
         return L, rep
 
     def gate_mask(self, nis: np.ndarray, gate: Gate | None, m: int) -> np.ndarray:
@@ -94,7 +99,8 @@ class BatchFilter:
         """x^- = normalize(f(x)), P^- = F P F^T + Q (paper 001 eqs. 9-10), symmetrised."""
         x = b.x
         F = batch_F(process, x, u, dt)
-        P1 = sym(F @ b.cov @ T(F) + batch_Q(process, x, u, dt))
+        Ft = F.T if F.ndim == 2 else T(F)
+        P1 = sym(mm(mm(F, b.cov), Ft) + batch_Q(process, x, u, dt))
         return process.normalize(process.f(x, _per_point(u, x), dt)), P1
 
 
@@ -193,9 +199,9 @@ class BatchUKF(BatchFilter):
         sp = self.sp(x.shape[1])
         Q = batch_Q(process, x, u, dt)                       # at the prior mean, as the ukf
         L, _ = self.factor(b.cov)
-        X = x[:, None, :] + sp.E @ T(L)                      # 000 eq. 3 (N, 2n+1, n)
+        X = sigma_points(x, sp.eta, L)                       # 000 eq. 3 (N, 2n+1, n)
         Y = process.f(X, _per_point(u, X), dt)               # 000 eq. 4, one call
-        xm = np.einsum("i,kin->kn", sp.Wm, Y)                # 000 eq. 5
+        xm = sp.Wm @ Y                                       # 000 eq. 5
         D = Y - xm[:, None, :]
         xm = process.normalize(xm)
         P1 = T(D * sp.Wc[:, None]) @ D + Q                   # 000 eqs. 6-7 unsquared
@@ -212,12 +218,14 @@ class BatchUKF(BatchFilter):
         if rep is not None:
             P = rep
         sp = self.sp(n)
-        dX = sp.E @ T(L)                                     # (N, 2n+1, n)
-        Z = model.h(x[:, None, :] + dX)                      # 001 eq. 14, one call (N, 2n+1, m)
-        zm = np.einsum("i,kim->km", sp.Wm, Z)
+        Z = model.h(sigma_points(x, sp.eta, L))              # 001 eq. 14, one call (N, 2n+1, m)
+        zm = sp.Wm @ Z
         diff = _residual(model)
         dZ = diff(Z, zm[:, None, :])
         A = dZ * sp.Wc_col
+        if m == 1:                                           # a range: scalars per filter, no matrices
+            return self._update_scalar(b, x, P, L, dZ[:, :, 0], A[:, :, 0], R, diff(z, zm), gate)
+        dX = sigma_deviations(sp.eta, L)
         Pzz = T(dZ) @ A + R                                  # 001 eqs. 16-17
         _, rep = self.factor(Pzz)
         if rep is not None:
@@ -234,6 +242,30 @@ class BatchUKF(BatchFilter):
         self._count("updates", ok)
         post = BatchBelief(b.t, x1, P=P1).where(ok, BatchBelief(b.t, x, P=b.cov))
         return BatchUpdate(post, y, Pzz, nis, ok)
+
+
+    def _update_scalar(self, b, x, P, L, dz, a, R, y, gate) -> BatchUpdate:
+        """001 eqs. 15-20 for m = 1: P_zz, P_xz and K per filter as scalars and n-vectors."""
+        r = R.reshape(-1)[0] if R.ndim == 2 else R[:, 0, 0]
+        Pzz = (dz * a).sum(axis=1) + r                       # 001 eqs. 16-17
+        Ly, rep = self.factor(Pzz[:, None, None])
+        if rep is not None:
+            Pzz = rep[:, 0, 0]
+        Ly = Ly[:, 0, 0]
+        n = x.shape[1]
+        eta = self.sp(n).eta                                 # 001 eq. 15 from the points' structure:
+        Pxz = np.einsum("kij,kj->ki", L, a[:, 1:n + 1] - a[:, n + 1:]) * eta
+        W = Pxz / Ly[:, None]                                # L_y^-1 P_xz^T (N, n), as the ukf
+        wy = y[:, 0] / Ly                                    # L_y^-1 y
+        nis = wy * wy
+        ok = self.gate_mask(nis, gate, 1)
+        x1 = x + W * wy[:, None]                             # 001 eqs. 18-19
+        P1 = P - W[:, :, None] * W[:, None, :]               # 001 eq. 20: P - W^T W (exactly symmetric)
+        if self.process is not None:
+            x1 = self.process.normalize(x1)
+        self._count("updates", ok)
+        post = BatchBelief(b.t, x1, P=P1).where(ok, BatchBelief(b.t, x, P=b.cov))
+        return BatchUpdate(post, y, Pzz[:, None, None], nis, ok)
 
 
 class BatchSRUKF(BatchUKF):
@@ -279,7 +311,7 @@ class BatchSRUKF(BatchUKF):
             S1 = qr_lower(np.concatenate((T(F @ S), BQ), axis=1))       # sqrt(F P F^T + Q)
             return BatchBelief(b.t + dt, process.normalize(process.f(x, _per_point(u, x), dt)), S=S1)
         sp = self.sp(n)
-        X = x[:, None, :] + sp.E @ T(S)                                  # eq. 3
+        X = sigma_points(x, sp.eta, S)                                   # eq. 3
         Y = process.f(X, _per_point(u, X), dt)                           # eq. 4
         Y0 = Y[:, 0]
         D1 = Y[:, 1:] - Y0[:, None, :]
@@ -297,7 +329,7 @@ class BatchSRUKF(BatchUKF):
         sp = self.sp(n)
         if sp.gamma <= 0.0:
             raise ConfigError("the batched srukf needs beta >= alpha^2 (every recentred weight positive)")
-        dX = sp.E @ T(S)
+        dX = sigma_deviations(sp.eta, S)
         Z = model.h(x[:, None, :] + dX)                                   # eq. 8
         diff = _residual(model)
         Z0 = Z[:, 0]
