@@ -19,7 +19,7 @@ import sys  # noqa: E402
 from fusion import __version__  # noqa: E402
 from fusion.errors import FusionError  # noqa: E402
 
-COMMANDS = ("run", "validate", "plugins", "simulate", "tui", "import_")  # import_: `fusion import`
+COMMANDS = ("run", "validate", "plugins", "simulate", "tui", "import_", "sweep")  # import_: `fusion import`
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -101,14 +101,14 @@ def run_batch(trials: list[Trial]) -> list[dict[str, Any]]:
     from fusion.batch import make_batch_filter
 
     t0 = time.perf_counter()
-    systems = [system_of(tr) for tr in trials]
+    system = system_of(trials[0])                                # one variant: wired once
+    systems = [system] * len(trials)                             # (each Run's Scheduler copies it)
     streams = [_parse(s, recording_of(tr)) for s, tr in zip(systems, trials)]
     sig = [_signature(it) for it in streams[0][0]]
     for items, _ in streams[1:]:
         if len(items) != len(sig) or any(_signature(it) != s for it, s in zip(items, sig)):
             raise NotLockstep("the seeds' recordings differ in timing or content")
     N = len(trials)
-    system = systems[0]
     runs = [pipeline.Run(s, hooks=False) for s in systems]         # their RunStats, Scheduler counters
     for r, (_, parsed) in zip(runs, streams):
         r.parsed.header = parsed.header

@@ -49,9 +49,7 @@ def dask_client(where: str, jobs: int):
         raise ConfigError("--dask/--scheduler need dask.distributed: pip install 'fusion-estimator[cluster]' "
                           "(or pip install 'dask[distributed]')") from None
     if where == "local":
-        cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None,
-                               worker_class=None) if False else LocalCluster(
-            n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None)
+        cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None)
         return Client(cluster)
     try:
         return Client(where, timeout="10s")
