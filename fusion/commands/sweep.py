@@ -108,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
     if not Path(scenario).exists():
         raise ConfigError(f"--scenario {scenario}: no such scenario file")
     filters = [f.strip() for f in args.filter.split(",")] if args.filter else [None]
-    if any(not f for f in filters):
+    if args.filter and any(not f for f in filters):
         raise ConfigError(f"--filter {args.filter!r}: an empty name (e.g. --filter ukf,ekf)")
     params = parse_params(args.param)
     trials = trials_of(args.config, scenario, seeds_of(args.seeds), filters, params, args.smooth)
