@@ -95,15 +95,21 @@ def _signature(item: tuple) -> tuple:
     return (item[0], item[1].t)
 
 
-def run_batch(trials: list[Trial]) -> list[dict[str, Any]]:
-    """Rows of the trials (one variant, different seeds) in the order given. Raises NotLockstep."""
+def run_batch(trials: list[Trial], timings: dict[str, float] | None = None) -> list[dict[str, Any]]:
+    """Rows of the trials (one variant, different seeds) in the order given. Raises NotLockstep.
+    ``timings`` (optional) gets the seconds spent wiring, simulating, parsing, in the filter math and in
+    the statistics (summed over the trials)."""
     from fusion import pipeline
     from fusion.batch import make_batch_filter
 
     t0 = time.perf_counter()
     system = system_of(trials[0])                                # one variant: wired once
     systems = [system] * len(trials)                             # (each Run's Scheduler copies it)
-    streams = [_parse(s, recording_of(tr)) for s, tr in zip(systems, trials)]
+    t1 = time.perf_counter()
+    texts = [recording_of(tr) for tr in trials]
+    t2 = time.perf_counter()
+    streams = [_parse(system, lines) for lines in texts]
+    t3 = time.perf_counter()
     sig = [_signature(it) for it in streams[0][0]]
     for items, _ in streams[1:]:
         if len(items) != len(sig) or any(_signature(it) != s for it, s in zip(items, sig)):
@@ -183,4 +189,9 @@ def run_batch(trials: list[Trial]) -> list[dict[str, Any]]:
         row = row_of(summary, [n for n, s in system.sensors.items() if s.role == "measurement"])
         row.update(status="ok", error="", engine="batch", wall_s=share + math_s / N)
         rows.append(row)
+    if timings is not None:
+        t4 = time.perf_counter()
+        for k, v in (("wire", t1 - t0), ("simulate", t2 - t1), ("parse", t3 - t2), ("filter_math", math_s),
+                     ("statistics", t4 - t3 - math_s)):
+            timings[k] = timings.get(k, 0.0) + v
     return rows
