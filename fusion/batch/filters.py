@@ -114,6 +114,23 @@ def _per_point(u, x: np.ndarray):
     return u
 
 
+#: Largest block of sigma-point elements (points x n) given to a process model at once: a model's temporaries
+#: then stay in cache (16-state ins: 1.7x faster over 1000 filters in blocks of ~60 filters than in one call).
+F_BLOCK = 32768
+
+
+def _propagate(process: Any, X: np.ndarray, u, dt: float) -> np.ndarray:
+    """``process.f`` on the sigma points X (N, 2n+1, n) in blocks of filters (a loop over blocks of
+    ~F_BLOCK elements, not over filters); the same numbers as one call (f is evaluated point by point)."""
+    N = X.shape[0]
+    per = max(1, F_BLOCK // (X.shape[1] * X.shape[2]))
+    up = _per_point(u, X)
+    if N <= per:
+        return process.f(X, up, dt)
+    shared = up is None or np.ndim(up) < 3
+    return np.concatenate([process.f(X[i:i + per], up if shared else up[i:i + per], dt) for i in range(0, N, per)])
+
+
 def _residual(model: Any):
     from fusion_plugins.filters.base import residual_of
     return residual_of(model)
@@ -200,7 +217,7 @@ class BatchUKF(BatchFilter):
         Q = batch_Q(process, x, u, dt)                       # at the prior mean, as the ukf
         L, _ = self.factor(b.cov)
         X = sigma_points(x, sp.eta, L)                       # 000 eq. 3 (N, 2n+1, n)
-        Y = process.f(X, _per_point(u, X), dt)               # 000 eq. 4, one call
+        Y = _propagate(process, X, u, dt)                    # 000 eq. 4, in blocks of filters
         xm = sp.Wm @ Y                                       # 000 eq. 5
         D = Y - xm[:, None, :]
         xm = process.normalize(xm)
@@ -312,7 +329,7 @@ class BatchSRUKF(BatchUKF):
             return BatchBelief(b.t + dt, process.normalize(process.f(x, _per_point(u, x), dt)), S=S1)
         sp = self.sp(n)
         X = sigma_points(x, sp.eta, S)                                   # eq. 3
-        Y = process.f(X, _per_point(u, X), dt)                           # eq. 4
+        Y = _propagate(process, X, u, dt)                                # eq. 4
         Y0 = Y[:, 0]
         D1 = Y[:, 1:] - Y0[:, None, :]
         v0 = np.einsum("i,kin->kn", sp.W1, D1)                           # eq. 5 (recentred)
