@@ -88,24 +88,34 @@ def batch_ready(trials: list[Trial]) -> tuple[list[list[Trial]], list[Trial], di
     return ready, rest, why
 
 
-def run_batched(groups: list[list[Trial]], chunk: int = 256) -> Iterator[tuple[Trial, dict[str, Any]]]:
-    """Each group (one variant) in chunks of ``chunk`` seeds through the batched engine; a group whose
-    recordings are not in lockstep falls back on the pipeline, trial by trial (its rows say so)."""
+def _batch_part(part: list[Trial]) -> list[tuple[Trial, dict[str, Any]]]:
+    """One chunk of one variant's seeds through the batched engine; a chunk not in lockstep falls back on
+    the pipeline, trial by trial (its rows say so); an error of the whole chunk is every trial's row."""
     from .batched import NotLockstep, run_batch
 
     _threads_one()
+    try:
+        return list(zip(part, run_batch(part)))
+    except NotLockstep:
+        return [(t, run_trial(t)) for t in part]
+    except Exception as exc:
+        msg = f"{type(exc).__name__}: {exc}".replace("\n", " ")[:500]
+        return [(t, {"status": "error", "error": msg, "engine": "batch"}) for t in part]
+
+
+def run_batched(groups: list[list[Trial]], chunk: int = 256, jobs: int = 1) -> Iterator[tuple[Trial, dict[str, Any]]]:
+    """Each group (one variant) in chunks of at most ``chunk`` seeds through the batched engine: in this
+    process (``jobs`` 1), or the chunks spread over a pool of ``jobs`` processes (each group then split
+    into at least ``jobs`` chunks so that every core batches)."""
+    parts = []
     for ts in groups:
-        for i in range(0, len(ts), chunk):
-            part = ts[i:i + chunk]
-            try:
-                rows = run_batch(part)
-            except NotLockstep:
-                for t in part:
-                    yield t, run_trial(t)
-                continue
-            except Exception as exc:  # the variant fails: every trial of the chunk gets the error
-                msg = f"{type(exc).__name__}: {exc}".replace("\n", " ")[:500]
-                for t in part:
-                    yield t, {"status": "error", "error": msg, "engine": "batch"}
-                continue
-            yield from zip(part, rows)
+        size = min(chunk, max(1, -(-len(ts) // jobs)))
+        parts += [ts[i:i + size] for i in range(0, len(ts), size)]
+    if jobs <= 1 or len(parts) == 1:
+        for part in parts:
+            yield from _batch_part(part)
+        return
+    _threads_one()
+    with ProcessPoolExecutor(max_workers=jobs, initializer=_threads_one) as ex:
+        for f in as_completed([ex.submit(_batch_part, p) for p in parts]):
+            yield from f.result()

@@ -102,8 +102,9 @@ def sweep(trials: list[Trial], out: str | Path, engine: str = "auto", jobs: int 
     """Run the trials the results file ``out`` lacks (.csv appended as they finish, .parquet written at
     the end) and return (every row of the sweep, info: engine used per trial count, skipped, reasons).
 
-    ``engine``: auto (batch for the variants that support it, then a pool for the rest; with ``dask`` the
-    rest goes to the cluster), batch, serial, pool, dask."""
+    ``engine``: auto (batch for the variants that support it, their chunks over ``jobs`` processes, then a
+    pool for the rest; with ``dask`` the rest goes to the cluster), batch (all in this process), serial,
+    pool, dask."""
     from . import engines
     from .results import CsvWriter, columns, done_keys, read_rows, trial_fields, write_parquet
     from .trial import system_of
@@ -136,7 +137,7 @@ def sweep(trials: list[Trial], out: str | Path, engine: str = "auto", jobs: int 
         if engine in ("auto", "batch"):
             ready, rest, why = engines.batch_ready(todo)
             info["not_batched"] = why
-            streams.append(engines.run_batched(ready))
+            streams.append(engines.run_batched(ready, jobs=1 if engine == "batch" else jobs))
             if engine == "batch" and rest:
                 streams.append(engines.run_serial(rest))
             elif rest:

@@ -43,7 +43,8 @@ def test_batch_rows_equal_pipeline_rows(trials):
 
 
 def test_pool_and_dask_rows_equal_serial_rows(trials):
-    """A process pool and a 2-worker LocalCluster give the serial rows exactly (a trial is a pure function)."""
+    """A process pool and a 2-worker LocalCluster give the serial rows exactly (a trial is a pure function);
+    the batched chunks spread over 2 processes give them to 1e-9."""
     ts = trials(seeds=range(2), filters=("ukf", "ekf"))
     serial = rows_by_key(engines.run_serial(ts))
     pool = rows_by_key(engines.run_pool(ts, 2))
@@ -55,10 +56,14 @@ def test_pool_and_dask_rows_equal_serial_rows(trials):
         cluster = client.cluster
         client.close()
         cluster.close()
-    assert set(serial) == set(pool) == set(dask) == {t.key() for t in ts}
+    ready, _, _ = engines.batch_ready(ts)
+    batch2 = rows_by_key(engines.run_batched(ready, jobs=2))          # batched chunks over 2 processes
+    assert set(serial) == set(pool) == set(dask) == set(batch2) == {t.key() for t in ts}
+    assert {r["engine"] for r in batch2.values()} == {"batch"}
     for k, row in serial.items():
         assert_rows_equal(pool[k], row)
         assert_rows_equal(dask[k], row)
+        assert_rows_equal(batch2[k], row, rel=1e-9)
 
 
 def test_unbatchable_variants_are_named(trials):
