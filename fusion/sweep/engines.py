@@ -49,7 +49,9 @@ def dask_client(where: str, jobs: int):
         raise ConfigError("--dask/--scheduler need dask.distributed: pip install 'fusion-estimator[cluster]' "
                           "(or pip install 'dask[distributed]')") from None
     if where == "local":
-        cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None)
+        import logging
+        cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.ERROR)
         return Client(cluster)
     try:
         return Client(where, timeout="10s")
