@@ -32,6 +32,7 @@ class BatchFilter:
         self.single = single
         self.counters: dict[str, np.ndarray] = {}
         self.N = 0
+        self.process: Any = None      # the process model of the last predict (normalize in the update)
 
     # ------------------------------------------------------------------ helpers
     def reset(self, N: int) -> None:
@@ -168,9 +169,8 @@ class BatchEKF(BatchFilter):
         x1 = x + np.einsum("kmn,km->kn", Kt, r)
         A = np.eye(x.shape[1]) - T(Kt) @ H                   # I - K H
         P1 = sym(A @ P @ T(A) + T(Kt) @ R @ Kt)              # Joseph form
-        proc = getattr(self, "process", None)
-        if proc is not None:
-            x1 = proc.normalize(x1)
+        if self.process is not None:
+            x1 = self.process.normalize(x1)
         self._count("updates", ok)
         post = BatchBelief(b.t, x1, P=P1).where(ok, BatchBelief(b.t, x, P=P))
         return BatchUpdate(post, r, S, nis, ok)
@@ -199,7 +199,6 @@ class BatchUKF(BatchFilter):
         if getattr(single, "_augmented", False):
             raise ConfigError("the batched ukf has no augmented mode (augmented: true); run the sweep with "
                               "--engine pool")
-        self.process = None
 
     def sp(self, n: int):
         return self.single.sigma_points(n)

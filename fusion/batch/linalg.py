@@ -2,10 +2,9 @@
 symmetric solves. numpy's ``linalg`` gufuncs call LAPACK once per stack (potrf, geqrf, syevd, gesv)
 from C: no Python loop over the N matrices.
 
-A stack that holds a non-positive-definite matrix makes ``np.linalg.cholesky`` raise for the whole
-stack; then the failing ones are found by LAPACK dpotrf one by one (the same test as the single
-filters' ``cholesky_lower``; only on that rare path) and repaired together, the eigenvalues clipped as in
-``plugins.filters.linalg.recover_factor``.
+:func:`cholesky` flags the matrices whose pivots fail (LAPACK dpotrf's test, as the single filters'
+``cholesky_lower``) with a mask; the filters repair those together, the eigenvalues clipped as in
+``plugins.filters.linalg.recover_factor`` (:func:`recover_factors`).
 """
 from __future__ import annotations
 
@@ -13,7 +12,8 @@ import numpy as np
 
 from fusion_plugins.filters.linalg import cholesky_lower
 
-__all__ = ["sym", "T", "chol_repair", "recover_factors", "qr_lower", "psd_sqrt_rows", "solve_spd"]
+__all__ = ["sym", "T", "cholesky", "recover_factors", "qr_lower", "psd_sqrt_rows", "solve_spd", "mm",
+           "sigma_points", "sigma_deviations"]
 
 
 def T(A: np.ndarray) -> np.ndarray:
@@ -38,26 +38,6 @@ def recover_factors(P: np.ndarray, rel_floor: float = 1e-12) -> np.ndarray:
     floor = np.maximum(rel_floor * np.abs(w).max(axis=-1, keepdims=True), np.finfo(float).tiny ** 0.5)
     w = np.maximum(w, floor)
     return np.linalg.cholesky(sym((V * w[..., None, :]) @ T(V)))
-
-
-def chol_repair(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Lower Cholesky factors L (N, n, n) of P (N, n, n), repairing the non-positive-definite ones.
-
-    Returns ``(L, bad, repaired)``: ``bad`` (N,) bool marks the repaired ones; ``repaired`` is P with
-    those replaced by L L^T (None when none was bad)."""
-    try:
-        return np.linalg.cholesky(P), np.zeros(P.shape[0], bool), None
-    except np.linalg.LinAlgError:
-        pass
-    bad = np.array([not cholesky_lower(np.asarray(p, order="F"))[1] for p in P])   # rare path only
-    L = np.empty_like(P)
-    good = ~bad
-    if good.any():
-        L[good] = np.linalg.cholesky(P[good])
-    L[bad] = recover_factors(P[bad])
-    rep = P.copy()
-    rep[bad] = L[bad] @ T(L[bad])
-    return L, bad, rep
 
 
 def qr_lower(A: np.ndarray) -> np.ndarray:
