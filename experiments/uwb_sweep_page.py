@@ -124,9 +124,12 @@ def write_page(out: Path, studies: list, results: dict[str, list[dict]], walls: 
     cmd = "python experiments/uwb_ukf_vs_ekf.py" + ("" if args.seeds == 50 else f" --seeds {args.seeds}") + (
         "" if args.tune_seeds == 20 else f" --tune-seeds {args.tune_seeds}")
     n_trials = sum(len(v) for v in results.values())
+    trial_s = sum(float(r.get("wall_s") or 0.0) for v in results.values() for r in v)
     L = ["# UWB personal navigation (paper 001): UKF against EKF, reproduced over seeds", "",
-         f"Regenerate this page and its figure (docs/results/uwb/sweep_rmse.png): `{cmd}` ({n_trials} trials, "
-         f"{wall / 60:.1f} min on this 2-core machine shared with other jobs; Python {platform.python_version()}, "
+         f"Regenerate this page and its figure (docs/results/uwb/sweep_rmse.png): `{cmd}` ({n_trials} trials; "
+         f"{trial_s / 60:.0f} trial-minutes, the sum of the rows' `wall_s`, on 2 worker processes of a 2-core "
+         f"machine shared with other jobs; {wall / 60:.1f} min in the invocation that wrote this page, which "
+         f"reruns no trial already in its `--work` folder; Python {platform.python_version()}, "
          f"numpy {numpy.__version__}). Every study is a `fusion sweep` grid (docs/sweep.md) over the shipped configs "
          "`configs/uwb_pv_ukf.yaml` (beacons around a 30 m x 20 m hall) and `configs/uwb_pv_ukf_line.yaml` (the four "
          "beacons on one line) and the scenarios `scenarios/uwb_route{1,2}[_line].yaml`, with the overrides each "
