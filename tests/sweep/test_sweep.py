@@ -151,3 +151,14 @@ def test_missing_dask_is_a_clear_message(monkeypatch):
     monkeypatch.setattr(builtins, "__import__", no_dask)
     with pytest.raises(ConfigError, match=r"pip install 'fusion-estimator\[cluster\]'"):
         dask_client("local", 2)
+
+
+def test_default_scenario_is_the_one_that_made_the_recording(tmp_path):
+    from fusion.api import ConfigError
+    from fusion.sweep.grid import default_scenario
+
+    assert default_scenario(CONFIG).endswith("scenarios/uwb_route1.yaml")
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(open(CONFIG).read().replace("recording: ../recordings/uwb_route1.log", "recording: null"))
+    with pytest.raises(ConfigError, match="give --scenario"):
+        default_scenario(str(cfg))
