@@ -128,8 +128,8 @@ def write_page(out: Path, studies: list, results: dict[str, list[dict]], walls: 
     L = ["# UWB personal navigation (paper 001): UKF against EKF, reproduced over seeds", "",
          f"Regenerate this page and its figure (docs/results/uwb/sweep_rmse.png): `{cmd}` ({n_trials} trials; "
          f"{trial_s / 60:.0f} trial-minutes, the sum of the rows' `wall_s`, on 2 worker processes of a 2-core "
-         f"machine shared with other jobs; {wall / 60:.1f} min in the invocation that wrote this page, which "
-         f"reruns no trial already in its `--work` folder; Python {platform.python_version()}, "
+         f"machine shared with other jobs (`--work DIR` keeps the results files and resumes them); "
+         f"Python {platform.python_version()}, "
          f"numpy {numpy.__version__}). Every study is a `fusion sweep` grid (docs/sweep.md) over the shipped configs "
          "`configs/uwb_pv_ukf.yaml` (beacons around a 30 m x 20 m hall) and `configs/uwb_pv_ukf_line.yaml` (the four "
          "beacons on one line) and the scenarios `scenarios/uwb_route{1,2}[_line].yaml`, with the overrides each "
@@ -170,6 +170,17 @@ def write_page(out: Path, studies: list, results: dict[str, list[dict]], walls: 
                 f"{word} by {abs(100 * res['rel_median']):.1f}% median, lower in {100 * res['a_lower']:.0f}% of "
                 f"{res['n']} seeds, p {_pval(res['p'])})")
 
+    def pair_text(rows: list[dict], pred, metric: str, unit: str) -> str:
+        sel = [r for r in rows if r.get("status") == "ok" and pred(r)]
+        u = {r["seed"]: r[metric] for r in sel if r["filter"] == "ukf"}
+        e = {r["seed"]: r[metric] for r in sel if r["filter"] == "ekf"}
+        k = sorted(set(u) & set(e))
+        res = paired([u[i] for i in k], [e[i] for i in k])
+        return (f"UKF {np.mean([u[i] for i in k]):.3g}{unit}, EKF {np.mean([e[i] for i in k]):.3g}{unit} (median "
+                f"paired difference {100 * res['rel_median']:+.1f}%, UKF lower in {100 * res['a_lower']:.0f}% of "
+                f"{res['n']} seeds, p {_pval(res['p'])})")
+
+    slow = (lambda r: r["param.scenario.sensors.uwb.rate_hz"] == "0.5" and r["param.process.spectral_density"] == "1.0")
     L += ["## In short", "",
           f"* **As the system is specified** (0.1 m range noise, 20 ranges/s, walking at 1.2 m/s) **the UKF and the EKF "
           f"give the same track**: over {studies[0].seeds} seeds in each of the paper's four cases the median paired "
@@ -181,16 +192,20 @@ def write_page(out: Path, studies: list, results: dict[str, list[dict]], walls: 
            f"{r1[2]['n']} seeds: {100 * (1 - r1[0] / r1[1]):.0f}% lower; issue 17's target is at least 25%: "
            f"{'met' if r1[0] <= 0.75 * r1[1] else 'missed'}); in every case and for both filters (section 2)."
            if r1 else "* Smoothing: no rows."),
-          "", "The process noise and range-rate grids (sections 4-5) say when the difference between the filters "
-          "appears; the collinear layout from a wrong initial belief (section 6) shows what the line of beacons "
-          "leaves undetermined.", ""]
+          f"* **At 2 ranges/s with S = 1** (0.5 cycles/s, first 30 s of route 1) the largest error: "
+          f"{pair_text(results['rate'], slow, 'position_max_m', ' m')}; mean NEES "
+          f"{pair_text(results['rate'], slow, 'nees_mean', '')} (section 5).",
+          f"* **Collinear beacons from the wrong initial belief** (section 6): position RMSE "
+          f"{pair_text(results['collinear_initial'], lambda r: True, 'position_rmse_m', ' m')}; an RMSE of metres "
+          "is a track on the mirror side of the line of beacons, which fits every range (no gate can tell).",
+          "", "The process-noise grid (section 4) chooses S for both filters.", ""]
     sec = {"cases": 1, "smoothed": 2, "initial": 3, "process_noise": 4, "rate": 5, "collinear_initial": 6}
     for st in sorted(studies, key=lambda s: sec[s.key]):
         rows = results[st.key]
         L += [f"## {sec[st.key]}. {st.title}", "",
               f"{st.seeds} seeds a variant; overrides: " + (", ".join(f"`{k}` = {', '.join(v)}" for k, v in st.params)
                                                             or "none (as shipped)") +
-              f"; {walls[st.key]:.0f} s of sweeps.", ""]
+              f"; {sum(float(r.get('wall_s') or 0.0) for r in rows) / 60:.1f} trial-minutes.", ""]
         if st.key == "smoothed":
             L += ["![Filtered and smoothed position RMSE over seeds](uwb/sweep_rmse.png)", "", *sm_lines, ""]
             continue
