@@ -6,8 +6,6 @@ import math
 import platform
 from collections import defaultdict
 from pathlib import Path
-from typing import Any
-
 import numpy as np
 
 from fusion.sweep.report import format_ci
@@ -108,11 +106,6 @@ def figure(path: Path, rows: list[dict]) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
-
-
-def _mean(rows, pred, m):
-    v = [r[m] for r in rows if r.get("status") == "ok" and pred(r)]
-    return float(np.mean(v)) if v else math.nan
 
 
 def write_page(out: Path, studies: list, results: dict[str, list[dict]], walls: dict, wall: float, args) -> None:

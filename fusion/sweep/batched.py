@@ -13,13 +13,12 @@ otherwise :class:`NotLockstep` is raised and the engine runs those trials one by
 from __future__ import annotations
 
 import copy
-import math
 import time
 from typing import Any
 
 import numpy as np
 
-from fusion.api import Estimate, MalformedMessage, Message
+from fusion.api import Estimate, MalformedMessage
 
 from .trial import Trial, recording_of, row_of, system_of
 

@@ -3,7 +3,6 @@ API: run what the results file does not have yet, append rows as they finish, re
 from __future__ import annotations
 
 import itertools
-import math
 import re
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
@@ -180,6 +179,3 @@ def sweep(trials: list[Trial], out: str | Path, engine: str = "auto", jobs: int 
     rows = [r for r in latest(previous + new_rows) if r["key"] in wanted]
     return rows, info
 
-
-def nan_to_none(v: Any) -> Any:
-    return None if isinstance(v, float) and math.isnan(v) else v
