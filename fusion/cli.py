@@ -19,9 +19,9 @@ import sys  # noqa: E402
 from fusion import __version__  # noqa: E402
 from fusion.errors import FusionError  # noqa: E402
 
-COMMANDS = ("run", "validate", "plugins", "simulate", "tui", "import_")  # import_: `fusion import`
+COMMANDS = ("run", "validate", "plugins", "simulate", "tui", "import_", "sweep")  # import_: `fusion import`
 # Commands that import numpy and scipy.linalg: numpy's unused submodules are deferred for them (start-up).
-NUMERIC_COMMANDS = ("run", "validate", "tui", "simulate", "import")
+NUMERIC_COMMANDS = ("run", "validate", "tui", "simulate", "import", "sweep")
 
 
 def build_parser() -> argparse.ArgumentParser:

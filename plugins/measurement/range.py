@@ -142,6 +142,21 @@ class RangeModel(MeasurementModel):
             H[:, self._q] = u @ rotate_jacobian(x[self._q], self._lever)
         return H
 
+    def jacobian_batch(self, x: np.ndarray) -> np.ndarray:
+        """dh/dx (N, k, n) at states x (N, n) (batched filters, fusion.batch): :meth:`jacobian` row by row
+        in one vectorised evaluation."""
+        d = self._tag(x)[:, None, :] - self._B                     # (N, k, dp)
+        r = np.sqrt(np.einsum("Nkd,Nkd->Nk", d, d) + self._dz2)
+        u = d / np.maximum(r, 1e-12)[..., None]
+        if self._calibrated:
+            u = u * self._scale[:, None]
+        H = np.zeros((x.shape[0], len(self.bound), x.shape[-1]))
+        H[:, :, self._p] = u
+        if self._lever is not None:
+            from fusion.batch.models import batch_H_rows
+            H[:, :, self._q] = batch_H_rows(lambda xi: self.jacobian(xi)[:, self._q], x)
+        return H
+
     # ------------------------------------------------------------------ geometry check
     def geometry(self, x: np.ndarray, P: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Geometry of the sensor's beacons at the position of states ``x`` (..., n); ``P`` (..., n, n).

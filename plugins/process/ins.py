@@ -374,6 +374,27 @@ class Ins(ProcessModel):
             add_hold_noise(Qm, q, dt - self._hold, self.params.hold_accel_rw, self.params.hold_rate_rw)  # type: ignore[attr-defined]
         return Qm
 
+    def Q_batch(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        """:meth:`Q` for states x (N, 16) at once, (N, 16, 16) (batched filters, fusion.batch): with isotropic
+        accelerometer and gyro noise and no hold noise, the shared blocks plus the attitude block of each
+        state in one vectorised evaluation; otherwise :meth:`Q` state by state."""
+        x = np.asarray(x, dtype=float)
+        if self._Qdt[1] is None or not self._iso_w or (self._hold is not None and dt > self._hold):
+            return np.stack([self.Q(xi, u if u is None or np.ndim(u) == 1 else u[i], dt) for i, xi in enumerate(x)])
+        base = self._Qdt[0] * dt
+        base += self._Qdt[1] * (dt * dt)
+        base += self._Qdt[2] * (dt * dt * dt)
+        q = x[:, 6:10]
+        qq = q[:, :, None] * q[:, None, :]
+        n2 = np.einsum("ki,ki->k", q, q)
+        Qqq = (n2[:, None, None] * np.eye(4) - qq) * (self._var_w[0] * dt / 4.0)
+        qnv = self.params.quat_norm_variance  # type: ignore[attr-defined]
+        if qnv:
+            Qqq += qq * (qnv / n2)[:, None, None]
+        Qm = np.repeat(base[None], x.shape[0], axis=0)
+        Qm[:, 6:10, 6:10] = Qqq
+        return Qm
+
     def Q_inputs(self, x0: np.ndarray, x1: np.ndarray, us: np.ndarray, dts: np.ndarray) -> np.ndarray:
         """Process noise (16, 16) of a run of samples integrated in one step (:meth:`f_inputs`), from the
         mean before (x0) and after (x1) the run: the white noises and bias random walks of the whole

@@ -85,3 +85,12 @@ class ConstantVelocity(ProcessModel):
                 self._Q_cache.clear()
             self._Q_cache[dt] = Q
         return Q
+
+    # batched filters (fusion.batch): F and Q depend on dt alone, one shared matrix for all N states
+    def jacobian_batch(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        """F (2d, 2d) shared by the states x (N, 2d) (broadcasts against (N, 2d, 2d))."""
+        return self.F(dt)
+
+    def Q_batch(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        """Q (2d, 2d) over dt seconds shared by the states x (N, 2d) (broadcasts against (N, 2d, 2d))."""
+        return self.Q(x, u, dt)

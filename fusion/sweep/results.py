@@ -1,0 +1,119 @@
+"""The results file of a sweep: one row a trial, CSV (appended as trials finish, so an interrupted sweep
+keeps what it did) or Parquet (pyarrow; rewritten whole at the end). ``read_rows`` gives the rows of an
+existing file, for resuming and for the summary."""
+from __future__ import annotations
+
+import csv
+import math
+import os
+from pathlib import Path
+from typing import Any, Iterable
+
+from fusion.api import ConfigError
+
+from .trial import METRICS, SMOOTHED, Trial
+
+__all__ = ["columns", "trial_fields", "read_rows", "CsvWriter", "write_parquet", "done_keys"]
+
+TRIAL_COLUMNS = ("key", "config", "scenario", "seed", "filter")
+
+
+def columns(param_keys: Iterable[str], sensors: Iterable[str], smooth: bool) -> list[str]:
+    """Column order: the trial, its params (``param.<key>``), status, metrics, NIS per sensor,
+    smoothed metrics (with --smooth), engine, error."""
+    cols = list(TRIAL_COLUMNS) + [f"param.{k}" for k in param_keys] + ["smooth", "status"] + list(METRICS)
+    cols += [f"nis_mean_{s}" for s in sensors]
+    if smooth:
+        cols += list(SMOOTHED)
+    return cols + ["engine", "error"]
+
+
+def trial_fields(trial: Trial) -> dict[str, Any]:
+    """The trial's own columns."""
+    out: dict[str, Any] = {"key": trial.key(), "config": trial.config, "scenario": trial.scenario, "seed": trial.seed,
+                           "filter": trial.filter or "", "smooth": trial.smooth}
+    for k, v in trial.params:
+        out[f"param.{k}"] = v
+    return out
+
+
+def _parse(v: str) -> Any:
+    if v == "":
+        return math.nan
+    try:
+        f = float(v)
+    except ValueError:
+        return {"True": True, "False": False}.get(v, v)
+    return int(f) if f.is_integer() and "." not in v and "e" not in v.lower() and "nan" not in v.lower() else f
+
+
+def read_rows(path: str | Path) -> list[dict[str, Any]]:
+    """Rows of a results file (CSV or Parquet); [] when it does not exist."""
+    p = Path(path)
+    if not p.exists():
+        return []
+    if p.suffix == ".parquet":
+        pq = _pyarrow()
+        return pq.read_table(p).to_pylist()
+    with open(p, newline="", encoding="utf-8") as fh:
+        rd = csv.DictReader(fh)
+        return [{k: (_parse(v) if k not in ("key", "error", "config", "scenario", "filter") and not k.startswith("param.")
+                     else v) for k, v in r.items()} for r in rd]
+
+
+def done_keys(rows: list[dict[str, Any]]) -> set[str]:
+    """Keys of the trials that finished (status ok): a resumed sweep skips them and retries failed ones."""
+    return {r["key"] for r in rows if r.get("status") == "ok"}
+
+
+def _pyarrow():
+    try:
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise ConfigError("a .parquet results file needs pyarrow: pip install pyarrow (or write .csv)") from None
+    return pq
+
+
+class CsvWriter:
+    """Appends rows to a CSV results file, flushed after each; writes the header to a new file and checks
+    an existing file's header is the same columns (else ConfigError: another sweep's file)."""
+
+    def __init__(self, path: str | Path, cols: list[str]):
+        self.path = Path(path)
+        self.cols = cols
+        exists = self.path.exists() and self.path.stat().st_size > 0
+        if exists:
+            with open(self.path, newline="", encoding="utf-8") as fh:
+                head = next(csv.reader(fh), [])
+            if head != cols:
+                raise ConfigError(f"{self.path}: its columns are not this sweep's (another config, --param or "
+                                  f"--smooth?); first difference: {_first_diff(head, cols)}; use another -o")
+        self.fh = open(self.path, "a", newline="", encoding="utf-8")
+        self.w = csv.DictWriter(self.fh, fieldnames=cols, extrasaction="ignore")
+        if not exists:
+            self.w.writeheader()
+            self.fh.flush()
+
+    def write(self, row: dict[str, Any]) -> None:
+        self.w.writerow({k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in row.items()})
+        self.fh.flush()
+
+    def close(self) -> None:
+        self.fh.close()
+
+
+def _first_diff(a: list[str], b: list[str]) -> str:
+    for x, y in zip(a, b):
+        if x != y:
+            return f"{x!r} in the file, {y!r} here"
+    return f"{len(a)} columns in the file, {len(b)} here"
+
+
+def write_parquet(path: str | Path, rows: list[dict[str, Any]], cols: list[str]) -> None:
+    """All rows to a Parquet file (atomically: a temporary file renamed)."""
+    pq = _pyarrow()
+    import pyarrow as pa
+    table = pa.Table.from_pylist([{c: r.get(c) for c in cols} for r in rows])
+    tmp = Path(str(path) + ".tmp")
+    pq.write_table(table, tmp)
+    os.replace(tmp, path)

@@ -1,0 +1,199 @@
+"""One trial of a sweep: simulate(scenario, seed), then run(config variant); a pure function of
+(config, scenario, seed, filter, params, smooth), so its row does not depend on where it ran.
+
+A ``param`` key is a dotted path into the system YAML (``process.spectral_density``,
+``filter.alpha``, ``sensors.uwb.noise.sd``), or into the scenario when it starts with ``scenario.``
+(``scenario.sensors.uwb.rate_hz``); a value is YAML (``0.2``, ``[1, 2]``, ``null``).
+"""
+from __future__ import annotations
+
+import copy
+import json
+import math
+import time
+import traceback
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from fusion.api import ConfigError
+
+__all__ = ["Trial", "row_of", "run_trial", "system_of", "scenario_of", "recording_of", "METRICS"]
+
+#: The metric columns of a row, in order (``nis_mean_<sensor>`` columns follow, one per sensor).
+METRICS = ("position_rmse_m", "position_max_m", "velocity_rmse_mps", "attitude_rmse_deg", "nees_mean",
+           "nees_in_95_fraction", "estimates", "updates", "rejected", "late", "malformed", "resets",
+           "not_positive_definite", "wall_s")
+SMOOTHED = ("smoothed_position_rmse_m", "smoothed_position_max_m", "smoothed_velocity_rmse_mps",
+            "smoothed_nees_mean", "smoothed_nees_in_95_fraction")
+
+
+@dataclass(frozen=True)
+class Trial:
+    """What a trial runs: paths of the system YAML and the scenario, the noise ``seed``, the ``filter``
+    (None: the config's), ``params`` as sorted (key, YAML value text) pairs, ``smooth`` (RTS smoother
+    after the forward filter)."""
+
+    config: str
+    scenario: str
+    seed: int
+    filter: str | None = None
+    params: tuple[tuple[str, str], ...] = field(default_factory=tuple)
+    smooth: bool = False
+
+    def key(self) -> str:
+        """Identity of the trial in a results file (resume): JSON of every field."""
+        return json.dumps([self.config, self.scenario, self.seed, self.filter or "", list(map(list, self.params)),
+                           bool(self.smooth)])
+
+    def variant(self) -> tuple:
+        """Everything but the seed: trials of one variant differ only in their noise."""
+        return (self.config, self.scenario, self.filter, self.params, self.smooth)
+
+
+def _yaml_value(text: str, where: str) -> Any:
+    import yaml
+
+    from fusion.yamlsource import parse_yaml
+    try:
+        return parse_yaml(text)[0]
+    except yaml.YAMLError:
+        raise ConfigError(f"{where}: value {text!r} is not valid YAML") from None
+
+
+def _set(data: dict, dotted: str, value: Any, where: str) -> None:
+    """data[a][b][c] = value for ``a.b.c`` (missing mappings created)."""
+    keys = dotted.split(".")
+    node = data
+    for i, k in enumerate(keys[:-1]):
+        nxt = node.get(k) if isinstance(node, dict) else None
+        if nxt is None:
+            nxt = node[k] = {}
+        elif isinstance(nxt, str) and k == "filter":   # filter: ukf -> {type: ukf}
+            nxt = node[k] = {"type": nxt}
+        elif not isinstance(nxt, dict):
+            raise ConfigError(f"{where}: {'.'.join(keys[:i + 1])} is not a mapping (it is {nxt!r})")
+        node = nxt
+    node[keys[-1]] = value
+
+
+@lru_cache(maxsize=64)
+def _read_yaml(path: str) -> Any:
+    from fusion.yamlsource import load_yaml
+    return load_yaml(path).data
+
+
+def _validation(where: str, exc: Any) -> ConfigError:
+    err = exc.errors()[0]
+    loc = ".".join(str(p) for p in err.get("loc", ()))
+    return ConfigError(f"{where}: {loc}: {err.get('msg', exc)}")
+
+
+def scenario_of(trial: Trial):
+    """The validated fusion.simulate Scenario of a trial (its ``scenario.`` params applied)."""
+    from pydantic import ValidationError
+
+    from fusion.simulate.scenario import Scenario
+    data = copy.deepcopy(_read_yaml(trial.scenario))
+    if not isinstance(data, dict):
+        raise ConfigError(f"{trial.scenario}: a scenario is a YAML mapping")
+    data.setdefault("name", Path(trial.scenario).stem)
+    for k, v in trial.params:
+        if k.startswith("scenario."):
+            _set(data, k[len("scenario."):], _yaml_value(v, f"--param {k}"), f"--param {k}")
+    try:
+        return Scenario.model_validate(data)
+    except ValidationError as exc:
+        raise _validation(f"{trial.scenario} (with --param)", exc) from None
+
+
+def system_of(trial: Trial):
+    """The wired System of a trial: the config with its params and filter (``filter`` other than the
+    config's own type starts from that filter's defaults: the config's parameters belong to its filter)."""
+    from pydantic import ValidationError
+
+    from fusion.config import SystemSpec, wire
+    data = copy.deepcopy(_read_yaml(trial.config))
+    if not isinstance(data, dict):
+        raise ConfigError(f"{trial.config}: a system config is a YAML mapping")
+    data["recording"] = None
+    if trial.filter is not None:
+        own = data.get("filter")
+        own_type = own.get("type") if isinstance(own, dict) else own
+        if trial.filter != own_type:
+            data["filter"] = {"type": trial.filter}
+    for k, v in trial.params:
+        if not k.startswith("scenario."):
+            _set(data, k, _yaml_value(v, f"--param {k}"), f"--param {k}")
+    try:
+        spec = SystemSpec.model_validate(data)
+    except ValidationError as exc:
+        raise _validation(f"{trial.config} (with --param/--filter)", exc) from None
+    return wire(spec, path=Path(trial.config))
+
+
+def recording_of(trial: Trial) -> list[str]:
+    """The simulated recording of a trial, as lines (fusion.simulate, the trial's seed)."""
+    from fusion.simulate import simulate
+    return simulate(scenario_of(trial), seed=trial.seed).splitlines()
+
+
+def _get(d: dict, *keys, default=math.nan):
+    for k in keys:
+        if not isinstance(d, dict) or k not in d:
+            return default
+        d = d[k]
+    return d
+
+
+def row_of(summary: dict, sensors: list[str]) -> dict[str, Any]:
+    """The metric columns of a row from a run's summary (fusion.pipeline, DESIGN.md "Outputs")."""
+    sens = summary.get("sensors", {})
+    row = {
+        "position_rmse_m": _get(summary, "errors", "position_rmse_m"),
+        "position_max_m": _get(summary, "errors", "position_max_m"),
+        "velocity_rmse_mps": _get(summary, "errors", "velocity_rmse_mps"),
+        "attitude_rmse_deg": _get(summary, "errors", "attitude_rmse_deg"),
+        "nees_mean": _get(summary, "consistency", "nees_mean"),
+        "nees_in_95_fraction": _get(summary, "consistency", "nees_in_95_fraction"),
+        "estimates": _get(summary, "errors", "samples", default=0),
+        "updates": int(_get(summary, "steps", "update", default=0)),
+        "rejected": sum(int(s.get("rejected", 0)) for s in sens.values()),
+        "late": sum(int(s.get("late", 0)) for s in sens.values()),
+        "malformed": sum(int(s.get("malformed", 0)) for s in sens.values()),
+        "resets": int(_get(summary, "health", "resets", default=0)),
+        "not_positive_definite": int(_get(summary, "filter_counters", "not_positive_definite", default=0)),
+    }
+    for s in sensors:
+        row[f"nis_mean_{s}"] = _get(summary, "consistency", "nis_mean", s)
+    sm = summary.get("smoothed")
+    if sm is not None:
+        row.update(smoothed_position_rmse_m=_get(sm, "errors", "position_rmse_m"),
+                   smoothed_position_max_m=_get(sm, "errors", "position_max_m"),
+                   smoothed_velocity_rmse_mps=_get(sm, "errors", "velocity_rmse_mps"),
+                   smoothed_nees_mean=_get(sm, "consistency", "nees_mean"),
+                   smoothed_nees_in_95_fraction=_get(sm, "consistency", "nees_in_95_fraction"))
+    return row
+
+
+def run_trial(trial: Trial) -> dict[str, Any]:
+    """Simulate and run one trial through ``fusion.pipeline.run`` (or the smoother's run); its row. A
+    failure is caught and recorded: ``status`` "error" and ``error`` the exception's one-line text."""
+    t0 = time.perf_counter()
+    try:
+        lines = recording_of(trial)
+        system = system_of(trial)
+        if trial.smooth:
+            from fusion.smoothing.run import run_smoothed
+            result = run_smoothed(system, lines, hooks=False)
+        else:
+            from fusion import pipeline
+            result = pipeline.run(system, lines, hooks=False)
+        row = row_of(result.summary, [n for n, s in system.sensors.items() if s.role == "measurement"])
+        row.update(status="ok", error="", engine="pipeline", wall_s=time.perf_counter() - t0)
+        return row
+    except Exception as exc:  # a failed trial is a row, the sweep goes on
+        msg = f"{type(exc).__name__}: {exc}".replace("\n", " ")
+        return {"status": "error", "error": msg[:500], "engine": "pipeline", "wall_s": time.perf_counter() - t0,
+                "traceback": traceback.format_exc(limit=3)[-1000:]}
