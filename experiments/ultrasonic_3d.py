@@ -153,6 +153,13 @@ def page(rows, walks, args, wall: float) -> str:
     late = np.mean([w["filter_argmax"] > 0.1 * len(w["filter"]) for w in walks])
     below = int(np.sum(np.array(f["maxes"]) <= PAPER_III["filter"][1]))
     pmax = np.array(f["maxes"])
+    if a12["sd_ok"] >= a12["genuine_ok"]:
+        verdict = ("met wherever the bound of the genuine arrivals allows it; unreachable on principle "
+                   "elsewhere.")
+    else:
+        verdict = (f"met at {a12['sd_ok']} positions; at {a12['genuine_ok'] - a12['sd_ok']} more the bound of the "
+                   "genuine arrivals is under 10 mm by less than the 2-3 % the 2-sigma gate costs (it refuses "
+                   "4.55 % of the genuine arrivals, as the paper's did); unreachable on principle elsewhere.")
     import numpy as _np
     return f"""# The 3-D ultrasonic localiser (paper 003): Tables I-III reproduced
 
@@ -169,14 +176,16 @@ paper 003, issue 14; the smoothed rows: issue 17).
 * **Position (Tables I-II).** The IEKF on single arrival times, with its 2-sigma gate, is closer to the
   measured position than the mean of the geometric fixes in {a12['kf_closer']} of {a12['runs']} static runs
   (mean error {ke.mean():.1f} mm against {ge.mean():.1f} mm). Its sd (Table II's "standard deviation from
-  filter") is within {SD_TARGET_MM:.0f} mm at {a12['sd_ok']} of 5 positions, and that is all any estimator can
-  do: a stationary filter's sd is the Cramer-Rao bound of the arrivals it uses
+  filter") is within {SD_TARGET_MM:.0f} mm at {a12['sd_ok']} of 5 positions (mean over seeds, largest axis), and it
+  cannot be smaller: a stationary filter's sd is the Cramer-Rao bound of the arrivals it uses
   (`tdoa_geometric.stationary_bound`; the IEKF's sd is {ratio.mean():.3f} x that bound, {ratio.min():.3f}-{ratio.max():.3f}
-  over the runs), and the bound of all the genuine arrivals is within {SD_TARGET_MM:.0f} mm at {a12['bound_ok']} of 5
-  positions. It is the paper's own Table II sd to within a few percent ({' / '.join(f'{b:.1f}' for b in a12['bound_all'])} mm
-  with every arrival, against {' / '.join(str(max(s for _, s in r[3])) for r in POSITIONS)}): the far position
-  (2370, 2200, 1350) cannot reach 10 mm with 0.2 ms of noise and 64 cycles, nor could the paper's filter. Target "within 10 mm sd": met where the bound
-  allows, unreachable on principle at the far position.
+  over the runs). The bound of every arrival of the paper's cycles (no echoes at all) is within
+  {SD_TARGET_MM:.0f} mm at {a12['bound_ok']} of 5 positions, and the bound of the arrivals that are not echoes (what an
+  estimator told which arrivals are echoes could reach) at {a12['genuine_ok']} of 5. The bound of every arrival is
+  the paper's own Table II sd to within a few percent ({' / '.join(f'{b:.1f}' for b in a12['bound_all'])} mm, against
+  {' / '.join(str(max(s for _, s in r[3])) for r in POSITIONS)}): the far position (2370, 2200, 1350) cannot reach
+  10 mm with 0.2 ms of noise and 64 cycles, nor could the paper's filter, and with this page's echo rate the
+  last position sits at the 10 mm line (the paper's 10.1). Target "within 10 mm sd": {verdict}
 * **Orientation (Table III).** The geometric algorithm is the paper's: {g['mean']:.2f} deg mean
   and {g['max']:.1f} deg maximum (mean over {n_w} seeds) against 15.0 and 29.7. The paper's filter gives
   {f['mean']:.2f} deg mean (target <= 9.34: {'met' if f['mean'] <= 9.34 else 'missed'}) and a maximum of
