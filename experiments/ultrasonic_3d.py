@@ -334,7 +334,10 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(uc.ROOT / "docs" / "results" / "ultrasonic_3d.md"))
     ap.add_argument("--save", help="also keep every per-seed result (with the per-firing errors) in this "
                     "pickle, for --render")
-    ap.add_argument("--render", help="no runs: rewrite the page from a pickle written by --save")
+    ap.add_argument("--render", nargs="+", help="no runs: rewrite the page from pickles written by --save "
+                    "(static rows from the first that has them, the walks of all in order)")
+    ap.add_argument("--walk-first", type=int, default=100, help="seed of the first walk (to split the walks "
+                    "over processes: --static-seeds 0 --walk-first 104 --save b.pkl)")
     args = ap.parse_args(argv)
     if args.quick:
         args.static_seeds, args.walk_seeds, args.firings = 3, 2, 3000
@@ -343,22 +346,32 @@ def main(argv=None) -> int:
 
     t0 = time.perf_counter()
     if args.render:
-        with open(args.render, "rb") as fh:
-            saved = pickle.load(fh)
-        rows, walks, wall = saved["rows"], saved["walks"], saved["wall"]
-        args.static_seeds, args.walk_seeds, args.firings = saved["sizes"]
+        parts = []
+        for name in args.render:
+            with open(name, "rb") as fh:
+                parts.append(pickle.load(fh))
+        rows = next(p["rows"] for p in parts if p["rows"])
+        walks = [w for p in parts for w in p["walks"]]
+        wall = sum(p["wall"] for p in parts)
+        args.static_seeds = next(p["sizes"][0] for p in parts if p["rows"])
+        args.walk_seeds, args.firings = len(walks), parts[0]["sizes"][2]
     else:
         with tempfile.TemporaryDirectory() as tmp:
             rows = []
-            for i, row in enumerate(POSITIONS):
+            for i, row in enumerate(POSITIONS if args.static_seeds else []):
                 rows.append([static_row(row, 1000 * (i + 1) + s, tmp) for s in range(args.static_seeds)])
                 print(f"static position {i + 1}: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
             walks = []
             for s in range(args.walk_seeds):
-                walks.append(walk_seed(100 + s, args.firings, tmp))
+                walks.append(walk_seed(args.walk_first + s, args.firings, tmp))
                 print(f"walk {s + 1}: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
         wall = time.perf_counter() - t0
         if args.save:
+            if not rows:      # a part of the walks only: no page
+                with open(args.save, "wb") as fh:
+                    pickle.dump({"rows": rows, "walks": walks, "wall": wall,
+                                 "sizes": (0, args.walk_seeds, args.firings)}, fh)
+                return 0
             with open(args.save, "wb") as fh:
                 pickle.dump({"rows": rows, "walks": walks, "wall": wall,
                              "sizes": (args.static_seeds, args.walk_seeds, args.firings)}, fh)
