@@ -129,14 +129,19 @@ def run_system(system, path: str, smooth: bool = False) -> dict[str, Any]:
             "P_last": est[-1].belief.cov if est else None}
 
 
-def load(config: Path, **process_changes):
-    """A wired system of ``config`` with its process parameters changed."""
+def load(config: Path, preprocessor: dict | None = None, **process_changes):
+    """A wired system of ``config`` with its process parameters (and those of sensor ``us``'s
+    preprocessor) changed."""
     from fusion.config import SystemSpec, wire
     from fusion.yamlsource import load_yaml
 
     doc = load_yaml(config)
     data = dict(doc.data)
     data["process"] = {**data["process"], **process_changes}
+    if preprocessor:
+        us = dict(data["sensors"]["us"])
+        us["preprocessor"] = {**us["preprocessor"], **preprocessor}
+        data["sensors"] = {**data["sensors"], "us": us}
     return wire(SystemSpec.model_validate(data), None, Path(config))
 
 

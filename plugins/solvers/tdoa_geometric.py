@@ -227,6 +227,10 @@ class TdoaParams(Params):
     initialise_agree: int = Field(3, ge=1, description="initialise: the fix is the mean of this many "
                                   "consecutive fixes that agree (chi-square, 99 %), so echoes cannot "
                                   "place the filter")
+    initialise_stationary: bool = Field(False, description="initialise, for a robot known to stand still "
+                                        "(paper 003 Tables I-II): the fix is the batch fix of every arrival "
+                                        "so far that fits the agreeing fixes' position (stationary_fix), not "
+                                        "of those three cycles only")
 
 
 class TdoaGeometric(Solver):
@@ -270,6 +274,7 @@ class TdoaGeometric(Solver):
         self._previous: np.ndarray | None = None
         self._initialised = False
         self._agree = AgreeingFixes(p.initialise_agree)
+        self._history: list[tuple[str, float]] = []     # initialise_stationary: every arrival until the fix
 
     def feed(self, message: Message) -> list[Message]:
         """Take one ``beacon arrival [receiver]`` message; return the fix of a cycle that closed (or, after
@@ -287,6 +292,8 @@ class TdoaGeometric(Solver):
             if label in self._cycle or arrival - t_first >= len(self.beacon_positions) * p.period_s:
                 out += self._close()
         self._cycle[label] = (arrival, message)
+        if p.initialise_stationary and len(self._history) < 100_000:
+            self._history.append((label, arrival))
         if len(self._cycle) == len(self.beacon_positions):
             out += self._close()
         return out
@@ -331,9 +338,27 @@ class TdoaGeometric(Solver):
             from .initial_fix import pack_initial
             self._initialised = True
             pos, cov = agreed
+            if p.initialise_stationary:
+                try:
+                    return [Message(float(a[-1]), last.sensor, self._stationary(pos, cov), last.line)]
+                except np.linalg.LinAlgError:     # cannot happen with the agreeing cycles kept; be safe
+                    self._history = []
             return [Message(float(a[-1]), last.sensor, pack_initial(
                 pos, cov, self.beacon_positions[names[-1]], float(a[-1]), p.speed_of_sound, p.arrival_sd), last.line)]
         return [Message(float(a[-1]), last.sensor, pack_fix(pos, cov), last.line)]
+
+
+    def _stationary(self, start: np.ndarray, start_cov: np.ndarray) -> tuple[float, ...]:
+        """The initial fix message (initial_fix format) of every arrival so far, from the agreeing position."""
+        from .stationary_fix import stationary_fix
+
+        p: TdoaParams = self.params  # type: ignore[assignment]
+        B = np.array([self.beacon_positions[b] for b, _ in self._history])
+        a = np.array([t for _, t in self._history])
+        pos, t0, C, _ = stationary_fix(B, a, p.period_s, p.speed_of_sound, p.arrival_sd, start, start_cov)
+        self._history = []
+        n_last = float(np.rint((a[-1] - a[0]) / p.period_s))        # t: the latest firing, t0 + n T
+        return pack_fix(pos, C[:3, :3]) + (t0 + n_last * p.period_s,) + tuple(C[:3, 3].tolist()) + (float(C[3, 3]),)
 
 
 def parse_arrival(message: Message, known: Sequence[str]) -> tuple[str, float]:

@@ -248,3 +248,45 @@ def test_stationary_bound_is_the_scatter_of_least_squares():
     assert np.all(np.diag(bound)[:3] >= np.diag(known) * (1 - 1e-9))    # an unknown T never helps
     with pytest.raises(np.linalg.LinAlgError):
         stationary_bound(LAB, FAR, np.arange(4), C, sigma)               # one cycle: T not determined
+
+
+def test_stationary_fix_uses_every_genuine_arrival_and_drops_echoes():
+    """stationary_fix over 10 cycles at the far position with an echo in each of 4 of them: the echoes are
+    dropped, the fix is the truth (noise-free), and its covariance is the Cramer-Rao bound of the genuine
+    arrivals with T known (the [p, t0] block of sigma^2 (J^T J)^-1), far below a 3-cycle fix's."""
+    from fusion_plugins.solvers.stationary_fix import stationary_fix
+
+    k = np.arange(40)
+    Bk = LAB[k % 4]
+    a = 0.137 + k * T + np.linalg.norm(FAR - Bk, axis=1) / C
+    echo = np.zeros(k.size, bool)
+    echo[[1, 6, 19, 28]] = True
+    a[echo] += np.array([0.4, 1.0, 2.5, 0.7]) / C
+    pos, t0, cov, used = stationary_fix(Bk, a, T, C, 2e-4, FAR + np.array([0.2, -0.15, 0.1]),
+                                        np.eye(3) * 0.2 ** 2)
+    assert np.array_equal(used, ~echo)
+    assert np.abs(pos - FAR).max() < 1e-7 and abs(t0 - 0.137) < 1e-9
+    d = FAR - Bk[~echo]
+    J = np.column_stack([d / (C * np.linalg.norm(d, axis=1, keepdims=True)), np.ones(d.shape[0])])
+    assert np.allclose(cov, (2e-4) ** 2 * np.linalg.inv(J.T @ J), rtol=1e-6)
+    _, cov1, _ = tdoa_fix(LAB, a[8:12], np.arange(4), T, C, FAR)
+    assert np.trace(cov[:3, :3]) < np.trace(cov1) / 5
+
+
+def test_stationary_initialiser_keeps_the_wait():
+    """initialise_stationary: the initial fix after a wait (echoes in the first cycles) carries the
+    information of every genuine arrival so far, not of the three agreeing cycles only; same message."""
+    msgs = _messages(FAR, 9)
+    for j in (1, 6, 10, 13):                       # echoes in cycles 1-4: the agreeing run starts at 5
+        b, a, rec = msgs[j].values
+        msgs[j] = Message(a + 1.0 / C, "us", (b, a + 1.0 / C, rec))
+    plain = _solver(output="initialise")
+    batch = _solver(output="initialise", initialise_stationary=True)
+    f0 = [m for msg in msgs for m in plain.feed(msg)][0]
+    f1 = [m for msg in msgs for m in batch.feed(msg)][0]
+    assert f0.t == f1.t and len(f0.values) == len(f1.values) == 14
+    p0, c0 = unpack_fix(f0.values[:9])
+    p1, c1 = unpack_fix(f1.values[:9])
+    assert np.abs(p1 - FAR).max() < 1e-6
+    assert np.trace(c1) < 0.6 * np.trace(c0)       # 28 genuine arrivals against 12
+    assert abs(f1.values[9] - f0.values[9]) < 1e-6  # the same latest firing time (noise-free)
