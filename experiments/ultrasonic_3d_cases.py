@@ -110,26 +110,38 @@ def echoes(log: Log, beacons: dict[str, np.ndarray], c: float = 340.0, min_extra
 
 
 # --------------------------------------------------------------------------- running systems
-def run_system(system, path: str) -> dict[str, Any]:
-    """Replay ``system`` over the log at ``path``: {"summary", "t", "x", "sd"} (estimates at each update).
-    (The one place that calls the run loop, fusion.pipeline.run.)"""
+def run_system(system, path: str, smooth: bool = False) -> dict[str, Any]:
+    """Replay ``system`` over the log at ``path``: {"summary", "t", "x", "sd", "accepted", "P_last"}
+    (estimates at each update; ``accepted`` (k,) whether the update's measurement passed the gate,
+    ``P_last`` the last covariance). ``smooth``: the Rauch-Tung-Striebel smoothed run
+    (``fusion.smoothing.run_smoothed``, as ``fusion run --smooth``): the estimates are the smoothed ones
+    and the summary carries both the filtered errors and ``smoothed``. (The one place that calls the run
+    loop.)"""
     from fusion import pipeline
+    from fusion.smoothing import run_smoothed
 
     kept = pipeline.Collect()
-    summary = pipeline.run(system, path, [kept]).summary
+    summary = (run_smoothed if smooth else pipeline.run)(system, path, [kept]).summary
     est = [e for e in kept.estimates if e.reason == "update"]
     return {"summary": summary, "t": np.array([e.t for e in est]), "x": np.array([e.belief.x for e in est]),
-            "sd": np.array([e.belief.sd for e in est]), "system": system}
+            "sd": np.array([e.belief.sd for e in est]), "system": system,
+            "accepted": np.array([bool(e.update.accepted) if e.update is not None else True for e in est]),
+            "P_last": est[-1].belief.cov if est else None}
 
 
-def load(config: Path, **process_changes):
-    """A wired system of ``config`` with its process parameters changed."""
+def load(config: Path, preprocessor: dict | None = None, **process_changes):
+    """A wired system of ``config`` with its process parameters (and those of sensor ``us``'s
+    preprocessor) changed."""
     from fusion.config import SystemSpec, wire
     from fusion.yamlsource import load_yaml
 
     doc = load_yaml(config)
     data = dict(doc.data)
     data["process"] = {**data["process"], **process_changes}
+    if preprocessor:
+        us = dict(data["sensors"]["us"])
+        us["preprocessor"] = {**us["preprocessor"], **preprocessor}
+        data["sensors"] = {**data["sensors"], "us": us}
     return wire(SystemSpec.model_validate(data), None, Path(config))
 
 

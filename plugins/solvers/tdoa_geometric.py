@@ -135,12 +135,45 @@ def tdoa_fix(beacons: np.ndarray, arrivals: np.ndarray, firings: np.ndarray, per
     return r, 0.5 * (cov + cov.T), it
 
 
+def stationary_bound(beacons: np.ndarray, position: np.ndarray, firings: np.ndarray, c: float,
+                     sigma: float) -> np.ndarray:
+    """Cramer-Rao bound (5, 5) of ``[x y z T t0]`` (m, s, s) from arrival times of a stationary robot.
+
+    Arrival j comes from beacon ``beacons[j]`` (k, 3) (m) fired ``firings[j]`` periods after t0
+    (eq. 1 / eq. 11: ``t_j = t0 + n_j T + |p - b_j| / c``) with white noise of sd ``sigma`` (s). The
+    information is ``J^T J / sigma^2`` with rows ``J_j = [(p - b_j)^T / (c |p - b_j|), n_j, 1]``; the bound
+    is its inverse. It is the smallest covariance any unbiased estimator of a constant position and clock
+    reaches from these arrivals, and the covariance a stationary filter (no position random walk, a
+    constant period) reports after them: Table II's "standard deviation from filter" is this number, not
+    a property of the estimator. Raises ``numpy.linalg.LinAlgError`` when the arrivals cannot fix the state
+    (fewer than 4 beacons, one firing, ...)."""
+    B = np.atleast_2d(np.asarray(beacons, float))
+    d = np.asarray(position, float) - B
+    u = d / np.linalg.norm(d, axis=1, keepdims=True)
+    J = np.column_stack([u / c, np.asarray(firings, float), np.ones(len(B))])
+    info = J.T @ J / sigma ** 2
+    w = np.linalg.eigvalsh(info)
+    if not np.all(np.isfinite(w)) or w[0] <= 1e-12 * w[-1]:
+        raise np.linalg.LinAlgError("stationary_bound: the arrivals do not determine [x y z T t0]")
+    cov = cho_solve(cho_factor(info, lower=True), np.eye(5))
+    return 0.5 * (cov + cov.T)
+
+
 class AgreeingFixes:
     """Consecutive fixes that agree: ``add(position, cov)`` returns the mean of the last ``n`` fixes (and its
-    covariance, the mean covariance / n) once each agrees with the one before within the chi-square test
-    ``d^T (C1 + C2)^-1 d <= chi2.ppf(probability, 3)``, else None. With four beacons an echo moves a fix
-    by tens of cm and nothing in the cycle shows it; three fixes in a row that agree are very unlikely to all
-    carry one (an initialiser must not start a filter, confidently, in the wrong place)."""
+    covariance, the mean covariance / n) once each agrees with the one before, else None.
+
+    Two fixes agree when ``d^T (2 C_s)^-1 d <= chi2.ppf(probability, 3)``, d their difference and C_s the
+    covariance of the better-determined of the two (the smaller determinant). With four beacons an echo
+    moves a fix by tens of cm and nothing in the cycle shows it; three fixes in a row that agree are very
+    unlikely to all carry one (an initialiser must not start a filter, confidently, in the wrong place).
+    Why not ``C_a + C_b``: an echo can throw a fix far out, where the hyperboloids meet at a grazing angle
+    and the fix's own covariance is metres wide; with ``C_a + C_b`` that fix "agrees" with every good one
+    and, averaged in, puts the filter metres off with a metres-wide covariance, through which the gate then
+    lets echoes in (seen at the far static position of paper 003's Table I: a start 7.9 m off). Two fixes
+    of one position have about the same covariance, so ``2 C_s`` keeps the test's level when they do agree.
+    (The mean stays the plain one: weighting by each fix's own covariance, which depends on where the fix
+    fell, pulls the mean towards the beacons.)"""
 
     def __init__(self, n: int, probability: float = 0.99):
         from fusion.chisquare import chi2
@@ -149,11 +182,18 @@ class AgreeingFixes:
         self.threshold = float(chi2.ppf(probability, 3))
         self.run: list[tuple[np.ndarray, np.ndarray]] = []
 
+    def agree(self, pos_a: np.ndarray, cov_a: np.ndarray, pos_b: np.ndarray, cov_b: np.ndarray) -> bool:
+        """The agreement test of two fixes (m, m^2)."""
+        d = np.asarray(pos_a, float) - np.asarray(pos_b, float)
+        small = cov_a if np.linalg.det(cov_a) <= np.linalg.det(cov_b) else cov_b
+        try:
+            return float(d @ cho_solve(cho_factor(2.0 * small, lower=True), d)) <= self.threshold
+        except np.linalg.LinAlgError:
+            return False
+
     def add(self, pos: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        if self.run:
-            d = pos - self.run[-1][0]
-            if float(d @ np.linalg.solve(cov + self.run[-1][1], d)) > self.threshold:
-                self.run = []
+        if self.run and not self.agree(pos, cov, *self.run[-1]):
+            self.run = []
         self.run.append((pos, cov))
         if len(self.run) < self.n:
             return None
@@ -187,6 +227,10 @@ class TdoaParams(Params):
     initialise_agree: int = Field(3, ge=1, description="initialise: the fix is the mean of this many "
                                   "consecutive fixes that agree (chi-square, 99 %), so echoes cannot "
                                   "place the filter")
+    initialise_stationary: bool = Field(False, description="initialise, for a robot known to stand still "
+                                        "(paper 003 Tables I-II): the fix is the batch fix of every arrival "
+                                        "so far that fits the agreeing fixes' position (stationary_fix), not "
+                                        "of those three cycles only")
 
 
 class TdoaGeometric(Solver):
@@ -230,6 +274,7 @@ class TdoaGeometric(Solver):
         self._previous: np.ndarray | None = None
         self._initialised = False
         self._agree = AgreeingFixes(p.initialise_agree)
+        self._history: list[tuple[str, float]] = []     # initialise_stationary: every arrival until the fix
 
     def feed(self, message: Message) -> list[Message]:
         """Take one ``beacon arrival [receiver]`` message; return the fix of a cycle that closed (or, after
@@ -247,6 +292,8 @@ class TdoaGeometric(Solver):
             if label in self._cycle or arrival - t_first >= len(self.beacon_positions) * p.period_s:
                 out += self._close()
         self._cycle[label] = (arrival, message)
+        if p.initialise_stationary and len(self._history) < 100_000:
+            self._history.append((label, arrival))
         if len(self._cycle) == len(self.beacon_positions):
             out += self._close()
         return out
@@ -291,9 +338,27 @@ class TdoaGeometric(Solver):
             from .initial_fix import pack_initial
             self._initialised = True
             pos, cov = agreed
+            if p.initialise_stationary:
+                try:
+                    return [Message(float(a[-1]), last.sensor, self._stationary(pos, cov), last.line)]
+                except np.linalg.LinAlgError:     # cannot happen with the agreeing cycles kept; be safe
+                    self._history = []
             return [Message(float(a[-1]), last.sensor, pack_initial(
                 pos, cov, self.beacon_positions[names[-1]], float(a[-1]), p.speed_of_sound, p.arrival_sd), last.line)]
         return [Message(float(a[-1]), last.sensor, pack_fix(pos, cov), last.line)]
+
+
+    def _stationary(self, start: np.ndarray, start_cov: np.ndarray) -> tuple[float, ...]:
+        """The initial fix message (initial_fix format) of every arrival so far, from the agreeing position."""
+        from .stationary_fix import stationary_fix
+
+        p: TdoaParams = self.params  # type: ignore[assignment]
+        B = np.array([self.beacon_positions[b] for b, _ in self._history])
+        a = np.array([t for _, t in self._history])
+        pos, t0, C, _ = stationary_fix(B, a, p.period_s, p.speed_of_sound, p.arrival_sd, start, start_cov)
+        self._history = []
+        n_last = float(np.rint((a[-1] - a[0]) / p.period_s))        # t: the latest firing, t0 + n T
+        return pack_fix(pos, C[:3, :3]) + (t0 + n_last * p.period_s,) + tuple(C[:3, 3].tolist()) + (float(C[3, 3]),)
 
 
 def parse_arrival(message: Message, known: Sequence[str]) -> tuple[str, float]:

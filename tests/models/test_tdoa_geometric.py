@@ -181,3 +181,112 @@ def test_initial_state_fix_carries_the_firing_time():
     assert np.all(np.linalg.eigvalsh(obs.R) > 0)
     with pytest.raises(MalformedMessage):
         observe_initial(Message(1.0, "us", tuple(v[:13].tolist()) + ("x",)), ctx)
+
+
+# --------------------------------------------------------------------------- echoes thrown far, the bound
+FAR = np.array([2.37, 2.2, 1.35])     # paper 003 Table I, row 4: the position farthest from the beacons
+
+
+def test_an_echo_thrown_far_does_not_agree():
+    """At the far position 0.7 m of extra path on B1 throws the fix ~8 m out, where its own covariance is
+    metres wide: against C_a + C_b it "agreed" with the true fix (statistic ~4 < 11.3); against twice the
+    better-determined covariance it does not."""
+    from fusion_plugins.solvers.tdoa_geometric import AgreeingFixes
+
+    a, n = _arrivals(FAR, LAB)
+    good, cov_g, _ = tdoa_fix(LAB, a, n, T, C, FAR)
+    a[0] += 0.7 / C
+    bad, cov_b, _ = tdoa_fix(LAB, a, n, T, C, FAR)
+    assert np.linalg.norm(bad - FAR) > 5.0 and np.sqrt(np.diag(cov_b)).max() > 2.0
+    agree = AgreeingFixes(3)
+    assert not agree.agree(bad, cov_b, good, cov_g) and not agree.agree(good, cov_g, bad, cov_b)
+    assert agree.agree(good, cov_g, good + 0.5 * np.sqrt(np.diag(cov_g)), cov_g)   # one sd apart: agree
+
+
+def test_initialiser_is_not_placed_by_an_echo_thrown_far():
+    """Three agreeing cycles start the filter; an echo thrown far in the third must restart the count (it
+    once averaged in and started the filter metres off with a metres-wide covariance)."""
+    msgs = _messages(FAR, 8)
+    b, a, rec = msgs[9].values                      # cycle 3, beacon B2? no: index 9 is cycle 3, B2
+    b, a, rec = msgs[8].values                      # cycle 3, B1
+    msgs[8] = Message(a + 0.7 / C, "us", (b, a + 0.7 / C, rec))
+    s = _solver(output="initialise", initialise_agree=3)
+    out = [m for msg in msgs for m in s.feed(msg)]
+    pos, cov = unpack_fix(out[0].values[:9])
+    assert np.abs(pos - FAR).max() < 1e-6
+    assert np.sqrt(np.diag(cov)).max() < 0.15         # 3 fixes of 0.2 ms arrivals (~0.18 m each), not metres
+    assert out[0].t >= msgs[23].t        # three agreeing cycles after the echo's (3 disagrees with 2 and 4)
+
+
+def test_stationary_bound_is_the_scatter_of_least_squares():
+    """stationary_bound against the scatter of the least-squares estimate of [x y z T t0] from noisy
+    arrivals of a standing robot (scipy least_squares: an independent solver), and against the single-fix
+    covariance of eq. 8 / N for N cycles when T is known (T's column removed: the same information)."""
+    from scipy.optimize import least_squares
+
+    from fusion_plugins.solvers.tdoa_geometric import stationary_bound
+
+    rng = np.random.default_rng(3)
+    cycles, sigma, t0 = 6, 2e-5, 0.137
+    k = np.arange(4 * cycles)
+    Bk = LAB[k % 4]
+    clean = t0 + k * T + np.linalg.norm(FAR - Bk, axis=1) / C
+    est = []
+    for _ in range(600):
+        a = clean + rng.normal(0.0, sigma, k.size)
+        fun = lambda x: (x[4] + k * x[3] + np.linalg.norm(x[:3] - Bk, axis=1) / C - a) / sigma  # noqa: E731
+        est.append(least_squares(fun, np.r_[FAR + 0.01, T, t0], x_scale=[1, 1, 1, 1e-6, 1e-4]).x)
+    S = np.cov(np.array(est).T)
+    bound = stationary_bound(Bk, FAR, k, C, sigma)
+    assert np.allclose(np.diag(S)[:3], np.diag(bound)[:3], rtol=0.2)   # sample variance of 600: +-12 % (2 se)
+    # T known: the position block is the one-cycle fix covariance over N cycles
+    _, cov1, _ = tdoa_fix(LAB, clean[:4], np.arange(4), T, C, FAR, sigma=sigma)
+    d = FAR - Bk
+    J = np.column_stack([d / (C * np.linalg.norm(d, axis=1, keepdims=True)), np.ones(k.size)])
+    known = np.linalg.inv(J.T @ J / sigma ** 2)[:3, :3]
+    assert np.allclose(known, cov1 / cycles, rtol=1e-6)
+    assert np.all(np.diag(bound)[:3] >= np.diag(known) * (1 - 1e-9))    # an unknown T never helps
+    with pytest.raises(np.linalg.LinAlgError):
+        stationary_bound(LAB, FAR, np.arange(4), C, sigma)               # one cycle: T not determined
+
+
+def test_stationary_fix_uses_every_genuine_arrival_and_drops_echoes():
+    """stationary_fix over 10 cycles at the far position with an echo in each of 4 of them: the echoes are
+    dropped, the fix is the truth (noise-free), and its covariance is the Cramer-Rao bound of the genuine
+    arrivals with T known (the [p, t0] block of sigma^2 (J^T J)^-1), far below a 3-cycle fix's."""
+    from fusion_plugins.solvers.stationary_fix import stationary_fix
+
+    k = np.arange(40)
+    Bk = LAB[k % 4]
+    a = 0.137 + k * T + np.linalg.norm(FAR - Bk, axis=1) / C
+    echo = np.zeros(k.size, bool)
+    echo[[1, 6, 19, 28]] = True
+    a[echo] += np.array([0.4, 1.0, 2.5, 0.7]) / C
+    pos, t0, cov, used = stationary_fix(Bk, a, T, C, 2e-4, FAR + np.array([0.2, -0.15, 0.1]),
+                                        np.eye(3) * 0.2 ** 2)
+    assert np.array_equal(used, ~echo)
+    assert np.abs(pos - FAR).max() < 1e-7 and abs(t0 - 0.137) < 1e-9
+    d = FAR - Bk[~echo]
+    J = np.column_stack([d / (C * np.linalg.norm(d, axis=1, keepdims=True)), np.ones(d.shape[0])])
+    assert np.allclose(cov, (2e-4) ** 2 * np.linalg.inv(J.T @ J), rtol=1e-6)
+    _, cov1, _ = tdoa_fix(LAB, a[8:12], np.arange(4), T, C, FAR)
+    assert np.trace(cov[:3, :3]) < np.trace(cov1) / 5
+
+
+def test_stationary_initialiser_keeps_the_wait():
+    """initialise_stationary: the initial fix after a wait (echoes in the first cycles) carries the
+    information of every genuine arrival so far, not of the three agreeing cycles only; same message."""
+    msgs = _messages(FAR, 9)
+    for j in (1, 6, 10, 13):                       # echoes in cycles 1-4: the agreeing run starts at 5
+        b, a, rec = msgs[j].values
+        msgs[j] = Message(a + 1.0 / C, "us", (b, a + 1.0 / C, rec))
+    plain = _solver(output="initialise")
+    batch = _solver(output="initialise", initialise_stationary=True)
+    f0 = [m for msg in msgs for m in plain.feed(msg)][0]
+    f1 = [m for msg in msgs for m in batch.feed(msg)][0]
+    assert f0.t == f1.t and len(f0.values) == len(f1.values) == 14
+    p0, c0 = unpack_fix(f0.values[:9])
+    p1, c1 = unpack_fix(f1.values[:9])
+    assert np.abs(p1 - FAR).max() < 1e-6
+    assert np.trace(c1) < 0.6 * np.trace(c0)       # 28 genuine arrivals against 12
+    assert abs(f1.values[9] - f0.values[9]) < 1e-6  # the same latest firing time (noise-free)

@@ -96,3 +96,75 @@ sensors:
     us = s["sensors"]["us"]
     assert 300 <= us["used"] + us["rejected"] <= 335          # one fix per cycle of four (1333 arrivals)
     assert s["errors"]["position_rmse_m"] < 0.15
+
+
+# --------------------------------------------------------------------------- paper 003 Tables I-II: the sd
+def _cases():
+    import sys
+
+    sys.path.insert(0, str(ROOT / "experiments"))
+    import ultrasonic_3d_cases as uc
+
+    return uc
+
+
+@pytest.mark.parametrize("start", [(1.21, 1.15, 1.36), (2.37, 2.2, 1.35)], ids=["row1", "far"])
+def test_stationary_iekf_reports_the_bound_of_its_arrivals(tmp_path, start):
+    """A standing robot, no echoes, 30 cycles: the position IEKF with the paper's stationary model reports
+    the Cramer-Rao bound of the arrivals it used (tdoa_geometric.stationary_bound), i.e. Table II's sd is
+    fixed by the geometry, the noise and the number of arrivals. Used: every arrival but those the gate
+    refused (the initial cycles enter through the initial fix)."""
+    import numpy as np
+
+    from fusion_plugins.solvers.tdoa_geometric import stationary_bound
+
+    uc = _cases()
+    truth = np.array(start)
+    for seed in (1, 2):
+        sc = uc.scenario("ultrasonic_3d_static", seed, duration=30 * 0.9 + 0.3, us__echo_prob=0.0,
+                         trajectory__start=list(start))
+        path = uc.write_log(sc, seed, str(tmp_path))
+        log = uc.read_log(path)
+        res = uc.run_system(uc.load(uc.IEKF, position_sd=0.0), path)
+        B = np.array([sc.beacons[b] for b in log.beacon], float)
+        fires = np.rint((log.arrival - log.arrival[0]) / 0.225)
+        used = np.ones(len(log.t), bool)
+        used[np.searchsorted(log.t, res["t"][1:][~res["accepted"][1:]])] = False
+        bound = np.sqrt(np.diag(stationary_bound(B[used], truth, fires[used], 340.0, 2.0e-4))[:3])
+        ratio = res["sd"][-1, :3] / bound
+        assert np.all((ratio > 0.97) & (ratio < 1.08)), ratio   # the initial fix carries a little less
+
+
+def test_initialiser_at_the_far_position_over_seeds(tmp_path):
+    """Paper 003's far position (row 4) with the echoes of Tables I-II (11.7 %): over 12 seeds the initial
+    fix of tdoa_geometric is never metres off, and its error fits its covariance (chi-square 99 % in at
+    least 10 of 12; the seeds and echo rate of the results page, row 4). Before the agreement test used the
+    better-determined fix's covariance, an echo thrown
+    far (metres-wide covariance) agreed with good fixes and one seed in ten started 8 m off."""
+    import numpy as np
+
+    from fusion import testing
+    from fusion.api import BuildContext, Message
+    from fusion_plugins.solvers.initial_fix import SIZES
+    from fusion_plugins.solvers.ols_trilateration import unpack_fix
+
+    uc = _cases()
+    from ultrasonic_3d_tables import ECHO_RATE
+
+    truth = np.array([2.37, 2.2, 1.35])
+    errs, fits = [], 0
+    for seed in range(4000, 4012):
+        sc = uc.scenario("ultrasonic_3d_static", seed, duration=64 * 0.9 + 0.3, us__echo_prob=ECHO_RATE,
+                         trajectory__start=truth.tolist())
+        path = uc.write_log(sc, seed, str(tmp_path))
+        log = uc.read_log(path)
+        s = testing.build("solver", "tdoa_geometric", {"output": "initialise"},
+                          BuildContext(beacons={k: np.array(v, float) for k, v in sc.beacons.items()}, sensor="us"))
+        fix = next(m for j in range(len(log.t))
+                   for m in s.feed(Message(log.t[j], "us", (log.beacon[j], log.arrival[j], float(log.receiver[j]))))
+                   if len(m.values) in SIZES)
+        p, C = unpack_fix(np.array(fix.values[:9], float))
+        e = p - truth
+        errs.append(float(np.linalg.norm(e)))
+        fits += float(e @ np.linalg.solve(C, e)) <= 11.34
+    assert max(errs) < 1.0 and fits >= 10, (errs, fits)
