@@ -178,7 +178,8 @@ def write_page(out: Path, studies: list, results: dict[str, list[dict]], walls: 
           f"* **As the system is specified** (0.1 m range noise, 20 ranges/s, walking at 1.2 m/s) **the UKF and the EKF "
           f"give the same track**: over {studies[0].seeds} seeds in each of the paper's four cases the median paired "
           f"difference in position RMSE is at most {100 * max(rel):.1f}%, far below the spread between seeds (section 1).",
-          f"* **From a wrong, wide initial belief** (mean 7 m and 5 m off, sd 10 m; first 15 s of route 1), position "
+          f"* **From a wide initial belief** (sd 10 m, each seed's initial mean drawn from it around the true start; "
+          f"first 15 s of route 1), position "
           f"RMSE: {init_text(True)}; {init_text(False)} (section 3).",
           (f"* **Smoothing** (RTS, `fusion sweep --smooth`, issue 17) lowers the position RMSE of "
            f"`configs/uwb_pv_ukf.yaml` on route 1 from {r1[1]:.3f} m to {r1[0]:.3f} m (UKF, mean over "
@@ -188,7 +189,7 @@ def write_page(out: Path, studies: list, results: dict[str, list[dict]], walls: 
           f"* **At 2 ranges/s with S = 1** (0.5 cycles/s, first 30 s of route 1) the largest error: "
           f"{pair_text(results['rate'], slow, 'position_max_m', ' m')}; mean NEES "
           f"{pair_text(results['rate'], slow, 'nees_mean', '')} (section 5).",
-          f"* **Collinear beacons from the wrong initial belief** (section 6): position RMSE "
+          f"* **Collinear beacons from a wide initial belief** (sd 10 m, drawn; section 6): position RMSE "
           f"{pair_text(results['collinear_initial'], lambda r: True, 'position_rmse_m', ' m')}; an RMSE of metres "
           "is a track on the mirror side of the line of beacons, which fits every range (no gate can tell).",
           "", "The process-noise grid (section 4) chooses S for both filters.", ""]
@@ -208,8 +209,10 @@ def write_page(out: Path, studies: list, results: dict[str, list[dict]], walls: 
           "`fusion.sweep.grid.sweep` (the engine of `fusion sweep`: the seeds of a variant batched through "
           "`fusion.batch` where the system allows, whose rows equal the pipeline's, tests/sweep/; the smoothed study "
           "through the pipeline and the smoother); this page is written by `experiments/uwb_sweep_page.py` from the "
-          "rows. The earlier version of this page split the errors by manoeuvre phase, drew each seed's initial "
-          "mean, drew truth from the filters' own model and evaluated the paper's 4-range vector update with a "
+          "rows. Every study draws each seed's initial mean from N(true start, P0) (`fusion sweep --initial drawn`: "
+          "the initial error is a draw of the initial covariance, as a NEES test needs), the same draw for both "
+          "filters. The earlier version of this page split the errors by manoeuvre phase, "
+          "drew truth from the filters' own model and evaluated the paper's 4-range vector update with a "
           "simulator, interpolator and NEES of its own (experiments/uwb_cases.py, still used by "
           "tests/systems/test_uwb.py); those studies are not part of this sweep-based page.", ""]
     out.write_text("\n".join(L) + "\n")

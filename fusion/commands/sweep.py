@@ -43,6 +43,9 @@ def register(sub) -> None:
     p.add_argument("--param", metavar="KEY=V1,V2", action="append", default=[],
                    help="a config (or scenario.*) value to vary; repeatable: the grid is every combination")
     p.add_argument("--smooth", action="store_true", help="also run the RTS smoother; smoothed columns in the rows")
+    p.add_argument("--initial", default="config", choices=("config", "drawn"),
+                   help="initial mean: the config's (default), or drawn per seed from N(true start, P0), the "
+                        "Monte-Carlo protocol of a NEES test (needs truth in the recording)")
     p.add_argument("-o", "--output", metavar="RESULTS", required=True, help="results file (.csv or .parquet)")
     p.add_argument("--engine", default="auto", choices=("auto", "batch", "serial", "pool", "dask"),
                    help="where trials run (default auto)")
@@ -111,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
     if args.filter and any(not f for f in filters):
         raise ConfigError(f"--filter {args.filter!r}: an empty name (e.g. --filter ukf,ekf)")
     params = parse_params(args.param)
-    trials = trials_of(args.config, scenario, seeds_of(args.seeds), filters, params, args.smooth)
+    trials = trials_of(args.config, scenario, seeds_of(args.seeds), filters, params, args.smooth, args.initial)
     where = args.scheduler or args.dask
     bar = _Progress(not args.no_progress and not args.quiet)
     try:

@@ -20,7 +20,7 @@ import numpy as np
 
 from fusion.api import Estimate, MalformedMessage
 
-from .trial import Trial, recording_of, row_of, system_of
+from .trial import Trial, recording_of, row_of, system_of, with_initial
 
 __all__ = ["unsupported", "run_batch", "NotLockstep"]
 
@@ -114,6 +114,8 @@ def run_batch(trials: list[Trial], timings: dict[str, float] | None = None) -> l
         if len(items) != len(sig) or any(_signature(it) != s for it, s in zip(items, sig)):
             raise NotLockstep("the seeds' recordings differ in timing or content")
     N = len(trials)
+    systems = [with_initial(system, tr, lines) for tr, lines in zip(trials, texts)]   # drawn: own mean a seed
+    x0s = np.stack([s.x0 for s in systems])
     runs = [pipeline.Run(s, hooks=False) for s in systems]         # their RunStats, Scheduler counters
     for r, (_, parsed) in zip(runs, streams):
         r.parsed.header = parsed.header
@@ -141,7 +143,7 @@ def run_batch(trials: list[Trial], timings: dict[str, float] | None = None) -> l
         c["received"] += 1
         tm = time.perf_counter()
         if b is None:
-            b = bf.initial_belief(obs0.t, np.tile(system.x0, (N, 1)), system.P0)
+            b = bf.initial_belief(obs0.t, x0s, system.P0)
         if obs0.t < b.t:
             c["late"] += 1
             continue

@@ -76,15 +76,15 @@ def default_scenario(config: str) -> str:
 
 
 def trials_of(config: str, scenario: str, seeds: Iterable[int], filters: Sequence[str | None],
-              params: Sequence[tuple[str, list[str]]], smooth: bool = False) -> list[Trial]:
-    """Every combination, seeds innermost (so a variant's seeds are together)."""
+              params: Sequence[tuple[str, list[str]]], smooth: bool = False, initial: str = "config") -> list[Trial]:
+    """Every combination, seeds innermost (so a variant's seeds are together); ``initial`` as Trial's."""
     keys = [k for k, _ in params]
     out = []
     for flt in filters:
         for combo in itertools.product(*[v for _, v in params]):
             ps = tuple(sorted(zip(keys, combo)))
             for s in seeds:
-                out.append(Trial(config, scenario, int(s), flt, ps, smooth))
+                out.append(Trial(config, scenario, int(s), flt, ps, smooth, initial))
     return out
 
 

@@ -33,7 +33,9 @@ SMOOTHED = ("smoothed_position_rmse_m", "smoothed_position_max_m", "smoothed_vel
 class Trial:
     """What a trial runs: paths of the system YAML and the scenario, the noise ``seed``, the ``filter``
     (None: the config's), ``params`` as sorted (key, YAML value text) pairs, ``smooth`` (RTS smoother
-    after the forward filter)."""
+    after the forward filter), ``initial``: ``"config"`` (the config's initial mean, the same every
+    seed) or ``"drawn"`` (the mean drawn per seed from N(true start, P0): the Monte-Carlo protocol of a
+    NEES test, where the initial error is a draw of the initial covariance; see :func:`drawn_mean`)."""
 
     config: str
     scenario: str
@@ -41,15 +43,20 @@ class Trial:
     filter: str | None = None
     params: tuple[tuple[str, str], ...] = field(default_factory=tuple)
     smooth: bool = False
+    initial: str = "config"
 
     def key(self) -> str:
-        """Identity of the trial in a results file (resume): JSON of every field."""
-        return json.dumps([self.config, self.scenario, self.seed, self.filter or "", list(map(list, self.params)),
-                           bool(self.smooth)])
+        """Identity of the trial in a results file (resume): JSON of every field (``initial`` only when
+        drawn, so results files written before it existed still resume)."""
+        fields = [self.config, self.scenario, self.seed, self.filter or "", list(map(list, self.params)),
+                  bool(self.smooth)]
+        if self.initial != "config":
+            fields.append(self.initial)
+        return json.dumps(fields)
 
     def variant(self) -> tuple:
         """Everything but the seed: trials of one variant differ only in their noise."""
-        return (self.config, self.scenario, self.filter, self.params, self.smooth)
+        return (self.config, self.scenario, self.filter, self.params, self.smooth, self.initial)
 
 
 def _yaml_value(text: str, where: str) -> Any:
@@ -133,6 +140,54 @@ def system_of(trial: Trial):
     return wire(spec, path=Path(trial.config))
 
 
+#: Seeds the initial-mean draw apart from the simulator's noise (the same stream for every filter).
+INITIAL_STREAM = 1979660
+
+
+def drawn_mean(system, lines: list[str], seed: int):
+    """The initial mean of a ``drawn`` trial: the true state at the recording's first truth line plus a
+    draw of N(0, P0) on the elements truth gives (other elements, and quaternion blocks, keep the
+    config's mean), from ``numpy.random.default_rng([seed, INITIAL_STREAM])``. ConfigError when the
+    recording has no truth to draw around."""
+    import numpy as np
+
+    from fusion.logformat import ParsedStream, iter_messages
+    from fusion.api import Message
+
+    st = ParsedStream()
+    first = None
+    for item in iter_messages(lines, st):
+        if item.__class__ is Message and item.sensor == "truth":
+            first = item
+            break
+    names = st.header.fields.get("truth")
+    if first is None or not names:
+        raise ConfigError("initial: drawn needs truth in the recording ('# fields truth ...' and a truth line)")
+    layout = system.layout
+    quat = {n for b in layout.blocks if b.kind == "quaternion" for n in b.element_names()}
+    idx = [(layout.element_index(n), names.index(n)) for n in layout.names if n in names and n not in quat]
+    if not idx:
+        raise ConfigError("initial: drawn: no state element is named in the recording's truth fields")
+    xi = np.array([i for i, _ in idx])
+    truth = np.array([float(first.values[j]) for _, j in idx])
+    L = np.linalg.cholesky(system.P0[np.ix_(xi, xi)])
+    z = np.random.default_rng([int(seed), INITIAL_STREAM]).standard_normal(len(xi))
+    x0 = np.array(system.x0, dtype=float)
+    x0[xi] = truth + L @ z
+    return x0
+
+
+def with_initial(system, trial: Trial, lines: list[str]):
+    """``system`` with the trial's initial mean (itself unless ``initial`` is ``drawn``)."""
+    if trial.initial == "config":
+        return system
+    if trial.initial != "drawn":
+        raise ConfigError(f"initial {trial.initial!r}: expected 'config' or 'drawn'")
+    import dataclasses
+
+    return dataclasses.replace(system, x0=drawn_mean(system, lines, trial.seed))
+
+
 def recording_of(trial: Trial) -> list[str]:
     """The simulated recording of a trial, as lines (fusion.simulate, the trial's seed)."""
     from fusion.simulate import simulate
@@ -183,7 +238,7 @@ def run_trial(trial: Trial) -> dict[str, Any]:
     t0 = time.perf_counter()
     try:
         lines = recording_of(trial)
-        system = system_of(trial)
+        system = with_initial(system_of(trial), trial, lines)
         if trial.smooth:
             from fusion.smoothing.run import run_smoothed
             result = run_smoothed(system, lines, hooks=False)

@@ -16,6 +16,6 @@ SHORT = ("scenario.duration", "12.0")      # s of route 1: its first corner
 def trials():
     from fusion.sweep.grid import trials_of
 
-    def make(seeds=range(3), filters=("ukf", "ekf"), params=(), smooth=False):
-        return trials_of(CONFIG, SCENARIO, seeds, list(filters), [(SHORT[0], [SHORT[1]]), *params], smooth)
+    def make(seeds=range(3), filters=("ukf", "ekf"), params=(), smooth=False, initial="config"):
+        return trials_of(CONFIG, SCENARIO, seeds, list(filters), [(SHORT[0], [SHORT[1]]), *params], smooth, initial)
     return make
