@@ -123,9 +123,9 @@ def run_smoothed(system: System, source: Any, sinks: Sequence[Any] = (), *, lag:
         """The forward run's sink: notes estimates (and feeds the fixed-lag smoother)."""
 
         def on_estimate(self, est: Estimate) -> None:
-            log.note_estimate(est)
-            if fixed is not None:
-                fixed.on_estimate(est)
+            node = log.note_estimate(est)
+            if fixed is not None and node is not None:
+                fixed.on_estimate(est, node)
 
         def close(self) -> None:
             pass
