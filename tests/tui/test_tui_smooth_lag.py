@@ -127,3 +127,18 @@ def test_a_bad_lag_exits_2_with_one_line(value, capsys):
     assert main(["tui", str(CONFIG), f"--smooth-lag={value}"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--smooth-lag" in err[0]
+
+
+@pytest.mark.parametrize("config, t", [("example_2d.yaml", 30.0), ("abps_ins.yaml", 40.0)])
+def test_picture_with_the_smoothed_trace(config, t, snap_compare):
+    """The main screen at 120x40 with ``--smooth-lag 2``, held at sensor time t (the state plot shown,
+    key v, so both traces are in the picture). Regenerate: ``pytest tests/tui/test_tui_smooth_lag.py
+    --snapshot-update``."""
+    app = make_app(ROOT / "configs" / config, speed=0, pause_at=t, smooth_lag=LAG)
+
+    async def held(pilot):
+        while not (app.feed.paused and app.latest is not None and app.latest.sensor_t >= t and app.paused):
+            await pilot.pause(0.02)
+        await pilot.pause(0.2)
+
+    assert snap_compare(app, press=("v",), terminal_size=(120, 40), run_before=held)
