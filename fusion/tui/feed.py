@@ -29,6 +29,7 @@ from fusion.logformat import iter_messages
 from fusion.pipeline import COUNTERS, Run
 from fusion.tui.health import Health, HealthMonitor
 from fusion.tui.series import InnovationHistory, Sample
+from fusion.tui.smoothed_trace import SmoothedTrace
 from fusion.tui.state_series import StateHistory, StateSample
 
 __all__ = ["LiveFeed", "FeedSnapshot", "LoggedEvent", "COUNTERS"]
@@ -104,13 +105,11 @@ class LiveFeed:
                  pause_at: float | None = None, smooth_lag: float | None = None):
         self.system = system
         self.smooth_lag = smooth_lag
-        self.smoothed: deque[tuple[float, float]] = deque(maxlen=max_track)
-        self.smoothed_total = 0
-        self._smoothed_t = -math.inf
+        self.smoothed: SmoothedTrace | None = None
         if smooth_lag is not None:
             from fusion.smoothing.live import attach_fixed_lag
 
-            system, lag_sink = attach_fixed_lag(system, smooth_lag, self._take_smoothed)
+            system, lag_sink = attach_fixed_lag(system, smooth_lag, lambda est: self.smoothed.on_estimate(est))
             sinks = [*sinks, lag_sink]
         # The run keeps its statistics in bounded memory; the view's own histories are the deques below.
         self.run_ = Run(system, sinks, on_truth=self._take_truth, label=source)
@@ -118,9 +117,6 @@ class LiveFeed:
         self.health = HealthMonitor({n: s.role for n, s in sensors.items()}, expected_rates, limits)
         self.history = InnovationHistory({n: s.gate for n, s in sensors.items() if s.gate is not None})
         self.states = StateHistory(system.layout, lambda: self.parsed.header.fields.get("truth"))
-        # the smoothed samples come smooth_lag s late: their truth lines are kept that much longer
-        self.smoothed_states = StateHistory(system.layout, lambda: self.parsed.header.fields.get("truth"),
-                                            truth_keep=4096) if smooth_lag is not None else None
         self.attempt = 0
         self.pause_at = pause_at
         self._step = threading.Event()
@@ -162,6 +158,9 @@ class LiveFeed:
             start = lay["p"].start
             self._pos = (start, start + 1)
             self._pos_names = lay.block("p").element_names()[:2]
+        if smooth_lag is not None:
+            self.smoothed = SmoothedTrace(lay, lambda: self.parsed.header.fields.get("truth"), self._pos,
+                                          max_track, track_dt)
         self._truth_idx: tuple[int, int] | None | bool = None
 
     # ------------------------------------------------------------------ control (any thread)
@@ -330,23 +329,12 @@ class LiveFeed:
         else:
             self._log(out)
 
-    def _take_smoothed(self, est: Estimate) -> None:
-        """A fixed-lag smoothed estimate (``smooth_lag`` s old): to the smoothed track (decimated by time,
-        as the live one) and the smoothed state history."""
-        if self.smoothed_states is not None:
-            self.smoothed_states.on_estimate(est)
-        if self._pos is not None and est.t - self._smoothed_t >= self.track_dt:
-            x = est.belief.x
-            self.smoothed.append((float(x[self._pos[0]]), float(x[self._pos[1]])))
-            self.smoothed_total += 1
-            self._smoothed_t = est.t
-
     def _take_truth(self, msg: Message) -> None:
         """A truth line: its (north, east) point goes to the view's true track (decimated by time), the
         whole line to the state errors."""
         self.states.on_truth(msg)
-        if self.smoothed_states is not None:
-            self.smoothed_states.on_truth(msg)
+        if self.smoothed is not None:
+            self.smoothed.on_truth(msg)
         if self._truth_idx is None and self._pos is not None:
             names = self.parsed.header.fields.get("truth")
             ok = names is not None and all(n in names for n in self._pos_names)
@@ -402,14 +390,19 @@ class LiveFeed:
             track_total=self.track_total, truth=tuple(self.truth), truth_total=self.truth_total,
             lines=self.lines_read, data_wall=self._data_wall, sensor_t=t, speed_ratio=ratio, wall=now, message=self.message,
             health=self._assess(t, rates, counters, now, active), series=self.history.snapshot(), attempt=self.attempt,
-            states=self.states.snapshot(), smooth_lag=self.smooth_lag, smoothed=tuple(self.smoothed),
-            smoothed_total=self.smoothed_total,
-            smoothed_states=self.smoothed_states.snapshot() if self.smoothed_states is not None else ())
+            states=self.states.snapshot(), smooth_lag=self.smooth_lag,
+            **self._smoothed_fields())
         self._next_post = now + self.refresh_dt
         self._emitted_lines = self.lines_read
         self._post(snap)
         return snap
 
+
+    def _smoothed_fields(self) -> dict:
+        if self.smoothed is None:
+            return {}
+        track, total, states = self.smoothed.snapshot()
+        return {"smoothed": track, "smoothed_total": total, "smoothed_states": states}
 
     def _assess(self, t: float, rates: dict[str, float], counters: dict[str, dict[str, int]], now: float,
                 active: bool) -> Health:

@@ -22,7 +22,7 @@ DONE = ("finished", "lost", "error", "stopped")
 LAG = 2.0
 
 
-async def until(pilot, cond, what, guard_s=120.0):
+async def until(pilot, cond, what, guard_s=600.0):
     """Wait for ``cond``; the guard only keeps a broken app from hanging the suite (not a speed test)."""
     deadline = time.monotonic() + guard_s
     while not cond():
