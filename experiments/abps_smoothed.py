@@ -190,7 +190,7 @@ def section(head: tuple[dict, dict], study: list[dict]) -> str:
           f"On the shipped route the smoothed horizontal RMSE is {100 * red.mean():.0f}% below the filtered one on "
           f"average, at least {100 * red.min():.0f}% on every one of the {len(per)} seeds (issue 17 asks 25%).",
           "The smoothed NEES above 15 there is the vertical channel (pz, then vz; the attitude and bias blocks",
-          "are near 3, see the blocks of the headline run). The cause is the model of the height, not the smoother: the 2-D fix takes the receiver",
+          "are at or below 3, see the blocks of the headline run). The cause is the model of the height, not the smoother: the 2-D fix takes the receiver",
           "height as known (-0.75 m) while the floor dips, so the fix's z is off by up to 0.13 m, slowly, along the",
           "route; the config gives each fix that error as independent noise with `z_sd: 0.3` (three times its size,",
           "chosen so that the *filter*, averaging a limited past of fixes, stays consistent). The smoother averages",
