@@ -42,6 +42,8 @@ SYSTEMS = [  # config, scenario
     ("uwb_pv_ukf.yaml", "uwb_route2.yaml"),
     ("uwb_pv_ukf_line.yaml", "uwb_route1_line.yaml"),
     ("example_2d.yaml", "example_2d.yaml"),
+    ("ultrasonic_3d_iekf.yaml", "ultrasonic_3d_walk.yaml"),
+    ("ultrasonic_3d_pose.yaml", "ultrasonic_3d_walk.yaml"),
 ]
 
 
