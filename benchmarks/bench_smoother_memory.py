@@ -6,7 +6,7 @@
 
 Each run is its own process; its peak resident set size comes from ``os.wait4`` (ru_maxrss of that child
 alone), the bytes the smoother wrote to its temporary store from the summary (``smoothed.store``). The
-forward records go to disk past each store's in-memory budget (8 MB, fusion/smoothing/store.py), so the
+forward records go to disk past each store's in-memory budget (1 MiB, fusion/smoothing/store.py), so the
 peak should stay flat (issue 17: within the pipeline's flat-memory bound plus the store on disk).
 Written to benchmarks/results/smoother_memory.md.
 """
@@ -71,8 +71,10 @@ def main(argv=None) -> int:
                      f"{r['backward_s'] if r['backward_s'] is None else round(r['backward_s'], 1)} | {rm} |")
     lines += ["", "Wall times are of single runs on a shared 2-core machine (other jobs were running); the careful "
               "timing of the two passes is benchmarks/results/smoother.md (`python benchmarks/bench_smoother.py`). "
-              "The peak is bounded by the stores' in-memory budgets (8 MB each, four stores, plus a chunk buffer "
-              "each), not by the length: the 10-minute run has not filled them yet."]
+              "The peak is bounded by the stores' in-memory budgets (1 MiB each, four stores, plus a chunk buffer "
+              "of at most 256 KiB each, fusion/smoothing/store.py), not by the length: a run of a few minutes already "
+              "fills them and spills. (With 8 MB budgets and 1024-record chunks, up to 8.9 MB a buffer, the ratio was "
+              "1.181: the budgets were still filling at 10 minutes.)"]
     peak = {(m, s): r["peak_mb"] for m, s, r in rows}
     lines += ["", f"Smoothed peak ratio {long_min:g} min / {short_min:g} min: "
               f"**{peak[(long_min, True)] / peak[(short_min, True)]:.3f}**; smoothed / plain at {long_min:g} min: "

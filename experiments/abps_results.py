@@ -1,7 +1,10 @@
 """Regenerate docs/results/abps_ins.md and its figures (paper 000, configs/abps_ins.yaml, issues 5 and 11).
 
     python experiments/abps_results.py            # ~5-10 min: runs, every route x 10 seeds, figures, benchmarks
-    python experiments/abps_results.py --quick    # fewer benchmark repeats, 3 seeds a route
+    python experiments/abps_results.py --quick    # fewer benchmark repeats, 3 seeds a route, 5 smoothed seeds
+
+The section "Filtered against smoothed" (issue 17: ``fusion run --smooth``, 20 seeds and a flat-floor
+control) and its figure come from experiments/abps_smoothed.py.
 
 Runs the shipped config on recordings/abps_mine.log (and a few variants of it, to show what each choice
 buys), scores every estimate against the recording's truth (horizontal position, as the paper's 2-D
@@ -206,7 +209,7 @@ VARIANTS = [
 
 
 def page(results: list[tuple[str, dict, dict]], bench: dict, ukf_diff: tuple[float, float], elapsed: float,
-         routes: list[dict]) -> str:
+         routes: list[dict], smoothed: str = "") -> str:
     base = results[0][2]
     s0 = results[0][1]["summary"]
     lo, hi = chi2_interval(15)
@@ -306,6 +309,8 @@ def page(results: list[tuple[str, dict, dict]], bench: dict, ukf_diff: tuple[flo
     add("low (a deliberately loose initial covariance), then stays near 15 and touches the upper bound around 65 s")
     add("and 130 s, in the slow U-turns at the face and at the entrance.")
     add("")
+    if smoothed:
+        add(smoothed)
     add("## Figures")
     add("")
     add("![trajectory](abps_ins/trajectory.png)")
@@ -397,6 +402,9 @@ def main(argv=None) -> None:
     ukf_diff = (float(np.abs(xa - xb).max()), float(np.abs(sa - sb).max()))
     figures(results[0][1])
     routes = abps_routes.study(3 if args.quick else 10)
+    import abps_smoothed  # noqa: E402  (experiments/, on the path above)
+
+    smoothed = abps_smoothed.study_and_section(5 if args.quick else 20)
     import bench_abps
 
     steps = bench_abps.step_costs(rounds=5 if args.quick else 20)
@@ -404,7 +412,8 @@ def main(argv=None) -> None:
     load = os.getloadavg()[0]
     replay_["data_s"] = replay_["duration_s"]
     replay_["lines"] = sum(1 for _ in open(results[0][1]["system"].recording))
-    OUT.write_text(page(results, {"steps": steps, "replay": replay_, "load": load}, ukf_diff, time.perf_counter() - t0, routes))
+    OUT.write_text(page(results, {"steps": steps, "replay": replay_, "load": load}, ukf_diff, time.perf_counter() - t0, routes,
+                        smoothed))
     print(f"wrote {OUT.relative_to(ROOT)} and {FIG.relative_to(ROOT)}/*.png")
 
 

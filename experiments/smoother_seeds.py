@@ -1,7 +1,7 @@
 """Smoothed against filtered over many seeds on every shipped system with truth (issue 17), and the
 smoother's cost; writes docs/results/smoothing.md.
 
-    python experiments/smoother_seeds.py                 # 50 seeds each, ~10 min on 1 core
+    python experiments/smoother_seeds.py                 # 50 seeds each, ~15 min on 1 core
     python experiments/smoother_seeds.py --seeds 10      # quicker
 
 For each (config, scenario) pair, each seed simulates the scenario's recording with that seed
@@ -23,33 +23,55 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import platform  # noqa: E402
 import sys  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "experiments"))
+import abps_smoothed  # noqa: E402  (experiments/, on the path above)
+
 OUT = ROOT / "docs" / "results" / "smoothing.md"
-NOTE = ("abps_ins: the smoothed NEES is above its 15 dof (the filter's is not); on recordings/abps_mine.log the position block is 5.6 against 3 (filtered 2.9), velocity 3.9 against 3, the biases below 3: the smoothed position covariance is too small by about 2x. Not the cause (tried): the sigma-point batching of the IMU runs (the EKF smoother, composed sample by sample, gives the same overall NEES: 16.6 against the srukf smoother's 16.6), the trilateration window, projecting the quaternion block's covariance onto the unit sphere's tangent space. Most of it is a deterministic floor: on the same scenario simulated without noise (`fusion simulate scenarios/abps_mine.yaml --noise off`) the filter's horizontal RMSE is 0.025 m and the smoother's 0.013 m (NEES 3.6 and 6.5): errors of the models against the simulator that no covariance carries, about half of the smoother's 0.027 m with noise, and large against its smaller covariance.")
+FLAT = "abps_mine.yaml, flat floor"  # experiments/abps_smoothed.flat_scenario: the known height is true
 SYSTEMS = [  # config, scenario
     ("abps_ins.yaml", "abps_mine.yaml"),
+    ("abps_ins.yaml", FLAT),
     ("uwb_pv_ukf.yaml", "uwb_route1.yaml"),
     ("uwb_pv_ukf.yaml", "uwb_route2.yaml"),
     ("uwb_pv_ukf_line.yaml", "uwb_route1_line.yaml"),
     ("example_2d.yaml", "example_2d.yaml"),
+    ("ultrasonic_3d_iekf.yaml", "ultrasonic_3d_walk.yaml"),
+    ("ultrasonic_3d_pose.yaml", "ultrasonic_3d_walk.yaml"),
 ]
 
 
-def one(config: str, scenario: str, seed: int) -> dict:
+def one(config: str, scenario: str, seed: int, tmp: Path) -> dict:
+    """One seed: the summary's filtered and smoothed scores; for abps_ins also the NEES of the p and v blocks
+    and of pz alone (experiments/abps_smoothed.py), where the smoothed NEES exceeds its dof."""
     from fusion.config import load_system
+    from fusion.metrics import Truth
     from fusion.simulate.engine import simulate_file
     from fusion.smoothing import run_smoothed
 
     system = load_system(ROOT / "configs" / config)
-    lines = simulate_file(str(ROOT / "scenarios" / scenario), seed=seed).splitlines()
-    res = run_smoothed(system, lines)
-    s, sm = res.summary, res.summary["smoothed"]
-    return {"filtered": s["errors"]["position_rmse_m"], "smoothed": sm["errors"]["position_rmse_m"],
+    path = abps_smoothed.flat_scenario(tmp) if scenario == FLAT else ROOT / "scenarios" / scenario
+    text = simulate_file(str(path), seed=seed)
+    extra = {}
+    if config == "abps_ins.yaml":
+        log = tmp / "run.log"
+        log.write_text(text)
+        f, sm_rows, s = abps_smoothed.both(system, str(log), Truth.from_recording(log))
+        bf, bs = abps_smoothed.brief(f), abps_smoothed.brief(sm_rows)
+        extra = {"p_f": bf["block_nees"]["p"], "p_s": bs["block_nees"]["p"], "v_f": bf["block_nees"]["v"],
+                 "v_s": bs["block_nees"]["v"], "rest_f": sum(bf["block_nees"][k] for k in ("attitude", "ba", "bw")),
+                 "rest_s": sum(bs["block_nees"][k] for k in ("attitude", "ba", "bw")),
+                 "pz_f": float(bf["el"][2]), "pz_s": float(bs["el"][2])}
+    else:
+        s = run_smoothed(system, text.splitlines()).summary
+    sm = s["smoothed"]
+    return {**extra, "filtered": s["errors"]["position_rmse_m"], "smoothed": sm["errors"]["position_rmse_m"],
             "nees_f": s["consistency"]["nees_mean"], "nees_s": sm["consistency"]["nees_mean"],
             "in95_f": s["consistency"]["nees_in_95_fraction"], "in95_s": sm["consistency"]["nees_in_95_fraction"],
             "dof": s["consistency"]["nees_dof"], "forward_s": sm["forward_wall_s"], "backward_s": sm["backward_wall_s"]}
@@ -60,12 +82,14 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=50)
     ap.add_argument("--first-seed", type=int, default=100)
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--only", help="configs whose name contains this (a quick look; implies --no-write)")
     args = ap.parse_args(argv)
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     table = []
     t_start = time.time()
-    for config, scenario in SYSTEMS:
-        rows = [one(config, scenario, s) for s in seeds]
+    for config, scenario in [x for x in SYSTEMS if not args.only or args.only in x[0]]:
+        with tempfile.TemporaryDirectory() as d:
+            rows = [one(config, scenario, s, Path(d)) for s in seeds]
         f = np.array([r["filtered"] for r in rows])
         sm = np.array([r["smoothed"] for r in rows])
         red = 1.0 - sm / f
@@ -75,6 +99,9 @@ def main(argv=None) -> int:
                "nees_f": np.mean([r["nees_f"] for r in rows]), "nees_s": np.mean([r["nees_s"] for r in rows]),
                "in95_f": np.mean([r["in95_f"] for r in rows]), "in95_s": np.mean([r["in95_s"] for r in rows]),
                "fwd": np.median([r["forward_s"] for r in rows]), "bwd": np.median([r["backward_s"] for r in rows])}
+        if "p_f" in rows[0]:
+            out["blocks"] = {k: float(np.mean([r[k] for r in rows]))
+                             for k in ("p_f", "p_s", "v_f", "v_s", "rest_f", "rest_s", "pz_f", "pz_s")}
         table.append(out)
         print(f"{config} / {scenario}: filtered {out['f_mean']:.4f} m, smoothed {out['s_mean']:.4f} m, "
               f"reduction {100 * out['red_mean']:.1f}% (p5 {100 * out['red_p5']:.1f}%), helped {out['helped']}/{out['n']}, "
@@ -101,7 +128,25 @@ def main(argv=None) -> int:
     for o in table:
         lines.append(f"| {o['config']} | {o['scenario']} | {o['dof']} | {o['nees_f']:.2f} | {o['nees_s']:.2f} | "
                      f"{o['in95_f']:.3f} | {o['in95_s']:.3f} |")
-    lines += ["", NOTE]
+    lines += ["", "abps_ins per block (mean NEES over the seeds; dof 3 for p and v, 9 for attitude + ba + bw; pz: its "
+              "squared error over its variance, 1 if consistent):", "",
+              "| scenario | p filtered | p smoothed | v filtered | v smoothed | att+ba+bw filtered | smoothed | pz filtered | pz smoothed |",
+              "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for o in table:
+        if "blocks" in o:
+            b = o["blocks"]
+            lines.append(f"| {o['scenario']} | {b['p_f']:.2f} | {b['p_s']:.2f} | {b['v_f']:.2f} | {b['v_s']:.2f} | "
+                         f"{b['rest_f']:.2f} | {b['rest_s']:.2f} | {b['pz_f']:.2f} | {b['pz_s']:.2f} |")
+    lines += ["", "The abps_ins smoothed NEES above 15 on the shipped scenario is its vertical channel (pz, then vz): the "
+              "config takes the receiver height as known (-0.75 m, the 2-D fix of paper 000) while the scenario's floor "
+              "dips, so each fix's z is off by up to 0.13 m, slowly along the route, and the config treats that as "
+              "independent noise of sd 0.3 m, three times its size so that the filter stays consistent. The smoother "
+              "averages the fixes on both sides of each time, and a slowly changing error does not average out. On the "
+              "same route with a flat floor (the assumption true; `abps_mine.yaml, flat floor`, made by "
+              "experiments/abps_smoothed.py) the smoothed position block and NEES are back within their dof: the "
+              "smoother is consistent where the model is. Recovery resets (the chain breaks, G = 0) did not occur in "
+              "these runs. What would fix the model: docs/results/abps_ins.md, section Filtered against smoothed."
+              " The ultrasonic configs (paper 003) are not explained here: ultrasonic_3d_pose's smoothed NEES is above its dof while the filter's is not, and ultrasonic_3d_iekf's filtered NEES is already above its dof (the smoothed one inherits it); both are open."]
     lines += ["", "## Wall time (median over seeds, s)", "", "| config | scenario | forward | backward | backward / forward |",
               "|---|---|---:|---:|---:|"]
     for o in table:
@@ -109,7 +154,7 @@ def main(argv=None) -> int:
     lines += ["", "The forward time includes recording the transition terms (and, for the UKF, drawing the "
               "prediction's sigma points a second time for the cross-covariance); backward includes writing "
               "the smoothed estimates and scoring them."]
-    if not args.no_write:
+    if not (args.no_write or args.only):
         OUT.write_text("\n".join(lines) + "\n")
         print(f"wrote {OUT.relative_to(ROOT)}")
     return 0

@@ -48,6 +48,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--limit", metavar="SENSOR=S", action="append", default=[],
                    help="health: longest time without an accepted measurement before DEGRADED "
                         "(repeatable; default max(1 s, 10 / expected rate))")
+    p.add_argument("--smooth-lag", type=float, default=None, metavar="SECONDS",
+                   help="also draw the fixed-lag smoothed estimate, SECONDS of sensor time behind the live one, "
+                        "as a second trace in the track and the state plot (docs/smoothing.md)")
     p.add_argument("--no-reconnect", action="store_true",
                    help="with --port: a lost port ends reading (LOST) instead of being reopened with backoff")
     p.set_defaults(func=run)
@@ -115,6 +118,9 @@ def build_app(args: argparse.Namespace):
         raise InputError(f"--record {args.record}: the file exists; choose a new name (nothing is overwritten)")
     if args.no_reconnect and not args.port:
         raise ConfigError("--no-reconnect applies to a live --port")
+    lag = getattr(args, "smooth_lag", None)
+    if lag is not None and not (math.isfinite(lag) and lag >= 0.0):
+        raise ConfigError(f"--smooth-lag {lag}: expected a number of seconds >= 0, e.g. --smooth-lag 2")
     rates = _per_sensor(args.expect_rate, "--expect-rate", "HZ")
     limits = _per_sensor(args.limit, "--limit", "S")
     if args.udp:
@@ -133,7 +139,7 @@ def build_app(args: argparse.Namespace):
         source = open_source(args.port, device=True, **options)
     speed = 1.0 if args.speed is None else args.speed
     return make_app(config, source, speed=speed, refresh_hz=args.refresh, filter_override=override, udp=args.udp,
-                    expected_rates=rates, limits=limits)
+                    expected_rates=rates, limits=limits, smooth_lag=lag)
 
 
 def run(args: argparse.Namespace) -> int:

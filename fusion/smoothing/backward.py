@@ -7,8 +7,9 @@ with wrapping. The smoothed belief of a node is given to every estimate noted at
 written to a :class:`ChunkStore` last to first and read back first to last (:func:`smoothed_estimates`).
 
 Fixed-lag smoother (:class:`FixedLag`): keeps the transitions of the last ``lag`` seconds (and the
-estimates waiting in them) and emits an estimate once the open node is ``lag`` s past it, smoothed by
-the backward recursion from the open node's filtered belief, i.e. on all the measurements up to then.
+estimates waiting in them) and emits an estimate once the filter gives one ``lag`` s past it, smoothed
+by the backward recursion from that newer estimate's filtered belief, i.e. on all the measurements up to
+then.
 Memory is bounded by the window; at the end of the run what waits is smoothed on everything, so a lag
 longer than the run gives the full smoother.
 """
@@ -130,14 +131,20 @@ class FixedLag:
         self.window.append((node, rec))
         self.largest_window = max(self.largest_window, len(self.window))
 
-    def on_estimate(self, est: Estimate) -> None:
+    def on_estimate(self, est: Estimate, node: int | None = None) -> None:
+        """A filtered estimate at ``node`` (default: the open node); releases those ``lag`` s older,
+        smoothed back from this estimate's belief (so what an estimate gets does not depend on how late
+        the caller hands the estimates over)."""
         log = self.log
         assert log is not None
-        self.pending.append((log.nodes, est))
-        self._release(est.t - self.lag)
+        node = log.nodes if node is None else node
+        self.pending.append((node, est))
+        b = est.belief
+        self._release(est.t - self.lag, (node, b.x, log.backend.final(b)))
 
-    def _release(self, until: float) -> None:
-        """Emit the estimates at or before ``until`` (s), smoothed on everything recorded so far."""
+    def _release(self, until: float, start: tuple[int, np.ndarray, np.ndarray] | None = None) -> None:
+        """Emit the estimates at or before ``until`` (s), smoothed back from ``start`` = (node, mean,
+        covariance or factor), by default the open node's filtered belief (everything recorded so far)."""
         pend = self.pending
         if not pend or pend[0][1].t > until:
             return
@@ -147,11 +154,14 @@ class FixedLag:
         first_node = pend[0][0]
         log = self.log
         assert log is not None and log.current is not None
-        xs, Cs = log.final()  # type: ignore[misc]
-        node = log.nodes
+        if start is None:
+            xs, Cs = log.final()  # type: ignore[misc]
+            node = log.nodes
+        else:
+            node, xs, Cs = start
         out: list[Estimate] = []
         k = due - 1
-        recs = [r for n, r in self.window if n >= first_node]
+        recs = [r for n, r in self.window if first_node <= n < node]
         j = len(recs)
         while k >= 0:
             pnode, est = pend[k]

@@ -10,11 +10,15 @@ filtered belief in place (same time); a prediction closes the node with one reco
 covariance or conditional factor, gain, predicted mean and covariance) and opens the next. A belief that
 does not come from the last one (a reset by recovery, a re-initialisation) closes the node with a zero
 gain: the smoothed belief before a break is the filtered one. Each estimate the scheduler emits is noted
-with the node it belongs to, so the backward pass can give the smoothed belief at every output.
+with the node it belongs to, so the backward pass can give the smoothed belief at every output: the
+node whose filtered belief it carries (looked up among the last ``RECENT`` nodes), not merely the open
+one, because a caller may see an estimate after the filter has moved on (``fusion.pipeline.Run.push``
+hands its sinks every estimate of a message only once the scheduler has released them all).
 """
 from __future__ import annotations
 
 import copy
+from collections import deque
 from typing import Any, Callable
 
 import numpy as np
@@ -40,6 +44,7 @@ class ForwardLog:
     """
 
     REASONS = ("update", "output")
+    RECENT = 256   # nodes whose beliefs are kept to place a late-noted estimate
 
     def __init__(self, backend, n: int, chunk: int = 1024, disk: bool | None = None,
                  on_step: Callable[[int, dict], Any] | None = None, keep: bool = True):
@@ -55,7 +60,8 @@ class ForwardLog:
         self.current: Belief | None = None
         self.nodes = 0          # index of the open node = records so far
         self.breaks = 0
-        self.unmatched = 0      # estimates whose belief is not the open node's (mapped to it anyway)
+        self.unmatched = 0      # estimates whose belief is no recent node's (mapped to the open node)
+        self._recent: deque[tuple[int, Belief]] = deque(maxlen=self.RECENT)  # (node, a belief it had)
         self.on_step = on_step
 
     def __deepcopy__(self, memo) -> "ForwardLog":
@@ -74,29 +80,48 @@ class ForwardLog:
         if self.on_step is not None:
             self.on_step(self.nodes, rec)
         self.nodes += 1
-        self.current = b1
+        self.set_current(b1)
+
+    def set_current(self, b: Belief) -> None:
+        """The open node's filtered belief is now ``b`` (after a prediction, an update or a break)."""
+        self.current = b
+        self._recent.append((self.nodes, b))
 
     def enter(self, b: Belief) -> None:
         """The belief the filter is given next: a break of the chain unless it is the open node's."""
         if self.current is None:
-            self.current = b
+            self.set_current(b)
         elif not _same(self.current, b):
             self.breaks += 1
             self._record(self.backend.broken(self.current))
-            self.current = b
+            self.set_current(b)
 
     def transition(self, step) -> None:
         if step is not None:
             self._record(step)
 
-    def note_estimate(self, est: Estimate) -> None:
+    def node_of(self, est: Estimate) -> int:
+        """The node whose filtered belief ``est`` carries: the open one, else the newest recent node that
+        had it (``unmatched`` counts the estimates matching none; they are placed at the open node)."""
+        b = est.belief
+        if _same(b, self.current):
+            return self.nodes
+        for node, seen in reversed(self._recent):
+            if _same(b, seen):
+                return node
+        self.unmatched += 1
+        return self.nodes
+
+    def note_estimate(self, est: Estimate) -> int | None:
+        """Note an emitted estimate at its node (see the module); returns the node (None before the first
+        belief)."""
         if self.current is None:
-            return
-        if not _same(est.belief, self.current):
-            self.unmatched += 1
+            return None
+        node = self.node_of(est)
         reason = self.REASONS.index(est.reason) if est.reason in self.REASONS else 0
         if self.keep:
-            self.estimates.append(t=float(est.t), node=self.nodes, reason=reason, sensor=self.sensor_code(est.sensor))
+            self.estimates.append(t=float(est.t), node=node, reason=reason, sensor=self.sensor_code(est.sensor))
+        return node
 
     def sensor_code(self, sensor: str | None) -> int:
         """A small integer for a sensor name (the stores hold numbers)."""
@@ -175,6 +200,6 @@ class RecordingFilter:
         log.enter(belief)
         result = self.inner.update(belief, model, z, R, gate)
         if result.accepted:
-            log.current = result.belief
+            log.set_current(result.belief)
         return result
 

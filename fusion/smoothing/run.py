@@ -84,11 +84,12 @@ def _close(sinks: list) -> None:
 def run_smoothed(system: System, source: Any, sinks: Sequence[Any] = (), *, lag: float | None = None,
                  disk: bool | None = None, chunk: int = 1024, on_event: Callable | None = None,
                  progress: Callable | None = None, plot: Any = None, hooks: bool = True,
-                 label: str | None = None):
+                 label: str | None = None, forward_sinks: Sequence[Any] = ()):
     """Run ``system`` over ``source`` and smooth (see the module). ``lag`` None: the full smoother;
     else the fixed-lag smoother with that lag (s). Returns the forward run's ``RunResult`` with the
     summary's ``smoothed`` section. ConfigError when the filter has no smoother or the scheduler
-    replays late messages (the chain would fork)."""
+    replays late messages (the chain would fork). ``forward_sinks`` get the filtered estimates as the
+    forward pass gives them (and are closed after it): filtered and smoothed from one run."""
     from fusion import pipeline
 
     if system.spec.scheduler.late_policy == "replay":
@@ -123,12 +124,15 @@ def run_smoothed(system: System, source: Any, sinks: Sequence[Any] = (), *, lag:
         """The forward run's sink: notes estimates (and feeds the fixed-lag smoother)."""
 
         def on_estimate(self, est: Estimate) -> None:
-            log.note_estimate(est)
-            if fixed is not None:
-                fixed.on_estimate(est)
+            node = log.note_estimate(est)
+            if fixed is not None and node is not None:
+                fixed.on_estimate(est, node)
+            for s in forward_sinks:
+                s.on_estimate(est)
 
         def close(self) -> None:
-            pass
+            for s in forward_sinks:
+                s.close()
 
     out: ChunkStore | None = None
     try:

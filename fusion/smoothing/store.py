@@ -2,10 +2,12 @@
 
 The forward pass of a smoother appends one record per transition (means, covariance factors, gains);
 the backward pass reads them last to first. Records are buffered in a chunk of ``chunk`` rows (numpy
-arrays, one per field); a full chunk is kept in memory while the store holds less than
+arrays, one per field), fewer when a chunk would pass ``chunk_bytes`` (256 KiB: a 16-state smoother's
+transition is 4.4 kB, so 58 rows); a full chunk is kept in memory while the store holds less than
 ``memory_bytes``, and from then on every chunk (those already kept too) is written with ``np.save`` to
 a temporary directory and read back as a read-only memory map. So memory stays bounded by one chunk
-plus ``memory_bytes`` (8 MB) whatever the length of the run; ``disk=True`` spills from the first chunk,
+plus ``memory_bytes`` (1 MiB) whatever the length of the run, and a run long enough to spill at all
+(a few minutes of the 16-state INS) already sits at that bound; ``disk=True`` spills from the first chunk,
 ``disk=False`` never spills. ``close()`` deletes the directory.
 """
 from __future__ import annotations
@@ -23,17 +25,19 @@ __all__ = ["ChunkStore"]
 class ChunkStore:
     """Append-only records of named fields with fixed shapes (set by the first ``append``).
 
-    :param chunk: rows a chunk.
+    :param chunk: rows a chunk at most.
+    :param chunk_bytes: bytes a chunk at most (fewer rows for wide records; at least one row).
     :param disk: True: chunks go to disk; False: kept in memory; None: in memory up to ``memory_bytes``.
     :param memory_bytes: the in-memory budget of ``disk=None``.
     :param directory: where the temporary directory is made (default: the system's temp dir).
     """
 
-    def __init__(self, chunk: int = 1024, disk: bool | None = None, memory_bytes: int = 8 << 20,
-                 directory: str | Path | None = None, prefix: str = "fusion-smooth-"):
+    def __init__(self, chunk: int = 1024, disk: bool | None = None, memory_bytes: int = 1 << 20,
+                 directory: str | Path | None = None, prefix: str = "fusion-smooth-", chunk_bytes: int = 256 << 10):
         if chunk < 1:
             raise ValueError("chunk must be >= 1")
         self.chunk = int(chunk)
+        self.chunk_bytes = int(chunk_bytes)
         self.disk = disk
         self.memory_bytes = int(memory_bytes)
         self.directory = directory
@@ -64,6 +68,8 @@ class ChunkStore:
             for k, v in values.items():
                 a = np.asarray(v)
                 self._fields[k] = (a.shape, a.dtype if a.dtype.kind in "iub" else np.dtype(float))
+            row = sum(int(np.prod(shape, dtype=np.int64)) * dt.itemsize for shape, dt in self._fields.values())
+            self.chunk = max(1, min(self.chunk, self.chunk_bytes // max(row, 1)))
             self._new_buffer()
         buf, i = self._buf, self._fill
         for k, v in values.items():

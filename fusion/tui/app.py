@@ -211,7 +211,7 @@ class FusionApp(App):
             cov = snap.estimate.belief.cov[[i, j]][:, [i, j]]
         self._main.query_one(TrackPlot).show(snap, current, cov)
         self._main.query_one(InnovationPanel).show(snap.series, force=force or self.paused)
-        self._main.query_one(StatePlot).show(snap.states, force=force or self.paused)
+        self._main.query_one(StatePlot).show(snap.states, force=force or self.paused, smoothed=snap.smoothed_states)
         self._main.query_one(StatusLine).show(snap, self.paused)
 
     def action_pause(self) -> None:
@@ -295,7 +295,7 @@ def _label(path: Path) -> str:
 def make_app(config_path_or_system: str | Path | System, source: Any = None, *, speed: float = 1.0,
              refresh_hz: float = 15.0, filter_override: Any = None, udp: str | None = None,
              expected_rates: dict[str, float] | None = None, limits: dict[str, float] | None = None,
-             pause_at: float | None = None) -> FusionApp:
+             pause_at: float | None = None, smooth_lag: float | None = None) -> FusionApp:
     """The live view of a system over a source.
 
     ``config_path_or_system``: a system YAML (loaded with ``load_system``) or a wired ``System`` (fresh:
@@ -306,7 +306,9 @@ def make_app(config_path_or_system: str | Path | System, source: Any = None, *, 
     errors (missing recording, dead port) raise ``InputError`` here, before the UI takes the terminal.
     ``udp``: ``HOST:PORT`` to stream every estimate as JSON (fusion.tui.udp); ``expected_rates`` (Hz)
     and ``limits`` (s) by sensor for the health; ``pause_at``: a replay pauses itself after the first
-    message at or after this sensor time (s), for pictures at a fixed replay time."""
+    message at or after this sensor time (s), for pictures at a fixed replay time; ``smooth_lag``: s of
+    sensor time by which a fixed-lag smoothed trace follows the live one in the track and the state plot
+    (``fusion tui --smooth-lag``; None: no smoothing)."""
     if isinstance(config_path_or_system, System):
         system = config_path_or_system
     else:
@@ -329,7 +331,7 @@ def make_app(config_path_or_system: str | Path | System, source: Any = None, *, 
     options: dict[str, Any] = dict(lines=lines, source=label or source.label, live=live,
                                    close=getattr(source, "close", None))
     options.update(speed=speed, refresh_hz=refresh_hz, expected_rates=expected_rates, limits=limits,
-                   pause_at=pause_at)
+                   pause_at=pause_at, smooth_lag=smooth_lag)
     _check_sensors(system, expected_rates, "--expect-rate")
     _check_sensors(system, limits, "--limit")
     if udp:

@@ -8,6 +8,9 @@ a 100-200 Hz estimate stream costs the UI 10-20 refreshes a second.
 
 Health (``fusion.tui.health``), the innovation histories (``fusion.tui.series``) and the state histories
 (``fusion.tui.state_series``) are accumulated here too and ride in each snapshot. A reconnecting serial source reports through ``source_status``.
+With ``smooth_lag`` (s) the filter is recorded and a fixed-lag smoother (``fusion.smoothing.live``) gives
+every estimate again ``smooth_lag`` s of sensor time later, smoothed on the measurements up to then: its
+track and state histories ride in the snapshot beside the live ones (``smoothed``, ``smoothed_states``).
 
 The UI thread only calls ``pause()``, ``resume()``, ``step()`` and ``stop()`` (thread-safe).
 """
@@ -26,6 +29,7 @@ from fusion.logformat import iter_messages
 from fusion.pipeline import COUNTERS, Run
 from fusion.tui.health import Health, HealthMonitor
 from fusion.tui.series import InnovationHistory, Sample
+from fusion.tui.smoothed_trace import SmoothedTrace
 from fusion.tui.state_series import StateHistory, StateSample
 
 __all__ = ["LiveFeed", "FeedSnapshot", "LoggedEvent", "COUNTERS"]
@@ -51,7 +55,9 @@ class FeedSnapshot:
     reconnecting (a serial port being reopened: ``attempt``), lost (the source failed), stopped or error.
     ``health``: sensor rates and limits and the overall OK/DEGRADED/LOST; ``series``: innovation samples
     by sensor (fusion.tui.series); ``states``: estimate, 1-sigma and error against truth of the state
-    elements (fusion.tui.state_series); ``attempt``: the reopen attempt while reconnecting."""
+    elements (fusion.tui.state_series); ``attempt``: the reopen attempt while reconnecting.
+    ``smooth_lag``: the fixed lag (s) of ``smoothed`` ((north, east) points in m, as ``track``) and
+    ``smoothed_states`` (as ``states``), None when the view does not smooth."""
 
     source: str
     live: bool
@@ -75,6 +81,10 @@ class FeedSnapshot:
     series: Mapping[str, tuple[Sample, ...]] = field(default_factory=dict)
     states: tuple[StateSample, ...] = ()
     attempt: int = 0
+    smooth_lag: float | None = None
+    smoothed: tuple[tuple[float, float], ...] = ()
+    smoothed_total: int = 0
+    smoothed_states: tuple[StateSample, ...] = ()
 
 
 class LiveFeed:
@@ -84,15 +94,23 @@ class LiveFeed:
     pause: pausing a live feed freezes only the view, so nothing the device sends is lost); ``speed``:
     replay rate against sensor time (0: as fast as possible); ``close``: called by stop() to wake a
     blocked reader (a serial source's close); ``sinks``: extra pipeline sinks (the ``--udp`` stream);
-    ``expected_rates``/``limits``: per-sensor Hz and s for the health (fusion.tui.health)."""
+    ``expected_rates``/``limits``: per-sensor Hz and s for the health (fusion.tui.health); ``smooth_lag``:
+    s of sensor time by which the fixed-lag smoothed trace follows the live one (None: none)."""
 
     def __init__(self, system: System, lines: Iterable[str], post: Callable[[FeedSnapshot], object], *,
                  source: str = "", live: bool = False, speed: float = 1.0, refresh_hz: float = 15.0,
                  close: Callable[[], object] | None = None, max_events: int = 500,
                  max_track: int = 4000, track_dt: float = 0.1, sinks: Sequence[Any] = (),
                  expected_rates: Mapping[str, float] | None = None, limits: Mapping[str, float] | None = None,
-                 pause_at: float | None = None):
+                 pause_at: float | None = None, smooth_lag: float | None = None):
         self.system = system
+        self.smooth_lag = smooth_lag
+        self.smoothed: SmoothedTrace | None = None
+        if smooth_lag is not None:
+            from fusion.smoothing.live import attach_fixed_lag
+
+            system, lag_sink = attach_fixed_lag(system, smooth_lag, lambda est: self.smoothed.on_estimate(est))
+            sinks = [*sinks, lag_sink]
         # The run keeps its statistics in bounded memory; the view's own histories are the deques below.
         self.run_ = Run(system, sinks, on_truth=self._take_truth, label=source)
         sensors = self.run_.scheduler.sensors
@@ -140,6 +158,9 @@ class LiveFeed:
             start = lay["p"].start
             self._pos = (start, start + 1)
             self._pos_names = lay.block("p").element_names()[:2]
+        if smooth_lag is not None:
+            self.smoothed = SmoothedTrace(lay, lambda: self.parsed.header.fields.get("truth"), self._pos,
+                                          max_track, track_dt)
         self._truth_idx: tuple[int, int] | None | bool = None
 
     # ------------------------------------------------------------------ control (any thread)
@@ -312,6 +333,8 @@ class LiveFeed:
         """A truth line: its (north, east) point goes to the view's true track (decimated by time), the
         whole line to the state errors."""
         self.states.on_truth(msg)
+        if self.smoothed is not None:
+            self.smoothed.on_truth(msg)
         if self._truth_idx is None and self._pos is not None:
             names = self.parsed.header.fields.get("truth")
             ok = names is not None and all(n in names for n in self._pos_names)
@@ -367,12 +390,19 @@ class LiveFeed:
             track_total=self.track_total, truth=tuple(self.truth), truth_total=self.truth_total,
             lines=self.lines_read, data_wall=self._data_wall, sensor_t=t, speed_ratio=ratio, wall=now, message=self.message,
             health=self._assess(t, rates, counters, now, active), series=self.history.snapshot(), attempt=self.attempt,
-            states=self.states.snapshot())
+            states=self.states.snapshot(), smooth_lag=self.smooth_lag,
+            **self._smoothed_fields())
         self._next_post = now + self.refresh_dt
         self._emitted_lines = self.lines_read
         self._post(snap)
         return snap
 
+
+    def _smoothed_fields(self) -> dict:
+        if self.smoothed is None:
+            return {}
+        track, total, states = self.smoothed.snapshot()
+        return {"smoothed": track, "smoothed_total": total, "smoothed_states": states}
 
     def _assess(self, t: float, rates: dict[str, float], counters: dict[str, dict[str, int]], now: float,
                 active: bool) -> Health:

@@ -32,10 +32,11 @@ class StateSample:
 
 class StateHistory:
     """``names``/``index``: the plotted elements and their indices in the state vector; ``truth_names``
-    returns the truth line's field names (None until the header gives them)."""
+    returns the truth line's field names (None until the header gives them); ``truth_keep``: truth lines
+    kept for interpolation (more for estimates that arrive late, the fixed-lag smoothed ones)."""
 
     def __init__(self, layout: StateLayout, truth_names: Callable[[], list[str] | None], maxlen: int = 600,
-                 dt: float = 0.1, wait_s: float = 1.0):
+                 dt: float = 0.1, wait_s: float = 1.0, truth_keep: int = 64):
         self.names: list[str] = []
         idx: list[int] = []
         for block in layout.blocks:
@@ -48,7 +49,7 @@ class StateHistory:
         self.index = np.array(idx, dtype=np.int64)
         self._truth_names = truth_names
         self._cols: np.ndarray | None = None  # truth column of each element (-1: absent)
-        self._truth: deque[tuple[float, np.ndarray]] = deque(maxlen=64)
+        self._truth: deque[tuple[float, np.ndarray]] = deque(maxlen=truth_keep)  # the newest truth lines
         self.samples: deque[StateSample] = deque(maxlen=maxlen)
         self.dt = dt
         self._last_t = -math.inf

@@ -3,7 +3,9 @@
 Shows the estimated track, the truth when the stream carries truth lines (and the latest true position
 beside the estimate), the beacons, the current position and its 2-sigma covariance ellipse (the
 horizontal 2 x 2 block of P: semi-axes 2 sqrt(eigenvalue), 86% of the probability of a Gaussian);
-scales are equal on both axes and fit everything shown. ``zoom`` (keys + and -) narrows the view around
+scales are equal on both axes and fit everything shown. With ``fusion tui --smooth-lag L`` the fixed-lag
+smoothed track (each point L s behind the live estimate, smoothed on the measurements up to now) is a
+second trace. ``zoom`` (keys + and -) narrows the view around
 its centre, ``follow`` (key f) centres it on the current estimate; ``reset()`` (key r) forgets the trail
 drawn so far and refits the view to what comes next.
 """
@@ -20,6 +22,7 @@ from fusion.tui.canvas import BrailleCanvas
 from fusion.tui.feed import FeedSnapshot
 
 EST, TRUTH, BEACON, NOW, ELLIPSE = "bold cyan", "#a0a0a0", "bold red", "bold yellow", "yellow"
+SMOOTHED = "bold magenta"
 
 
 def ellipse_points(center: np.ndarray, cov: np.ndarray, k: float = 2.0, n: int = 64) -> np.ndarray:
@@ -44,33 +47,44 @@ class TrackPlot(Widget):
         self.has_position = has_position
         self.track: np.ndarray = np.zeros((0, 2))
         self.truth: np.ndarray = np.zeros((0, 2))
+        self.smoothed: np.ndarray = np.zeros((0, 2))  # the fixed-lag smoothed track (--smooth-lag), m
+        self.smooth_lag: float | None = None
         self.current: tuple[float, float] | None = None
         self.cov: np.ndarray | None = None  # (2, 2) horizontal covariance at the current estimate, m^2
         self.truth_now: tuple[float, float] | None = None
         self.zoom = 1.0
         self.follow = False
-        self._hide_track = self._hide_truth = 0
-        self._totals = (0, 0)
+        self._hide_track = self._hide_truth = self._hide_smoothed = 0
+        self._totals = (0, 0, 0)
         self.border_title = "track (top view)"
-        self.border_subtitle = (f"[{EST}]━ estimate[/] [{TRUTH}]━ truth[/] [{BEACON}]▲ beacon[/] "
-                                f"[{NOW}]● now[/] [{ELLIPSE}]◌ 2σ[/] [{TRUTH}]○ true now[/]")
+        self.border_subtitle = self._legend()
+
+    def _legend(self) -> str:
+        lag = (f"[{SMOOTHED}]━ smoothed {self.smooth_lag:g} s late[/] " if self.smooth_lag is not None else "")
+        return (f"[{EST}]━ estimate[/] {lag}[{TRUTH}]━ truth[/] [{BEACON}]▲ beacon[/] "
+                f"[{NOW}]● now[/] [{ELLIPSE}]◌ 2σ[/] [{TRUTH}]○ true now[/]")
 
     def show(self, snap: FeedSnapshot, current: tuple[float, float] | None, cov: np.ndarray | None = None) -> None:
         """Take the snapshot's track (only points after the last reset), the current position and its
         horizontal covariance (2 x 2, m^2)."""
         self.cov = None if cov is None or not np.isfinite(cov).all() else np.asarray(cov, dtype=float)
         self.truth_now = snap.truth[-1] if snap.truth else None
-        self._totals = (snap.track_total, snap.truth_total)
+        self._totals = (snap.track_total, snap.truth_total, snap.smoothed_total)
         self.track = _tail(snap.track, snap.track_total - self._hide_track)
         self.truth = _tail(snap.truth, snap.truth_total - self._hide_truth)
+        self.smoothed = _tail(snap.smoothed, snap.smoothed_total - self._hide_smoothed)
+        if snap.smooth_lag != self.smooth_lag:
+            self.smooth_lag = snap.smooth_lag
+            self.border_subtitle = self._legend()
         self.current = current
         self.refresh()
 
     def reset(self) -> None:
         """Forget the trail so far (the view refits to the points that follow)."""
-        self._hide_track, self._hide_truth = self._totals
+        self._hide_track, self._hide_truth, self._hide_smoothed = self._totals
         self.track = np.zeros((0, 2))
         self.truth = np.zeros((0, 2))
+        self.smoothed = np.zeros((0, 2))
         self.refresh()
 
     def set_zoom(self, factor: float) -> None:
@@ -97,7 +111,7 @@ class TrackPlot(Widget):
     def draw(self, cols: int, rows: int) -> Text:
         """The plot as rich Text of ``cols`` x ``rows`` cells (one row used for the scale)."""
         canvas = BrailleCanvas(cols, rows - 1)
-        pts = [self.track, self.truth, np.array(list(self.beacons.values())).reshape(-1, 2)]
+        pts = [self.track, self.truth, self.smoothed, np.array(list(self.beacons.values())).reshape(-1, 2)]
         ring = None
         if self.current is not None:
             pts.append(np.array([self.current]))
@@ -128,6 +142,8 @@ class TrackPlot(Widget):
             canvas.polyline(*to_dots(self.truth), style=TRUTH)
         if len(self.track):
             canvas.polyline(*to_dots(self.track), style=EST)
+        if len(self.smoothed):
+            canvas.polyline(*to_dots(self.smoothed), style=SMOOTHED)
         if ring is not None:
             canvas.polyline(*to_dots(ring), style=ELLIPSE)
         for name, b in self.beacons.items():
