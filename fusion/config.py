@@ -21,12 +21,13 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, Union
+import warnings
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from fusion.api import (BuildContext, Component, ConfigError, Decoder, Filter, Gate, MeasurementModel,
-                        ProcessModel, Solver)
+from fusion.api import (Aligns, BuildContext, CapabilityWarning, Component, ConfigError, Decoder, Filter, Gate,
+                        MeasurementModel, ProcessModel, Solver, has, near_misses)
 from fusion.recovery import RecoverySpec
 from fusion.registry import Registry, default_registry
 from fusion.yamlsource import LocatedYAML, load_yaml, pydantic_errors
@@ -218,6 +219,19 @@ def _split(spec: ComponentSpec, doc: LocatedYAML | None, loc: list[Any]) -> tupl
     return name, params
 
 
+_CHECKED: set[type] = set()
+
+
+def _report_near_misses(cls: type) -> None:
+    """Warn, once per class, about a method one edit away from a capability (a misspelt ``f_inputs``
+    silently switches the feature off): fusion.api.capabilities.near_misses."""
+    if cls in _CHECKED:
+        return
+    _CHECKED.add(cls)
+    for miss in near_misses(cls):
+        warnings.warn(miss, CapabilityWarning, stacklevel=3)
+
+
 def build_component(registry: Registry, kind: str, spec: ComponentSpec, ctx: BuildContext,
                     doc: LocatedYAML | None = None, loc: list[Any] | None = None) -> Component:
     """Instantiate a component of ``kind`` from its spec, validating params with its Params model."""
@@ -225,6 +239,7 @@ def build_component(registry: Registry, kind: str, spec: ComponentSpec, ctx: Bui
     name, params = _split(spec, doc, loc)
     where = doc.where(loc) if doc else ".".join(map(str, loc))
     cls = registry.get(kind, name, where)
+    _report_near_misses(cls)
     try:
         p = cls.Params(**params)
     except ValidationError as exc:
@@ -398,6 +413,9 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
                                   "use action: inflate")
         sensors[sname] = SensorRuntime(sname, s.role, decoder, pre, model, R, gate, s.time_offset, s.max_gap,
                                        s.recovery)
+    if getattr(filt, "linear_only", False):
+        _check_linear(filt, process, sensors, doc.where(["filter"]) if doc and filter_override is None
+                      else "filter (--filter)" if filter_override is not None else "filter")
     inputs = [n for n, s in sensors.items() if s.role == "input"]
     if len(inputs) > 1:
         raise ConfigError(f"{path or 'config'}: sensors: at most one input sensor, got {inputs}")
@@ -409,7 +427,7 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
         raise ConfigError(f"{doc.where(['initial', 'from_sensor']) if doc else 'initial.from_sensor'}: sensor "
                           f"{spec.initial.from_sensor!r} is an input; the initial position comes from a measurement "
                           f"sensor ({', '.join(n for n, r in sensors.items() if r.role == 'measurement') or 'none'})")
-    if spec.initial.align_s and not hasattr(process, "align"):
+    if spec.initial.align_s and not has(process, Aligns):
         raise ConfigError(f"{doc.where(['initial', 'align_s']) if doc else 'initial.align_s'}: process {process.name!r} cannot align itself")
     for i, name in enumerate(spec.evaluation.position or []):
         if name not in layout.names:
@@ -417,6 +435,19 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
                               f"state has no element {name!r}; elements are {list(layout.names)}")
     x0, P0 = _initial(spec, process, doc)
     return System(spec, path, process, filt, sensors, x0, P0, beacons, reg)  # type: ignore[arg-type]
+
+
+def _check_linear(filt, process: ProcessModel, sensors: dict[str, SensorRuntime], where: str) -> None:
+    """The rule for a ``linear_only`` filter (kf): the process and every measurement model must declare
+    ``linear = True`` (f and h affine in x); the first that does not is a ConfigError."""
+    others = "use ekf, iekf, ukf or srukf"
+    if not process.linear:
+        raise ConfigError(f"{where}: filter {filt.name!r} needs a linear process model; process {process.name!r} "
+                          f"is not linear (linear = False): {others}")
+    for sname, sr in sensors.items():
+        if sr.model is not None and not sr.model.linear:
+            raise ConfigError(f"{where}: filter {filt.name!r} needs linear measurement models; sensor {sname!r} "
+                              f"uses {sr.model.name!r}, which is not linear (linear = False): {others}")
 
 
 def load_system(path: str | Path, registry: Registry | None = None,

@@ -20,7 +20,8 @@ import numpy as np
 __all__ = [
     "multiply", "conjugate", "normalize", "identity", "left_matrix", "right_matrix", "xi",
     "to_matrix", "from_matrix", "rotate", "rotate_jacobian", "exp", "log", "from_euler",
-    "to_euler", "angle_between", "from_gravity",
+    "to_euler", "angle_between", "from_gravity", "PRODUCT_FORM", "ROTATION_FORM", "NORM_TERMS",
+    "rotation_form",
 ]
 
 # --------------------------------------------------------------------------- structure constants
@@ -57,6 +58,21 @@ _term(1, 3, 2, 0, 2.0); _term(0, 2, 2, 0, -2.0)   # C20 = 2(q1q3 - q0q2)
 _term(2, 3, 2, 1, 2.0); _term(0, 1, 2, 1, 2.0)    # C21 = 2(q2q3 + q0q1)
 _K = _K4.reshape(16, 9)
 _DIAG16 = np.array([0, 5, 10, 15])
+
+#: The structure constants as public, read-only forms, for models that evaluate many quaternions in one
+#: product: ``multiply(p, q) = outer(p, q).ravel() @ PRODUCT_FORM`` (16, 4); ``|q|^2 C_b^n(q)`` raveled
+#: = ``outer(q, q).ravel() @ ROTATION_FORM`` (16, 9); ``|q|^2 = outer(q, q).ravel()[NORM_TERMS].sum()``.
+PRODUCT_FORM = _T16.view()
+ROTATION_FORM = _K.view()
+NORM_TERMS = _DIAG16.view()
+for _a in (PRODUCT_FORM, ROTATION_FORM, NORM_TERMS):
+    _a.flags.writeable = False
+
+
+def rotation_form(v: np.ndarray) -> np.ndarray:
+    """(16, 3) form K_v of the rotation of a fixed vector v (3,): ``|q|^2 C_b^n(q) v = outer(q, q).ravel()
+    @ K_v`` for any (..., 4) q (divide by ``|q|^2`` for the rotation by q / |q|)."""
+    return _K.reshape(16, 3, 3) @ np.asarray(v, dtype=float)
 
 
 def _outer16(a: np.ndarray, b: np.ndarray) -> np.ndarray:

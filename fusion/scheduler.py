@@ -24,14 +24,15 @@ import heapq
 import itertools
 import math
 import time
-from collections import deque
+from collections import Counter, deque
 from dataclasses import dataclass
 from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from fusion.api import (AlignsState, Belief, Estimate, Event, MalformedMessage, Message, PseudoMeasurement,
-                        ReadsBelief, RejectedMessage, UsesInput)
+from fusion.api import (Aligns, AlignsState, Belief, ChecksGeometry, Estimate, Event, HasThreshold, MalformedMessage,
+                        Message, PositionFromFix, PredictsInputRuns, PseudoMeasurement, ReadsBelief, RejectedMessage,
+                        UpdateResult, UsesInput, has)
 from fusion.clock import ClockGuard
 from fusion.recovery import LockoutWatch, recover
 from fusion.config import SensorRuntime, System
@@ -94,12 +95,17 @@ class Scheduler:
         self._log_start = 0
         self._replaying = False
         self.steps = {"predict": 0, "update": 0}
+        # What the filter returned, counted here (filters keep no counters): predicts, batched_predicts (runs
+        # of input samples given in one predict_inputs call), updates, rejected, update_iterations, and the
+        # kinds of the events it reported (not_positive_definite).
+        self.filter_counters: Counter = Counter()
+        self._filter_events: list[Event] = []   # reported by the filter inside a prediction, not yet yielded
         self.time_s = {"predict": 0.0, "update": 0.0}
         self.unused: dict[str, int] = {}
         self._watch = {n: LockoutWatch(s.recovery) for n, s in self.sensors.items() if s.recovery is not None}
         self.resets = 0
         # Batched input integration (filter.predict_inputs) needs no per-sample replay log.
-        self._batch = hasattr(self.filter, "predict_inputs") and self.late_policy != "replay"
+        self._batch = has(self.filter, PredictsInputRuns) and self.late_policy != "replay"
         self._pending: list[Message] = []
         self._warned: set[str] = set()  # sensors whose model's check() currently warns
         self._checked: dict[str, float] = {}  # sensor time of each sensor's last check()
@@ -128,6 +134,7 @@ class Scheduler:
         self._last_u: np.ndarray | None = None
         self._pseudo = [s for s in self.sensors.values()
                         if isinstance(s.model, PseudoMeasurement) and s.model.rule == "after_predict"]
+        self._thresholds = {n: s.gate.threshold for n, s in self.sensors.items() if has(s.gate, HasThreshold)}
         if self._pseudo:
             self._batch = False
 
@@ -291,11 +298,11 @@ class Scheduler:
         self._snapshot()
 
     def _check(self, sensor: SensorRuntime, model) -> Iterator[Event]:
-        """A model's optional ``check(belief, sensor) -> [Event]`` (e.g. the range model's geometry warning),
-        reported when a warning starts and when it clears, not at every update."""
-        check = getattr(model, "check", None)
-        if check is None:
+        """A model's ChecksGeometry capability (e.g. the range model's geometry warning), reported when a
+        warning starts and when it clears, not at every update."""
+        if not has(model, ChecksGeometry):
             return
+        check = model.check
         t = self.belief.t  # type: ignore[union-attr]
         if t - self._checked.get(sensor.name, -math.inf) < _CHECK_EVERY_S:
             return
@@ -317,10 +324,13 @@ class Scheduler:
         return Event(msg.t, kind, sensor.name, f"line {msg.line}: {exc}")
 
     def _drain_solver_events(self, sensor: SensorRuntime) -> Iterator[Event]:
-        events = getattr(sensor.preprocessor, "events", None)
+        """The events a preprocessor (fusion.api.Solver) appended to its ``events`` since the last call."""
+        pre = sensor.preprocessor
+        if pre is None:
+            return
+        events = pre.take_events()
         if events:
-            yield from list(events)
-            events.clear()
+            yield from events
 
     def _belief_at(self, t: float) -> Belief | None:
         """The belief predicted to ``t`` with the inputs so far (for a ReadsBelief preprocessor), or None before
@@ -355,10 +365,47 @@ class Scheduler:
                     self._next_output += k * self.output_dt
         while self._next_output <= t:
             self._step(self._next_output)
+            if self._filter_events:
+                yield from self._take_filter_events()
             if not self._replaying:
                 yield Estimate(self.belief.t, self.belief, "output")
             self._next_output += self.output_dt  # type: ignore[operator]
         self._step(t)
+        if self._filter_events:
+            yield from self._take_filter_events()
+
+    def _take_filter_events(self) -> list[Event]:
+        events, self._filter_events = self._filter_events, []
+        return [] if self._replaying else events
+
+    def _predicted(self, belief: Belief, k: int, batched: bool = False) -> Belief:
+        """Count a prediction of ``k`` samples; the events the filter put on the belief are kept for the event
+        stream and counted, and dropped from the belief the run goes on with."""
+        self.steps["predict"] += k
+        fc = self.filter_counters
+        fc["predicts"] += k
+        if batched:
+            fc["batched_predicts"] += 1
+        if belief.events:
+            for e in belief.events:
+                fc[e.kind] += 1
+            self._filter_events.extend(belief.events)
+            belief = belief.with_(events=())
+        return belief
+
+    def _tally(self, result: UpdateResult) -> None:
+        """Count an update's outcome and keep the events it reported for the event stream."""
+        fc = self.filter_counters
+        if result.accepted:
+            fc["updates"] += 1
+            if result.iterations:
+                fc["update_iterations"] += result.iterations
+        else:
+            fc["rejected"] += 1
+        if result.events:
+            for e in result.events:
+                fc[e.kind] += 1
+            self._filter_events.extend(result.events)
 
     def _step(self, t: float) -> None:
         dt = t - self.belief.t  # type: ignore[union-attr]
@@ -369,9 +416,9 @@ class Scheduler:
             self.belief = self.belief.with_(t=t)  # type: ignore[union-attr]
             return
         t0 = time.perf_counter()
-        self.belief = self.filter.predict(self.belief, self.process, self.u, dt)
+        belief = self.filter.predict(self.belief, self.process, self.u, dt)
         self.time_s["predict"] += time.perf_counter() - t0
-        self.steps["predict"] += 1
+        self.belief = self._predicted(belief, 1)
         if self._pseudo:
             self._pseudo_updates()
 
@@ -383,6 +430,7 @@ class Scheduler:
                 continue
             R = obs.R if obs.R is not None else sensor.R
             result = self.filter.update(self.belief, obs.model, obs.z, R, sensor.gate)
+            self._tally(result)
             if result.accepted:
                 self.belief = result.belief
                 sensor.counters["used"] += 1
@@ -432,11 +480,14 @@ class Scheduler:
             keep = dts > 0
             if keep.any():
                 t0 = time.perf_counter()
-                self.belief = self.filter.predict_inputs(self.belief, self.process, us[keep], dts[keep])
+                k = int(keep.sum())
+                belief = self.filter.predict_inputs(self.belief, self.process, us[keep], dts[keep])
+                self.time_s["predict"] += time.perf_counter() - t0
+                self.belief = self._predicted(belief, k, batched=k > 1)
                 if capped:  # bounded gap: the run still ends at the last sample's time
                     self.belief = self.belief.with_(t=last_t)
-                self.time_s["predict"] += time.perf_counter() - t0
-                self.steps["predict"] += int(keep.sum())
+                if self._filter_events:
+                    yield from self._take_filter_events()
             self.u = good[-1][1]
             sensor.counters["used"] += len(good)
         else:
@@ -458,7 +509,8 @@ class Scheduler:
                 continue
             if self._align_s and self._align_u:
                 u_mean = np.mean(self._align_u, axis=0)
-                self._x0, self._P0 = self.process.align(self._x0, self._P0, u_mean)  # type: ignore[attr-defined]
+                if has(self.process, Aligns):   # wiring refuses align_s for a process without it
+                    self._x0, self._P0 = self.process.align(self._x0, self._P0, u_mean)
                 for name, observations in self._aligners.items():
                     if observations:
                         s = self.sensors[name]
@@ -517,9 +569,10 @@ class Scheduler:
         result = self.filter.update(self.belief, obs.model, obs.z, R, sensor.gate)
         self.time_s["update"] += time.perf_counter() - t0
         self.steps["update"] += 1
+        self._tally(result)
         watch = self._watch.get(sensor.name)
         if watch is not None and not self._replaying:
-            threshold = getattr(sensor.gate, "threshold", None)
+            threshold = self._thresholds.get(sensor.name)
             th = threshold(len(obs.z)) if threshold is not None else None
             if watch.update(obs.t, result.accepted, result.nis, th):
                 watch.clear()
@@ -529,6 +582,9 @@ class Scheduler:
                 yield event
                 result = self.filter.update(self.belief, obs.model, obs.z, R, sensor.gate)
                 self.steps["update"] += 1
+                self._tally(result)
+        if self._filter_events:
+            yield from self._take_filter_events()
         if result.accepted:
             sensor.counters["used"] += 1
             self.belief = result.belief
@@ -558,7 +614,7 @@ class Scheduler:
             return x0, P0
         sl = self.system.layout["p"]
         m = len(obs.z)
-        to_state = getattr(obs.model, "position_from", None)
+        to_state = obs.model.position_from if has(obs.model, PositionFromFix) else None
         x0[sl.start:sl.start + m] = to_state(obs.z, x0)[:m] if to_state else obs.z
         if obs.R is not None:
             idx = np.arange(sl.start, sl.start + m)

@@ -1,7 +1,6 @@
 """Process ``ins``: IMU-driven 16-state strapdown INS (paper 000, sec. V-A, eqs. 33-52)."""
 from __future__ import annotations
 
-import math
 from typing import ClassVar, Literal
 
 import numpy as np
@@ -82,7 +81,7 @@ class InsParams(Params):
         return self
 
 
-def _var(density: Density) -> np.ndarray:
+def density_variance(density: Density) -> np.ndarray:
     d = np.broadcast_to(np.asarray(density, dtype=float), (3,))
     if np.any(d < 0):
         raise ValueError(f"noise densities must be >= 0, got {density}")
@@ -154,6 +153,8 @@ class Ins(ProcessModel):
     def __init__(self, params: InsParams | None = None, context: BuildContext | None = None):
         super().__init__(params, context)
         p: InsParams = self.params  # type: ignore[assignment]
+        if not p.renormalize:   # the filters leave |q| to eta or a quat_norm pseudo-observation
+            self.layout = type(self).layout.with_unit(False)
         if p.gravity is not None:
             g = p.gravity
         elif p.latitude_deg is not None:
@@ -167,8 +168,8 @@ class Ins(ProcessModel):
             self.w_ie: np.ndarray | None = EARTH_RATE * np.array([np.cos(lat), 0.0, -np.sin(lat)])
         else:
             self.w_ie = None
-        self._var_a, self._var_w = _var(p.accel_noise_density), _var(p.gyro_noise_density)
-        self._var_ba, self._var_bw = _var(p.accel_bias_rw), _var(p.gyro_bias_rw)
+        self._var_a, self._var_w = density_variance(p.accel_noise_density), density_variance(p.gyro_noise_density)
+        self._var_ba, self._var_bw = density_variance(p.accel_bias_rw), density_variance(p.gyro_bias_rw)
         self._trap = p.integration == "trapezoidal"
         self._g_col = self.g_n[:, None]
         # Q's attitude-independent blocks per power of dt (accelerometer noise isotropic: C N^2 C^T = N^2 I)
@@ -271,15 +272,7 @@ class Ins(ProcessModel):
     def normalize(self, x: np.ndarray) -> np.ndarray:
         """Renormalise the quaternion block of states x (..., 16) to unit norm (a new array); with
         ``renormalize: false``, x itself (the norm is left to eta or the quat_norm pseudo-observation)."""
-        if not self.params.renormalize:  # type: ignore[attr-defined]
-            return x
-        x = np.array(x, dtype=float, copy=True)
-        q = x[..., 6:10]
-        if x.ndim == 1:
-            q /= math.sqrt(float(q @ q))
-        else:
-            q /= np.sqrt((q * q).sum(axis=-1, keepdims=True))
-        return x
+        return self.layout.normalize(x)   # renormalize: false -> a layout whose q block is not unit
 
     # ------------------------------------------------------------------ linearisation
     def _dq_dw(self, w: np.ndarray, dt: float) -> np.ndarray:

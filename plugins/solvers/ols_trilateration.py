@@ -15,9 +15,10 @@ from typing import Any, Callable, ClassVar, Literal, Sequence
 import numpy as np
 from pydantic import Field
 
-from fusion.api import MAX_MAGNITUDE, Belief, BuildContext, ConfigError, Event, MalformedMessage, Message, Params, Solver
+from fusion.api import (MAX_MAGNITUDE, Belief, BuildContext, ConfigError, Event, Fix, MalformedMessage, Message,
+                        Params, Solver)
 from fusion_plugins.solvers.firing_schedule import FiringSchedule
-from fusion_plugins.solvers.ols_linear import _condition, _ols_fit, _solve_linear
+from fusion_plugins.solvers.ols_linear import condition, ols_fit, solve_linear
 from fusion_plugins.solvers.range_fix import Cycle, Fit, NoFix, consensus, inflate, weighted_fix
 
 REASONS = ("too_few_beacons", "degenerate", "inconsistent", "ambiguous")
@@ -81,15 +82,15 @@ def trilaterate(beacons: np.ndarray, ranges: np.ndarray, *, dim: int = 3, z: flo
 
     def solve(idx: np.ndarray) -> Fit:
         if not refine:
-            return _ols_fit(cyc, idx, *lin)
+            return ols_fit(cyc, idx, *lin)
         Bi, ri = cyc.B[idx], cyc.r[idx]
         ref = int(np.argmin(ri)) if reference == "nearest" else 0
         if start is None:                                     # the paper's OLS is the start
-            pos0, _, info = _solve_linear(Bi, ri, dim, z, ref, qr_condition, degenerate_condition, gain=False)
+            pos0, _, info = solve_linear(Bi, ri, dim, z, ref, qr_condition, degenerate_condition, gain=False)
         else:                                                 # a start given: only eq. 28's geometry test
             D = np.delete(Bi, ref, axis=0) - Bi[ref]
             pos0, info = np.asarray(start, dtype=float), {"method": "start",
-                                                          "cond": _condition(D, dim, degenerate_condition)}
+                                                          "cond": condition(D, dim, degenerate_condition)}
         g = weighted_fix(cyc, idx, pos0, dim=dim, z=z, z_sd=z_sd, sigma=sigma, iterations=refine)
         g.info = {**info, "method": info["method"] + "+gauss-newton", "reference": int(idx[ref])}
         return g
@@ -199,9 +200,10 @@ class OlsTrilateration(Solver):
     QR when cond(A^T A) > ``qr_condition``; then up to ``refine_iterations`` Gauss-Newton steps on the
     whitened range equations, from the belief's receiver position (``lever_arm``) when compensating, else
     from the OLS fix. Covariance: range noise and geometry, the compensation uncertainty, the assumed
-    height (2-D) and the residual misfit (``inflate_misfit``), plugins/solvers/range_fix.py. Emitted as
-    ``Message(t, sensor, (x, y, z, cxx, cxy, cxz, cyy, cyz, czz[, age]))``: position (m) and the upper
-    triangle of its covariance (m^2), which the ``position`` model uses as R.
+    height (2-D) and the residual misfit (``inflate_misfit``), plugins/solvers/range_fix.py. Emitted as a
+    ``fusion.api.Fix``: position (3,) (m, NED), its covariance (3, 3) (m^2), which the ``position`` model
+    uses as R, the age (s) and the beacons used. (A recording may carry the same fix as a line of 9 or 10
+    numbers, :func:`pack_fix`; the position model reads both.)
 
     **Outliers** (1% in the ABPS recording, a longer reflected path): consensus over subsets scored by
     the chi-square of the residuals; no fix when no subset is consistent or two disagree. No fix:
@@ -352,11 +354,12 @@ class OlsTrilateration(Solver):
                                      f"fix from {len(info['used'])} beacons"))
         self.counters["fixes"] += 1
         self.counters["qr"] += info["method"].startswith("qr")
-        values = pack_fix(pos, cov)
-        if age > 0.0:
-            values += (age,)
         self.last_fix = (t_m, pos, cov, info)
-        return [Message(t_fix, self._sensor, values, self._line)]
+        # the fix as a typed value (the position model's observe takes it); the covariance mirrored from its
+        # upper triangle, as a fix line of a recording (pack_fix) is read
+        cov = np.triu(cov) + np.triu(cov, 1).T
+        return [Fix(t_fix, np.asarray(pos, dtype=float), cov, float(age) if age > 0.0 else 0.0,
+                    tuple(names[j] for j in info["used"]), self._sensor, self._line)]
 
     def _velocity(self, t: float) -> tuple[np.ndarray, np.ndarray, float, np.ndarray | None]:
         """From the filter's belief predicted to ``t``: the velocity (3,) (m/s, navigation frame), its
