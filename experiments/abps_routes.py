@@ -35,7 +35,7 @@ from fusion import pipeline  # noqa: E402
 from fusion.config import SystemSpec, wire  # noqa: E402
 from fusion.metrics import Truth  # noqa: E402
 from fusion.simulate import simulate_file  # noqa: E402
-from fusion_plugins.solvers.ols_trilateration import unpack_fix  # noqa: E402
+from fusion_plugins.solvers.ols_trilateration import pack_fix, unpack_fix  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "abps_ins.yaml"
@@ -110,12 +110,12 @@ def one(scenario: str, seed: int, tmp: Path, noise: bool = True, changes: dict |
 
     def _feed(self, msg):
         out = feed(self, msg)
-        fixes.extend((m.t, m.values) for m in out)
+        fixes.extend((m.t, pack_fix(m.value, m.cov) + ((m.age,) if m.age else ())) for m in out)  # typed Fix
         return out
 
     def _flush(self):
         out = flush(self)
-        fixes.extend((m.t, m.values) for m in out)
+        fixes.extend((m.t, pack_fix(m.value, m.cov) + ((m.age,) if m.age else ())) for m in out)  # typed Fix
         return out
 
     cls.feed, cls.flush = _feed, _flush

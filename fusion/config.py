@@ -21,12 +21,13 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, Union
+import warnings
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from fusion.api import (BuildContext, Component, ConfigError, Decoder, Filter, Gate, MeasurementModel,
-                        ProcessModel, Solver)
+from fusion.api import (Aligns, BuildContext, CapabilityWarning, Component, ConfigError, Decoder, Filter, Gate,
+                        MeasurementModel, ProcessModel, Solver, has, near_misses)
 from fusion.recovery import RecoverySpec
 from fusion.registry import Registry, default_registry
 from fusion.yamlsource import LocatedYAML, load_yaml, pydantic_errors
@@ -49,7 +50,7 @@ class _Strict(BaseModel):
 #: configs/uwb_pv_ukf.yaml (0.1 m ranges), the EKF still converges at sd 1e7 and diverges at 1e8 (1046
 #: non-positive-definite repairs). No physical prior is wider: 1e6 m is a continent, 1e6 m/s is 30x orbital
 #: speed.
-MAX_INITIAL_SD = 1e6
+from fusion.config_values import MAX_INITIAL_SD  # noqa: E402 (= 1e6, used by the wiring's checks there too)
 #: Fastest fixed-rate output (Hz): each output costs a prediction and a row (~200 B of CSV); beyond the
 #: fastest sensor (an IMU at 100 Hz-1 kHz) more rows carry no information (1 kHz over an hour: 3.6 M rows).
 MAX_OUTPUT_RATE_HZ = 1000.0
@@ -218,6 +219,19 @@ def _split(spec: ComponentSpec, doc: LocatedYAML | None, loc: list[Any]) -> tupl
     return name, params
 
 
+_CHECKED: set[type] = set()
+
+
+def _report_near_misses(cls: type) -> None:
+    """Warn, once per class, about a method one edit away from a capability (a misspelt ``f_inputs``
+    silently switches the feature off): fusion.api.capabilities.near_misses."""
+    if cls in _CHECKED:
+        return
+    _CHECKED.add(cls)
+    for miss in near_misses(cls):
+        warnings.warn(miss, CapabilityWarning, stacklevel=3)
+
+
 def build_component(registry: Registry, kind: str, spec: ComponentSpec, ctx: BuildContext,
                     doc: LocatedYAML | None = None, loc: list[Any] | None = None) -> Component:
     """Instantiate a component of ``kind`` from its spec, validating params with its Params model."""
@@ -225,6 +239,7 @@ def build_component(registry: Registry, kind: str, spec: ComponentSpec, ctx: Bui
     name, params = _split(spec, doc, loc)
     where = doc.where(loc) if doc else ".".join(map(str, loc))
     cls = registry.get(kind, name, where)
+    _report_near_misses(cls)
     try:
         p = cls.Params(**params)
     except ValidationError as exc:
@@ -239,107 +254,7 @@ def build_component(registry: Registry, kind: str, spec: ComponentSpec, ctx: Bui
         raise ConfigError(f"{where}: {kind} {name!r}: {exc}") from None
 
 
-def _noise_matrix(noise: NoiseSpec | float | list[float] | None, m: int, where: str) -> np.ndarray | None:
-    if noise is None:
-        return None
-    if isinstance(noise, (int, float, list)):
-        noise = NoiseSpec(sd=noise)
-    if noise.R is not None:
-        R = _matrix(noise.R, f"{where}.R")
-        if R.shape != (m, m):
-            raise ConfigError(f"{where}.R: must be {m} x {m} for this measurement model, got {R.shape[0]} x {R.shape[1] if R.ndim > 1 else 1}")
-        if not _positive_definite(R):
-            raise ConfigError(f"{where}.R: must be symmetric positive definite")
-        return R
-    if noise.sd is not None:
-        sd = np.atleast_1d(np.asarray(noise.sd, float))
-        if sd.size not in (1, m):
-            raise ConfigError(f"{where}.sd: needs 1 or {m} values for this measurement model, got {sd.size}")
-        if np.any(sd <= 0):
-            raise ConfigError(f"{where}.sd: standard deviations must be > 0")
-        with np.errstate(over="ignore", under="ignore"):
-            var = np.broadcast_to(sd, (m,)) ** 2
-        if not (np.all(np.isfinite(var)) and np.all(var > 0)):
-            raise ConfigError(f"{where}.sd: {sd.tolist()} squared is not a positive finite variance "
-                              "(float64: 1e-150 < sd < 1e150)")
-        return np.diag(var)
-    return None
-
-
-def _matrix(rows: list[list[float]], where: str) -> np.ndarray:
-    """A matrix from YAML rows; ConfigError for rows of different lengths."""
-    lengths = sorted({len(r) for r in rows})
-    if len(lengths) > 1:
-        raise ConfigError(f"{where}: rows of different lengths {lengths}; a matrix is a list of equal rows")
-    return np.asarray(rows, float).reshape(len(rows), lengths[0] if lengths else 0)
-
-
-def _positive_definite(A: np.ndarray) -> bool:
-    """A symmetric positive definite (and finite: a Cholesky factor exists)."""
-    if not (np.all(np.isfinite(A)) and np.allclose(A, A.T)):
-        return False
-    try:
-        np.linalg.cholesky(A)
-    except np.linalg.LinAlgError:
-        return False
-    return bool(np.all(np.linalg.eigvalsh(A) > 0))
-
-
-def _fill_blocks(target: np.ndarray, values: dict[str, Any], layout, where) -> None:
-    """Write ``{block: scalar or per-element values}`` into ``target`` (n,), naming the field on error."""
-    for name, val in values.items():
-        if name not in layout:
-            raise ConfigError(f"{where(name)}: state has no block {name!r}; blocks are {[b.name for b in layout.blocks]}")
-        sl = layout[name]
-        v = np.atleast_1d(np.asarray(val, float))
-        if v.size not in (1, sl.stop - sl.start):
-            raise ConfigError(f"{where(name)}: block {name!r} has {sl.stop - sl.start} elements, got {v.size} values")
-        target[sl] = v
-
-
-def _initial(spec: SystemSpec, process: ProcessModel, doc: LocatedYAML | None) -> tuple[np.ndarray, np.ndarray]:
-    lay = process.layout
-
-    def where(*loc: Any) -> str:
-        return doc.where(["initial", *loc]) if doc else "initial." + ".".join(map(str, loc))
-    x0 = np.zeros(lay.n)
-    for block in lay.blocks:
-        if block.kind == "quaternion":
-            x0[lay[block.name].start] = 1.0
-    _fill_blocks(x0, spec.initial.mean, lay, lambda name: where("mean", name))
-    for block in lay.blocks:
-        if block.kind == "quaternion" and not np.linalg.norm(x0[lay[block.name]]) > 1e-6:
-            raise ConfigError(f"{where('mean', block.name)}: a quaternion needs a non-zero norm (e.g. [1, 0, 0, 0]), "
-                              f"got {x0[lay[block.name]].tolist()}")
-    if spec.initial.P is not None:
-        P0 = _matrix(spec.initial.P, where("P"))
-        if P0.ndim != 2 or P0.shape != (lay.n, lay.n):
-            raise ConfigError(f"{where('P')}: must be {lay.n} x {lay.n} for the state {lay!r}, got {P0.shape}")
-        big = np.flatnonzero(np.diagonal(P0) > MAX_INITIAL_SD ** 2)
-        if big.size:
-            raise ConfigError(f"{where('P')}: variance {np.diagonal(P0)[big[0]]:g} of {lay.names[big[0]]} above "
-                              f"{MAX_INITIAL_SD ** 2:g} (sd {MAX_INITIAL_SD:g}): the filter would lose every digit "
-                              "of the first update")
-    else:
-        sd = np.ones(lay.n)
-        _fill_blocks(sd, spec.initial.sd, lay, lambda name: where("sd", name))
-        missing = [b.name for b in lay.blocks if b.name not in spec.initial.sd]
-        if missing and spec.initial.sd:
-            raise ConfigError(f"{where('sd')}: no standard deviation for block(s) {missing}")
-        if np.any(sd <= 0):
-            raise ConfigError(f"{where('sd')}: standard deviations must be > 0")
-        big = np.flatnonzero(sd > MAX_INITIAL_SD)
-        if big.size:
-            name = next(b.name for b in lay.blocks if lay[b.name].start <= big[0] < lay[b.name].stop)
-            raise ConfigError(f"{where('sd', name)}: {sd[big[0]]:g} is above {MAX_INITIAL_SD:g}: with a measurement "
-                              "of 1 cm sd the first update would keep no digit (P0 / R > 1 / eps); no prior "
-                              "is that wide")
-        P0 = np.diag(sd ** 2)
-        if not np.all(np.diagonal(P0) > 0):
-            raise ConfigError(f"{where('sd')}: standard deviations below 1e-150 square to a zero variance")
-    if not _positive_definite(P0):
-        raise ConfigError(f"{where('P')}: initial covariance must be symmetric positive definite")
-    return x0, P0
+from fusion.config_values import _initial, _noise_matrix  # noqa: E402,F811 (the numbers of a config, split out)
 
 
 def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = None,
@@ -398,6 +313,9 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
                                   "use action: inflate")
         sensors[sname] = SensorRuntime(sname, s.role, decoder, pre, model, R, gate, s.time_offset, s.max_gap,
                                        s.recovery)
+    if getattr(filt, "linear_only", False):
+        _check_linear(filt, process, sensors, doc.where(["filter"]) if doc and filter_override is None
+                      else "filter (--filter)" if filter_override is not None else "filter")
     inputs = [n for n, s in sensors.items() if s.role == "input"]
     if len(inputs) > 1:
         raise ConfigError(f"{path or 'config'}: sensors: at most one input sensor, got {inputs}")
@@ -409,7 +327,7 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
         raise ConfigError(f"{doc.where(['initial', 'from_sensor']) if doc else 'initial.from_sensor'}: sensor "
                           f"{spec.initial.from_sensor!r} is an input; the initial position comes from a measurement "
                           f"sensor ({', '.join(n for n, r in sensors.items() if r.role == 'measurement') or 'none'})")
-    if spec.initial.align_s and not hasattr(process, "align"):
+    if spec.initial.align_s and not has(process, Aligns):
         raise ConfigError(f"{doc.where(['initial', 'align_s']) if doc else 'initial.align_s'}: process {process.name!r} cannot align itself")
     for i, name in enumerate(spec.evaluation.position or []):
         if name not in layout.names:
@@ -417,6 +335,19 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
                               f"state has no element {name!r}; elements are {list(layout.names)}")
     x0, P0 = _initial(spec, process, doc)
     return System(spec, path, process, filt, sensors, x0, P0, beacons, reg)  # type: ignore[arg-type]
+
+
+def _check_linear(filt, process: ProcessModel, sensors: dict[str, SensorRuntime], where: str) -> None:
+    """The rule for a ``linear_only`` filter (kf): the process and every measurement model must declare
+    ``linear = True`` (f and h affine in x); the first that does not is a ConfigError."""
+    others = "use ekf, iekf, ukf or srukf"
+    if not process.linear:
+        raise ConfigError(f"{where}: filter {filt.name!r} needs a linear process model; process {process.name!r} "
+                          f"is not linear (linear = False): {others}")
+    for sname, sr in sensors.items():
+        if sr.model is not None and not sr.model.linear:
+            raise ConfigError(f"{where}: filter {filt.name!r} needs linear measurement models; sensor {sname!r} "
+                              f"uses {sr.model.name!r}, which is not linear (linear = False): {others}")
 
 
 def load_system(path: str | Path, registry: Registry | None = None,

@@ -200,8 +200,9 @@ class RunStats:
 
     @property
     def filter_counters(self) -> dict[str, int]:
-        """The filter's own diagnostics for this run (``predicts``, ``not_positive_definite``, ...)."""
-        return dict(getattr(self.scheduler.filter, "counters", None) or {})
+        """The filter's diagnostics for this run (``predicts``, ``not_positive_definite``, ...), counted by
+        the scheduler from what the filter returned (filters keep no counters)."""
+        return dict(self.scheduler.filter_counters)
 
     def summary(self, source: str, wall_s: float) -> dict[str, Any]:
         """The summary dict of DESIGN.md "Outputs"."""

@@ -149,7 +149,10 @@ def make_plugin_manager(extra_plugins: Iterable[object] = ()) -> tuple[pluggy.Pl
         pm.load_setuptools_entrypoints("fusion")
     for plugin in extra_plugins:
         pm.register(plugin)
-    pm.check_pending()
+    try:
+        pm.check_pending()
+    except pluggy.PluginValidationError as exc:
+        raise _misspelt_hook(pm, exc) from None
     # Each component is attributed to the distribution of the plugin module whose top-level package
     # defines its class (a plugin's classes live in its own package).
     registry.providers = {}
@@ -160,6 +163,37 @@ def make_plugin_manager(extra_plugins: Iterable[object] = ()) -> tuple[pluggy.Pl
     registry.pm = pm
     pm.hook.fusion_register_components(registry=registry)
     return pm, registry
+
+
+def _misspelt_hook(pm: pluggy.PluginManager, exc: pluggy.PluginValidationError) -> ConfigError:
+    """A hookimpl with no spec (a misspelt hook name) as one line a user can act on: which hook, where
+    (file:line), which plugin and package, the hook it probably means, and how to run without it."""
+    import inspect
+
+    plugin = exc.plugin
+    name = pm.get_name(plugin) or getattr(plugin, "__name__", repr(plugin))
+    dists = {id(p): f"{d.metadata['name']} {d.version}" for p, d in pm.list_plugin_distinfo()}
+    package = dists.get(id(plugin))
+    specs = [h for h in dir(hookspecs) if h.startswith("fusion_")]
+    parts = []
+    for impl in pm.get_hookcallers(plugin) or []:
+        if impl.spec is not None:
+            continue
+        where = ""
+        for hi in impl.get_hookimpls():
+            if hi.plugin is plugin:
+                fn = inspect.unwrap(hi.function)
+                try:
+                    where = f"{inspect.getsourcefile(fn)}:{inspect.getsourcelines(fn)[1]}: "
+                except (OSError, TypeError):
+                    where = ""
+        close = difflib.get_close_matches(impl.name, specs, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        parts.append(f"{where}hook {impl.name!r} is not a fusion hook{hint}")
+    what = "; ".join(parts) or str(exc)
+    source = f"plugin {name!r} of the installed package {package!r}" if package else f"plugin {name!r}"
+    return ConfigError(f"{what}: in {source}; fix or uninstall it, or run with FUSION_BLOCK_PLUGINS={name} "
+                       "(FUSION_DISABLE_PLUGIN_AUTOLOAD=1 skips every third-party plugin)")
 
 
 @functools.lru_cache(maxsize=1)

@@ -8,6 +8,10 @@ are fused by updates at their own times; outputs are emitted at each update and/
 A message older than the released horizon is late: ``drop`` counts it, ``replay`` rewinds to the newest
 stored belief before it and re-runs the processed messages after it (bounded history).
 
+Modules: this one is the loop (processing, prediction, updates); fusion.scheduling holds the reorder
+buffer (``reorder``), the initialisation (``initialisation``), what is counted and reported
+(``reporting``) and ``late_policy: replay`` (``replay``), as mixins of :class:`Scheduler`.
+
 ``Scheduler.run(messages)`` is a generator of ``Estimate`` and ``Event`` objects, so a live UI can
 consume it as it goes. The one loop that drives a scheduler over a source is ``fusion.pipeline``.
 
@@ -18,37 +22,24 @@ goes to ``on_nis`` (the pipeline's statistics), truth and reference lines are th
 """
 from __future__ import annotations
 
-import bisect
 import copy
-import heapq
 import itertools
 import math
 import time
-from collections import deque
-from dataclasses import dataclass
+from collections import Counter, deque
 from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from fusion.api import (AlignsState, Belief, Estimate, Event, MalformedMessage, Message, PseudoMeasurement,
-                        ReadsBelief, RejectedMessage, UsesInput)
+from fusion.api import (AlignsState, Belief, Estimate, Event, HasThreshold, MalformedMessage, Message,
+                        PredictsInputRuns, PseudoMeasurement, ReadsBelief, UsesInput, has)
 from fusion.clock import ClockGuard
 from fusion.recovery import LockoutWatch, recover
 from fusion.config import SensorRuntime, System
-
-
-@dataclass
-class _Snapshot:
-    t: float
-    belief: Belief
-    u: np.ndarray | None
-    next_output: float
-    index: int  # position in the processed-message log after which this snapshot was taken
-
-
-_NOT_FED = frozenset(("truth", "reference"))  # streams that are compared against, never fused
-_CHECK_EVERY_S = 0.5  # a model's check() (geometry) runs at most this often per sensor, s of sensor time
-_BATCH_MAX = 64  # input samples integrated per predict_inputs call at most (bounds the live latency)
+from fusion.scheduling.initialisation import Initialisation
+from fusion.scheduling.reorder import Reordering
+from fusion.scheduling.replay import Replay, _Snapshot
+from fusion.scheduling.reporting import Reporting
 
 
 def _failed(component, exc: Exception) -> MalformedMessage:
@@ -58,11 +49,7 @@ def _failed(component, exc: Exception) -> MalformedMessage:
     return MalformedMessage(f"{who} failed on it: {type(exc).__name__}: {exc}")
 
 
-def _msg_t(msg: Message) -> float:
-    return msg.t
-
-
-class Scheduler:
+class Scheduler(Reordering, Initialisation, Reporting, Replay):
     """Runs a wired System over a stream of Messages."""
 
     MAX_UNUSED = 100  # distinct unknown sensor names counted by name; more are counted under "(other)"
@@ -94,12 +81,17 @@ class Scheduler:
         self._log_start = 0
         self._replaying = False
         self.steps = {"predict": 0, "update": 0}
+        # What the filter returned, counted here (filters keep no counters): predicts, batched_predicts (runs
+        # of input samples given in one predict_inputs call), updates, rejected, update_iterations, and the
+        # kinds of the events it reported (not_positive_definite).
+        self.filter_counters: Counter = Counter()
+        self._filter_events: list[Event] = []   # reported by the filter inside a prediction, not yet yielded
         self.time_s = {"predict": 0.0, "update": 0.0}
         self.unused: dict[str, int] = {}
         self._watch = {n: LockoutWatch(s.recovery) for n, s in self.sensors.items() if s.recovery is not None}
         self.resets = 0
         # Batched input integration (filter.predict_inputs) needs no per-sample replay log.
-        self._batch = hasattr(self.filter, "predict_inputs") and self.late_policy != "replay"
+        self._batch = has(self.filter, PredictsInputRuns) and self.late_policy != "replay"
         self._pending: list[Message] = []
         self._warned: set[str] = set()  # sensors whose model's check() currently warns
         self._checked: dict[str, float] = {}  # sensor time of each sensor's last check()
@@ -128,6 +120,7 @@ class Scheduler:
         self._last_u: np.ndarray | None = None
         self._pseudo = [s for s in self.sensors.values()
                         if isinstance(s.model, PseudoMeasurement) and s.model.rule == "after_predict"]
+        self._thresholds = {n: s.gate.threshold for n, s in self.sensors.items() if has(s.gate, HasThreshold)}
         if self._pseudo:
             self._batch = False
 
@@ -137,72 +130,6 @@ class Scheduler:
         for item in messages:
             yield from self.push(item)
         yield from self.finish()
-
-    def push(self, item: Message | MalformedMessage) -> Iterable[Estimate | Event]:
-        """Accept one message; returns (an iterable of) whatever it releases. Iterate it to drive the filter.
-
-        The common cases (a truth line; an input sample that only joins the pending batch) return an empty
-        tuple without building a generator: at 100-200 Hz that is a measurable share of a replay."""
-        if item.__class__ is Message:
-            sensor = self.sensors.get(item.sensor)
-            if sensor is not None:
-                t = item.t
-                if (sensor.role == "input" and self._batch and not sensor.time_offset and not self._buffer
-                        and self.max_latency == 0.0 and t >= self._horizon and t < self._next_output
-                        and t <= self._newest + self._future and not self.clock.busy
-                        and len(self._pending) < _BATCH_MAX - 1):
-                    sensor.counters["received"] += 1
-                    self._horizon = self._newest = t
-                    self._pending.append(item)
-                    return ()
-            elif item.sensor in _NOT_FED:
-                return ()
-        return self._push(item)
-
-    def _push(self, item: Message | MalformedMessage) -> Iterator[Estimate | Event]:
-        if isinstance(item, MalformedMessage):
-            sensor = getattr(item, "sensor", None)
-            if sensor in self.sensors:
-                self.sensors[sensor].counters["malformed"] += 1
-            yield Event(math.nan, "malformed", sensor, f"line {getattr(item, 'lineno', '?')}: {item}")
-            return
-        msg = item
-        sensor = self.sensors.get(msg.sensor)
-        if sensor is None:
-            if msg.sensor in _NOT_FED:
-                return
-            name = msg.sensor if msg.sensor in self.unused or len(self.unused) < self.MAX_UNUSED else "(other)"
-            n = self.unused.get(name, 0)
-            self.unused[name] = n + 1
-            if n == 0:
-                yield Event(msg.t, "warning", msg.sensor, f"sensor {msg.sensor!r} is not in the config; its messages are ignored")
-            return
-        sensor.counters["received"] += 1
-        admitted, events = self.clock.admit(sensor.name, msg, msg.t + sensor.time_offset, self._newest)
-        yield from events
-        for m, t in admitted:
-            yield from self._accept(sensor, m, t)
-
-    def _count_wild(self, sensor: str, n: int) -> None:
-        """Held messages the clock guard dropped as wild stamps: malformed (their time is)."""
-        if sensor in self.sensors:
-            self.sensors[sensor].counters["malformed"] += n
-
-    def _accept(self, sensor: SensorRuntime, msg: Message, t: float) -> Iterator[Estimate | Event]:
-        """A message on the stream's time base, stamped ``t`` (s, offsets applied)."""
-        if t != msg.t:
-            msg = Message(t, msg.sensor, msg.values, msg.line)
-        if t < self._horizon:
-            if self.late_policy == "drop" or not self._history:
-                sensor.counters["late"] += 1
-                yield Event(t, "late", msg.sensor, f"{self._horizon - t:.3f} s behind the released horizon; dropped")
-                return
-            sensor.counters["late"] += 1
-            yield from self._replay(msg)
-            return
-        heapq.heappush(self._buffer, (t, next(self._seq), msg))
-        self._newest = max(self._newest, t)
-        yield from self._release(self._newest - self.max_latency)
 
     def finish(self) -> Iterator[Estimate | Event]:
         """Release everything still buffered (end of input)."""
@@ -223,38 +150,6 @@ class Scheduler:
             yield from self._flush_inputs()
 
     # ------------------------------------------------------------------ internals
-    def _release(self, until: float, flush: bool = True) -> Iterator[Estimate | Event]:
-        pending = self._pending
-        while self._buffer and self._buffer[0][0] <= until:
-            _, _, msg = heapq.heappop(self._buffer)
-            if msg.t > self._horizon:
-                self._horizon = msg.t
-            if self._batch and self.sensors[msg.sensor].role == "input":
-                # Input samples wait until the belief is needed (a measurement, an output tick, the end, or
-                # a full batch), then go to the filter in one predict_inputs call.
-                pending.append(msg)
-                if len(pending) >= _BATCH_MAX or msg.t >= self._next_output:
-                    yield from self._flush_inputs()
-                continue
-            # Pending inputs stay pending through measurements that produce no observation (ranges a
-            # solver gathers); _measure flushes them, up to its own time, when it needs the belief.
-            yield from self._process(msg)
-        if until == math.inf and pending and flush:
-            yield from self._flush_inputs()
-
-    def _flush_inputs(self, until: float | None = None) -> Iterator[Estimate | Event]:
-        """Integrate the pending input samples; with ``until`` only those up to that time (the last one held
-        to it), the later ones stay pending, so a measurement at ``until`` is applied at its own time."""
-        pending = self._pending
-        if until is not None and pending and pending[-1].t > until:
-            k = bisect.bisect_right(pending, until, key=_msg_t)      # pending is in time order
-            batch, self._pending = pending[:k], pending[k:]
-            if not batch:
-                return
-        else:
-            batch, self._pending = pending, []
-        if batch:  # nothing pending: nothing to integrate (a measurement right after a flush)
-            yield from self._inputs(batch, until)
 
     def _process(self, msg: Message) -> Iterator[Estimate | Event]:
         if not self._replaying:
@@ -290,38 +185,6 @@ class Scheduler:
             yield from self._measure(sensor, out)
         self._snapshot()
 
-    def _check(self, sensor: SensorRuntime, model) -> Iterator[Event]:
-        """A model's optional ``check(belief, sensor) -> [Event]`` (e.g. the range model's geometry warning),
-        reported when a warning starts and when it clears, not at every update."""
-        check = getattr(model, "check", None)
-        if check is None:
-            return
-        t = self.belief.t  # type: ignore[union-attr]
-        if t - self._checked.get(sensor.name, -math.inf) < _CHECK_EVERY_S:
-            return
-        self._checked[sensor.name] = t
-        events = check(self.belief, sensor.name)
-        active = sensor.name in self._warned
-        if events and not active:
-            self._warned.add(sensor.name)
-            yield from events
-        elif not events and active:
-            self._warned.discard(sensor.name)
-            yield Event(self.belief.t, "cleared", sensor.name, "the geometry warning no longer applies")  # type: ignore[union-attr]
-
-    @staticmethod
-    def _bad(sensor: SensorRuntime, msg: Message, exc: MalformedMessage) -> Event:
-        """Count a message a plugin refused (rejected: outside the sensor's limits; else malformed)."""
-        kind = "rejected" if isinstance(exc, RejectedMessage) else "malformed"
-        sensor.counters[kind] += 1
-        return Event(msg.t, kind, sensor.name, f"line {msg.line}: {exc}")
-
-    def _drain_solver_events(self, sensor: SensorRuntime) -> Iterator[Event]:
-        events = getattr(sensor.preprocessor, "events", None)
-        if events:
-            yield from list(events)
-            events.clear()
-
     def _belief_at(self, t: float) -> Belief | None:
         """The belief predicted to ``t`` with the inputs so far (for a ReadsBelief preprocessor), or None before
         initialisation; later than ``t`` when inputs past it are already integrated. What the prediction
@@ -333,11 +196,6 @@ class Scheduler:
         if self.belief.t < t:
             self._deferred.extend(self._predict_to(t))
         return self.belief
-
-    def _start(self, t: float) -> None:
-        """The first belief, at ``t``: the configured one, aligned and with the remembered fix if any."""
-        self.belief = self.filter.initial_belief(t, *self._initial())
-        self._next_output = t + self.output_dt if self.output_dt else math.inf
 
     def _predict_to(self, t: float) -> Iterator[Estimate | Event]:
         """Predict with the held input up to ``t``, emitting fixed-rate outputs on the way. A gap longer
@@ -355,10 +213,14 @@ class Scheduler:
                     self._next_output += k * self.output_dt
         while self._next_output <= t:
             self._step(self._next_output)
+            if self._filter_events:
+                yield from self._take_filter_events()
             if not self._replaying:
                 yield Estimate(self.belief.t, self.belief, "output")
             self._next_output += self.output_dt  # type: ignore[operator]
         self._step(t)
+        if self._filter_events:
+            yield from self._take_filter_events()
 
     def _step(self, t: float) -> None:
         dt = t - self.belief.t  # type: ignore[union-attr]
@@ -369,9 +231,9 @@ class Scheduler:
             self.belief = self.belief.with_(t=t)  # type: ignore[union-attr]
             return
         t0 = time.perf_counter()
-        self.belief = self.filter.predict(self.belief, self.process, self.u, dt)
+        belief = self.filter.predict(self.belief, self.process, self.u, dt)
         self.time_s["predict"] += time.perf_counter() - t0
-        self.steps["predict"] += 1
+        self.belief = self._predicted(belief, 1)
         if self._pseudo:
             self._pseudo_updates()
 
@@ -383,6 +245,7 @@ class Scheduler:
                 continue
             R = obs.R if obs.R is not None else sensor.R
             result = self.filter.update(self.belief, obs.model, obs.z, R, sensor.gate)
+            self._tally(result)
             if result.accepted:
                 self.belief = result.belief
                 sensor.counters["used"] += 1
@@ -432,11 +295,14 @@ class Scheduler:
             keep = dts > 0
             if keep.any():
                 t0 = time.perf_counter()
-                self.belief = self.filter.predict_inputs(self.belief, self.process, us[keep], dts[keep])
+                k = int(keep.sum())
+                belief = self.filter.predict_inputs(self.belief, self.process, us[keep], dts[keep])
+                self.time_s["predict"] += time.perf_counter() - t0
+                self.belief = self._predicted(belief, k, batched=k > 1)
                 if capped:  # bounded gap: the run still ends at the last sample's time
                     self.belief = self.belief.with_(t=last_t)
-                self.time_s["predict"] += time.perf_counter() - t0
-                self.steps["predict"] += int(keep.sum())
+                if self._filter_events:
+                    yield from self._take_filter_events()
             self.u = good[-1][1]
             sensor.counters["used"] += len(good)
         else:
@@ -445,29 +311,6 @@ class Scheduler:
                 self.u = u
                 sensor.counters["used"] += 1
         self._snapshot()
-
-    def _align(self, good: list[tuple[float, np.ndarray]], sensor: SensorRuntime) -> list[tuple[float, np.ndarray]]:
-        """Before the first belief: gather the static start; create the belief once aligned (and fixed).
-        Returns the samples left to integrate after the belief exists."""
-        for i, (t, u) in enumerate(good):
-            if self._align_t0 is None:
-                self._align_t0 = t
-            if t - self._align_t0 < self._align_s or not self._have_fix:
-                self._align_u.append(u)
-                sensor.counters["used"] += 1
-                continue
-            if self._align_s and self._align_u:
-                u_mean = np.mean(self._align_u, axis=0)
-                self._x0, self._P0 = self.process.align(self._x0, self._P0, u_mean)  # type: ignore[attr-defined]
-                for name, observations in self._aligners.items():
-                    if observations:
-                        s = self.sensors[name]
-                        self._x0, self._P0 = s.model.align_state(self._x0, self._P0, u_mean, observations, s.R)  # type: ignore[union-attr]
-            self._start(t)
-            self.u = u
-            sensor.counters["used"] += 1
-            return good[i + 1:]
-        return []
 
     def _measure(self, sensor: SensorRuntime, msg: Message) -> Iterator[Estimate | Event]:
         try:
@@ -517,9 +360,10 @@ class Scheduler:
         result = self.filter.update(self.belief, obs.model, obs.z, R, sensor.gate)
         self.time_s["update"] += time.perf_counter() - t0
         self.steps["update"] += 1
+        self._tally(result)
         watch = self._watch.get(sensor.name)
         if watch is not None and not self._replaying:
-            threshold = getattr(sensor.gate, "threshold", None)
+            threshold = self._thresholds.get(sensor.name)
             th = threshold(len(obs.z)) if threshold is not None else None
             if watch.update(obs.t, result.accepted, result.nis, th):
                 watch.clear()
@@ -529,6 +373,9 @@ class Scheduler:
                 yield event
                 result = self.filter.update(self.belief, obs.model, obs.z, R, sensor.gate)
                 self.steps["update"] += 1
+                self._tally(result)
+        if self._filter_events:
+            yield from self._take_filter_events()
         if result.accepted:
             sensor.counters["used"] += 1
             self.belief = result.belief
@@ -544,71 +391,4 @@ class Scheduler:
             if self.on_update:
                 yield Estimate(obs.t, self.belief, "update", sensor.name, result)
 
-    def _take_fix(self, obs) -> None:
-        """Remember a fix of ``initial.from_sensor`` for the initial position (latest fix wins)."""
-        self._fix = obs
-        self._have_fix = True
 
-    def _initial(self) -> tuple[np.ndarray, np.ndarray]:
-        """x0, P0 with the position block from the remembered fix. A model with ``position_from`` (a
-        position with a lever arm) turns the fix into the state's position at the initial attitude."""
-        x0, P0 = self._x0.copy(), self._P0.copy()
-        obs = getattr(self, "_fix", None)
-        if obs is None:
-            return x0, P0
-        sl = self.system.layout["p"]
-        m = len(obs.z)
-        to_state = getattr(obs.model, "position_from", None)
-        x0[sl.start:sl.start + m] = to_state(obs.z, x0)[:m] if to_state else obs.z
-        if obs.R is not None:
-            idx = np.arange(sl.start, sl.start + m)
-            P0[idx, :] = 0.0
-            P0[:, idx] = 0.0
-            P0[np.ix_(idx, idx)] = obs.R
-        return x0, P0
-
-    # ------------------------------------------------------------------ replay
-    def _record(self, msg: Message) -> None:
-        if self.late_policy != "replay":
-            return
-        if len(self._log) == self._log.maxlen:
-            self._log_start += 1
-        self._log.append(msg)
-
-    def _snapshot(self) -> None:
-        if self.late_policy != "replay" or self._replaying or self.belief is None:
-            return
-        self._history.append(_Snapshot(self.belief.t, self.belief, self.u, self._next_output,
-                                       self._log_start + len(self._log)))
-
-    def _replay(self, late: Message) -> Iterator[Estimate | Event]:
-        snap = None
-        for s in reversed(self._history):
-            if s.t <= late.t and s.index >= self._log_start:
-                snap = s
-                break
-        sensor = self.sensors[late.sensor]
-        if snap is None:
-            yield Event(late.t, "late", late.sensor, "older than the replay history; dropped")
-            return
-        rerun = list(itertools.islice(self._log, snap.index - self._log_start, None))
-        rerun.append(late)
-        rerun.sort(key=lambda m: m.t)
-        self.belief, self.u, self._next_output = snap.belief, snap.u, snap.next_output
-        self._replaying = True
-        counters = {n: dict(s.counters) for n, s in self.sensors.items()}
-        try:
-            for msg in rerun:
-                for out in self._process(msg):
-                    pass
-        finally:
-            self._replaying = False
-        for n, s in self.sensors.items():  # re-run messages were already counted
-            s.counters.update(counters[n])
-        sensor.counters["used"] += 1
-        self._record(late)
-        self._history.clear()
-        self._snapshot()
-        yield Event(late.t, "replayed", late.sensor, f"re-ran {len(rerun)} messages")
-        if self.on_update and self.belief is not None:
-            yield Estimate(self.belief.t, self.belief, "update", late.sensor)

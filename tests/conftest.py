@@ -1,8 +1,16 @@
-"""Fixtures shared by the test folders."""
+"""Fixtures shared by the test folders.
+
+The suite is hermetic: third-party plugins installed in the environment are not loaded
+(``FUSION_DISABLE_PLUGIN_AUTOLOAD=1`` for this process and the commands it starts), so the project's
+tests neither run nor depend on someone else's components. The tests of entry-point loading turn
+autoload back on for themselves (the ``installed_example`` fixture)."""
+import os
 import sys
 from pathlib import Path
 
 import pytest
+
+os.environ["FUSION_DISABLE_PLUGIN_AUTOLOAD"] = "1"
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "fusion-altimeter"
 
@@ -17,6 +25,7 @@ def installed_example(tmp_path, monkeypatch):
         "Metadata-Version: 2.1\nName: fusion-altimeter\nVersion: 0.1.0\n")
     (site / "fusion_altimeter-0.1.0.dist-info" / "entry_points.txt").write_text(
         "[fusion]\naltimeter = fusion_altimeter.plugin\n")
+    monkeypatch.delenv("FUSION_DISABLE_PLUGIN_AUTOLOAD", raising=False)  # this test loads entry points
     monkeypatch.syspath_prepend(str(EXAMPLE))
     monkeypatch.syspath_prepend(str(site))
     import fusion.registry

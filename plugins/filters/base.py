@@ -1,9 +1,9 @@
 """Building blocks shared by the five filters (Stone Soup style: share the math, not five monoliths).
 
-* :class:`KalmanBase`: the Filter base with diagnostics (``counters``, ``events``), the
-  not-positive-definite detection and recovery, gating and the process model remembered for
-  ``normalize`` in the update.
-* :func:`linear_predict`: the linear / linearised prediction (paper 001 eqs. 9-10).
+* :class:`KalmanBase`: the Filter base: the not-positive-definite detection and repair (returned as a
+  value, :class:`Factor`), gating, the layout's normalisation of the updated mean. No state.
+* :func:`linearised_predict`: the linearised prediction's terms (paper 001 eqs. 9-10), for ekf, ukf and
+  srukf; :func:`linear_predict` its covariance ``F P F^T + Q``.
 * :func:`linearised_update`: the Kalman update about a linearisation point, the step the EKF does once
   and the IEKF iterates.
 
@@ -14,17 +14,17 @@ No explicit inverse anywhere: with ``W = L_y^-1 (P H^T)^T`` and ``w = L_y^-1 y``
 """
 from __future__ import annotations
 
-from collections import Counter, deque
+from typing import NamedTuple
 
 import numpy as np
 
 from fusion.api import Belief, Event, Filter, Gate, MeasurementModel, ProcessModel, UpdateResult
 
-from .jacobian import measurement_jacobian
+from .jacobian import measurement_jacobian, process_jacobian
 from .linalg import cholesky_lower, recover_factor, solve_lower, symmetrise
 
-__all__ = ["KalmanBase", "linear_predict", "linearised_update", "as_covariance", "covariance_of",
-           "as_vector", "residual_of"]
+__all__ = ["KalmanBase", "Factor", "linear_predict", "linearised_predict", "linearised_update",
+           "as_covariance", "covariance_of", "as_vector", "residual_of"]
 
 _ndarray = np.ndarray
 _float64 = np.dtype(float)
@@ -73,53 +73,54 @@ def linear_predict(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray) -
     return symmetrise(F @ P @ F.T + Q)
 
 
-class KalmanBase(Filter):
-    """Common base of kf, ekf, iekf, ukf and srukf.
+class Factor(NamedTuple):
+    """What :meth:`KalmanBase.factor` returns: ``L`` the lower Cholesky factor, ``P`` the covariance it
+    factors (the input, or its repair ``L L^T`` when the input was not positive definite) and ``event``
+    (the ``not_positive_definite`` Event of a repair, else None)."""
 
-    Diagnostics: ``counters`` (a Counter: ``not_positive_definite``, ``rejected``, ``updates``,
-    ``predicts``, and filter-specific ones) and ``events`` (the last 1000 :class:`fusion.api.Event`,
-    e.g. ``not_positive_definite`` with where it happened). ``process`` is the process model of the
-    last ``predict``; the update applies its ``normalize`` to the updated mean (quaternion blocks).
+    L: np.ndarray
+    P: np.ndarray
+    event: Event | None
+
+
+class KalmanBase(Filter):
+    """Common base of kf, ekf, iekf, ukf and srukf. A filter keeps no state: everything it has to report
+    comes back as a value: a prediction's events on the returned belief (``Belief.events``), an update's
+    on its ``UpdateResult.events`` (with ``iterations``); the run counts and reports them.
+
+    The updated mean is brought back to the state's manifold by the layout's unit quaternion blocks
+    (``StateLayout.normalize``): the filter's own layout (the system's, given at wiring), else the
+    measurement model's. The predicted mean by the process model's ``normalize``.
     """
 
-    MAX_EVENTS = 1000
-
-    def __init__(self, params=None, context=None):
-        super().__init__(params, context)
-        self.counters: Counter = Counter()
-        self.events: deque[Event] = deque(maxlen=self.MAX_EVENTS)
-        self.process: ProcessModel | None = None
-        self.repaired: np.ndarray | None = None
-        self.last_iterations = 0
-
     # ------------------------------------------------------------------ diagnostics
-    def report(self, t: float, kind: str, detail: str = "") -> None:
-        """Count an event of ``kind`` and keep it in ``events``."""
-        self.counters[kind] += 1
-        self.events.append(Event(float(t), kind, None, f"{self.name}: {detail}" if detail else self.name))
+    def event(self, t: float, kind: str, detail: str = "") -> Event:
+        """An Event of ``kind`` from this filter (sensor None)."""
+        return Event(float(t), kind, None, f"{self.name}: {detail}" if detail else self.name)
 
-    def factor(self, P: np.ndarray, t: float, where: str) -> np.ndarray:
-        """Lower Cholesky factor of P; a non-positive-definite P is reported and repaired (then
-        ``self.repaired`` holds the repaired covariance L L^T, else None)."""
+    def factor(self, P: np.ndarray, t: float, where: str) -> Factor:
+        """Lower Cholesky factor of P; a non-positive-definite P is repaired (eigenvalue clipping) and
+        the repair returned, with its event."""
         L, ok = cholesky_lower(P)
         if ok:
-            self.repaired = None
-            return L
-        self.report(t, "not_positive_definite", f"{where}: covariance not positive definite, repaired")
+            return Factor(L, P, None)
         L = recover_factor(P)
-        self.repaired = L @ L.T
-        return L
+        return Factor(L, L @ L.T, self.event(t, "not_positive_definite",
+                                             f"{where}: covariance not positive definite, repaired"))
 
-    def normalize(self, x: np.ndarray) -> np.ndarray:
-        return self.process.normalize(x) if self.process is not None else x
+    def normalizer(self, model: MeasurementModel):
+        """The layout normalisation for an update with ``model``: the filter's layout, else the model's."""
+        lay = self.context.layout
+        if lay is None:
+            lay = model.context.layout
+        return lay.normalize if lay is not None else _identity
 
     def rejected(self, belief: Belief, y: np.ndarray, S: np.ndarray, nis: float, gate: Gate | None,
-                 m: int) -> UpdateResult | None:
+                 m: int, events: tuple = (), iterations: int = 1) -> UpdateResult | None:
         """The UpdateResult of a measurement the gate rejects (belief untouched), else None."""
         if gate is None or gate.accept(nis, m):
             return None
-        self.counters["rejected"] += 1
-        return UpdateResult(belief, y, S, nis, False)
+        return UpdateResult(belief, y, S, nis, False, events, iterations)
 
     # ------------------------------------------------------------------ interface
     def initial_belief(self, t: float, x: np.ndarray, P: np.ndarray) -> Belief:
@@ -135,14 +136,35 @@ class KalmanBase(Filter):
     def predict_inputs(self, belief: Belief, process: ProcessModel, us: np.ndarray, dts: np.ndarray) -> Belief:
         """Integrate a run of input samples in order: ``us`` (k, m), sample j held over ``dts[j]`` (s).
         The scheduler passes the samples between two measurements in one call. Here: k calls of
-        :meth:`predict` (the same numbers as sample by sample); the sigma-point filters override it."""
+        :meth:`predict` (the same numbers as sample by sample), their events gathered on the result; the
+        sigma-point filters override it."""
+        events: tuple = ()
         for u, dt in zip(us, dts):
             belief = self.predict(belief, process, u, float(dt))
-        return belief
+            if belief.events:
+                events += belief.events
+        return belief.with_(events=events) if events else belief
 
     def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                gate: Gate | None = None) -> UpdateResult:
         raise NotImplementedError
+
+
+def _identity(x: np.ndarray) -> np.ndarray:
+    return x
+
+
+def linearised_predict(belief: Belief, process: ProcessModel, u: np.ndarray | None, dt: float
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The linearised prediction's terms (paper 001 eqs. 9-10), shared by ekf, ukf and srukf::
+
+        x^- = normalize(f(x, u, dt)),   F = df/dx (x, u, dt),   Q = Q(x, u, dt)
+
+    returned as ``(x^-, F, Q)``; the covariance (``F P F^T + Q``, or its square root) is the caller's."""
+    x = belief.x
+    F = process_jacobian(process, x, u, dt)
+    Q = process.Q(x, u, dt)
+    return process.normalize(process.f(x, u, dt)), F, Q
 
 
 _EYE: dict[int, np.ndarray] = {}
@@ -178,20 +200,20 @@ def linearised_update(flt: KalmanBase, belief: Belief, model: MeasurementModel, 
     m = z.shape[0]
     R = as_covariance(R, m)
     xi = x0
+    events: tuple = ()
     for it in range(max_iterations):
         H = measurement_jacobian(model, xi)
         HP = H @ P                               # (P H^T)^T, P symmetric
-        S = HP @ H.T + R
-        Ly = flt.factor(S, belief.t, "innovation covariance")
-        if flt.repaired is not None:
-            S = flt.repaired
+        Ly, S, event = flt.factor(HP @ H.T + R, belief.t, "innovation covariance")
+        if event is not None:
+            events += (event,)
         r = model.residual(z, model.h(xi))
         W = solve_lower(Ly, HP)                  # L_y^-1 H P   (m, n)
         if it == 0:
             y0, S0 = r, S
             w = solve_lower(Ly, r)
             nis = float(w @ w)
-            out = flt.rejected(belief, y0, S0, nis, gate, m)
+            out = flt.rejected(belief, y0, S0, nis, gate, m, events)
             if out is not None:
                 return out
         else:
@@ -205,10 +227,7 @@ def linearised_update(flt: KalmanBase, belief: Belief, model: MeasurementModel, 
         if step <= tolerance:
             break
     iterations = it + 1
-    flt.counters["update_iterations"] += iterations
-    flt.last_iterations = iterations
     Kt = solve_lower(Ly, W, trans=1)             # K^T = S^-1 H P   (m, n)
     A = _eye(x0.shape[0]) - Kt.T @ H             # I - K H
     P1 = symmetrise(A @ P @ A.T + Kt.T @ R @ Kt)  # Joseph form
-    flt.counters["updates"] += 1
-    return UpdateResult(Belief(belief.t, flt.normalize(xi), P=P1), y0, S0, nis, True)
+    return UpdateResult(Belief(belief.t, flt.normalizer(model)(xi), P=P1), y0, S0, nis, True, events, iterations)

@@ -5,8 +5,7 @@ import numpy as np
 
 from fusion.api import Belief, Gate, MeasurementModel, Params, ProcessModel, UpdateResult
 
-from .base import KalmanBase, covariance_of, linear_predict, linearised_update
-from .jacobian import process_jacobian
+from .base import KalmanBase, covariance_of, linear_predict, linearised_predict, linearised_update
 
 
 class ExtendedKalmanFilter(KalmanBase):
@@ -23,8 +22,8 @@ class ExtendedKalmanFilter(KalmanBase):
 
     Jacobians: the model's analytic ``jacobian`` when it returns one, else central differences on one
     vectorised batch of 2n perturbed states (plugins/filters/jacobian.py). ``nis = y^T S^-1 y`` by a
-    triangular solve with the Cholesky factor of S; a non-positive-definite S is reported
-    (``counters['not_positive_definite']``) and repaired by eigenvalue clipping.
+    triangular solve with the Cholesky factor of S; a non-positive-definite S is repaired by eigenvalue
+    clipping and reported (a ``not_positive_definite`` event in ``UpdateResult.events``).
     """
 
     name = "ekf"
@@ -33,14 +32,10 @@ class ExtendedKalmanFilter(KalmanBase):
         """The EKF has no parameters."""
 
     def predict(self, belief: Belief, process: ProcessModel, u: np.ndarray | None, dt: float) -> Belief:
-        self.process = process
         if dt == 0.0:
             return belief
-        x = belief.x
-        F = process_jacobian(process, x, u, dt)
-        P1 = linear_predict(x, covariance_of(belief), F, process.Q(x, u, dt))
-        self.counters["predicts"] += 1
-        return Belief(belief.t + dt, process.normalize(process.f(x, u, dt)), P=P1)
+        x1, F, Q = linearised_predict(belief, process, u, dt)
+        return Belief(belief.t + dt, x1, P=linear_predict(belief.x, covariance_of(belief), F, Q))
 
     def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                gate: Gate | None = None) -> UpdateResult:

@@ -23,8 +23,8 @@ class IteratedExtendedKalmanFilter(ExtendedKalmanFilter):
 
     The fixed point is a stationary point of ``|x - x^-|^2_{P^-1} + |z - h(x)|^2_{R^-1}`` (the MAP
     estimate for Gaussian prior and noise). With ``max_iterations = 1`` it is the EKF. The reported
-    innovation, S, NIS and the gate decision are the prior's (iteration 0). ``last_iterations`` and
-    ``counters['update_iterations']`` count the iterations done.
+    innovation, S, NIS and the gate decision are the prior's (iteration 0). ``UpdateResult.iterations``
+    is the number of iterations done (the run sums them in its ``update_iterations`` counter).
     """
 
     name = "iekf"

@@ -23,12 +23,15 @@ class KalmanFilter(ExtendedKalmanFilter):
         x^+ = x^- + K y,   P^+ = (I - K H) P^- (I - K H)^T + K R K^T   (Joseph form, symmetrised)
 
     F and H are the models' Jacobians (analytic, else central differences, exact for affine functions
-    up to rounding). The process model must declare ``linear = True`` (ConfigError otherwise: use ekf,
-    iekf, ukf or srukf); a measurement model is assumed affine. The result equals FilterPy's
+    up to rounding). The rule for what it accepts: the process model and every measurement model must
+    declare ``linear = True`` (f and h affine in x); wiring refuses any other with a ConfigError naming the
+    config's ``filter:`` line (use ekf, iekf, ukf or srukf), and ``predict`` refuses a non-linear process
+    model given directly. The result equals FilterPy's
     ``KalmanFilter`` (tests/filters/test_filterpy_reference.py).
     """
 
     name = "kf"
+    linear_only = True
 
     class Params(Params):
         """The KF has no parameters."""

@@ -33,14 +33,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fusion.api import Belief, ConfigError, ProcessModel
+from fusion.api import Belief, ConfigError, InputRunNoise, IntegratesInputRuns, ProcessModel, has
 
 from .base import KalmanBase, covariance_of
 from .jacobian import process_jacobian
 from .linalg import cho_solve_lower, cholupdate, psd_sqrt_rows, qr_lower, recover_factor, robust_cholesky, \
     solve_lower, symmetrise
 from .srukf import SquareRootUnscentedKalmanFilter
-from .ukf import SigmaPointFilter
+from .sigma_point_filter import SigmaPointFilter
 
 __all__ = ["Step", "RtsBackend", "backend_for", "rts_step", "rts_step_sqrt"]
 
@@ -162,8 +162,8 @@ class RtsBackend:
         us = np.asarray(us, dtype=float)
         dts = np.asarray(dts, dtype=float)
         b1 = flt.predict_inputs(b0, process, us, dts)
-        f_inputs = getattr(process, "f_inputs", None)
-        Q_inputs = getattr(process, "Q_inputs", None)
+        f_inputs = process.f_inputs if has(process, IntegratesInputRuns) else None
+        Q_inputs = process.Q_inputs if has(process, InputRunNoise) else None
 
         def propagate(X):
             if f_inputs is not None:

@@ -9,11 +9,10 @@ from pydantic import Field
 
 from fusion.api import Belief, Gate, MeasurementModel, ProcessModel, UpdateResult
 
-from .base import as_covariance, as_vector, residual_of
-from .jacobian import process_jacobian
+from .base import as_covariance, as_vector, linearised_predict
 from .linalg import cholupdate, psd_sqrt_rows, qr_lower, qr_lower_scaled, recover_factor, solve_lower
+from .sigma_point_filter import SigmaPointFilter, measurement_transform
 from .sigma_points import SigmaPoints, UnscentedParams
-from .ukf import SigmaPointFilter
 
 
 class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
@@ -72,9 +71,9 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
     A negative beta - alpha^2 falls back on the cholupdate downdate.
 
     The rank-1 cholupdate is vectorised (linalg.cholupdate). A failed downdate (loss of positive
-    definiteness) is detected, counted in ``counters['not_positive_definite']``, reported in ``events``
-    and recovered by re-factorising the symmetrised covariance with its eigenvalues clipped: never NaN.
-    Row square roots of Q and R are cached per array object (models are immutable, DESIGN.md).
+    definiteness) is detected, recovered by re-factorising the symmetrised covariance with its eigenvalues
+    clipped (never NaN) and reported as a ``not_positive_definite`` event on the result (the predicted
+    belief's ``events``, the update's ``UpdateResult.events``). The filter keeps no state or cache.
     """
 
     name = "srukf"
@@ -92,47 +91,31 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
 
     def __init__(self, params=None, context=None):
         super().__init__(params, context)
-        self._sqrt_cache: dict[str, tuple[object, np.ndarray]] = {}
-        self._scaled: tuple[np.ndarray, float, np.ndarray] | None = None
         self._recentred = self.params.zeroth_point == "recentred"
         self._cov_update = self.params.covariance_update
 
     # ------------------------------------------------------------------ helpers
     def initial_belief(self, t: float, x: np.ndarray, P: np.ndarray) -> Belief:
         b = super().initial_belief(t, x, P)
-        return Belief(b.t, b.x, S=self.factor(b.P, t, "initial covariance"))
+        L, _, event = self.factor(b.P, t, "initial covariance")
+        return Belief(b.t, b.x, S=L, events=(event,) if event is not None else ())
 
-    def sqrt_of(self, belief: Belief) -> np.ndarray:
-        """S of a belief (the Cholesky factor of P for a covariance belief)."""
+    def sqrt_of(self, belief: Belief, events: list) -> np.ndarray:
+        """S of a belief (the Cholesky factor of P for a covariance belief; a repair goes to ``events``)."""
         if belief.S is not None:
             return belief.S
-        return self.factor(belief.P, belief.t, "srukf")
+        L, _, event = self.factor(belief.P, belief.t, "srukf")
+        if event is not None:
+            events.append(event)
+        return L
 
-    def noise_rows(self, key: str, C) -> np.ndarray:
-        """Row square root B (B^T B = C) of a noise covariance, cached for the same array object."""
-        hit = self._sqrt_cache.get(key)
-        if hit is not None and hit[0] is C:
-            return hit[1]
-        B = psd_sqrt_rows(C)
-        self._sqrt_cache[key] = (C, B)  # holds C, so its id cannot be reused while cached
-        return B
-
-    def scaled_rows(self, B: np.ndarray, c: float) -> np.ndarray:
-        """``B / c`` (a noise row square root over the sigma-point weight's square root), cached for the
-        last (B, c)."""
-        hit = self._scaled
-        if hit is not None and hit[0] is B and hit[1] == c:
-            return hit[2]
-        Bc = B / c
-        self._scaled = (B, c, Bc)
-        return Bc
-
-    def rank1(self, L: np.ndarray, v: np.ndarray, weight: float, t: float, where: str) -> np.ndarray:
-        """cholupdate{L, v, weight} with recovery of a failed downdate."""
+    def rank1(self, L: np.ndarray, v: np.ndarray, weight: float, t: float, where: str, events: list) -> np.ndarray:
+        """cholupdate{L, v, weight} with recovery of a failed downdate (its event appended to ``events``)."""
         L1, ok = cholupdate(L, v, weight)
         if ok:
             return L1
-        self.report(t, "not_positive_definite", f"{where}: cholupdate with weight {weight:.3g} failed, repaired")
+        events.append(self.event(t, "not_positive_definite",
+                                 f"{where}: cholupdate with weight {weight:.3g} failed, repaired"))
         return recover_factor(L @ L.T + weight * np.outer(v, v))
 
     def deviations(self, sp: SigmaPoints, Y: np.ndarray, diff):
@@ -150,7 +133,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         return Y0 + v0, D1, v0, sp.gamma
 
     def sqrt_transform(self, sp: SigmaPoints, D1: np.ndarray, B: np.ndarray, v0: np.ndarray, w0: float,
-                       t: float, where: str) -> np.ndarray:
+                       t: float, where: str, events: list) -> np.ndarray:
         """S with S S^T = W sum D1_i D1_i^T + B^T B + w0 v0 v0^T: one QR (eqs. 6, 10) and, for a
         negative w0, one rank-1 downdate (eqs. 7, 11); a positive w0 joins the QR as a row."""
         if w0 > 0.0:
@@ -158,55 +141,53 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
             return qr_lower(np.concatenate((sp.sqrt_w * D1.T, B.T, math.sqrt(w0) * v0[:, None]), axis=1).T,
                             overwrite=True)
         S = qr_lower(np.concatenate((sp.sqrt_w * D1.T, B.T), axis=1).T, overwrite=True)
-        return self.rank1(S, v0, w0, t, where) if w0 < 0.0 else S
+        return self.rank1(S, v0, w0, t, where, events) if w0 < 0.0 else S
 
     # ------------------------------------------------------------------ predict
     def predict(self, belief: Belief, process: ProcessModel, u: np.ndarray | None, dt: float) -> Belief:
-        self.process = process
         if dt == 0.0:
             return belief
-        x = belief.x
-        Q = process.Q(x, u, dt)
-        self.counters["predicts"] += 1
         if self.use_linear_prediction(process):
-            S = self.sqrt_of(belief)
-            BQ = self.noise_rows("Q", Q)
-            F = process_jacobian(process, x, u, dt)
+            events: list = []
+            S = self.sqrt_of(belief, events)
+            x1, F, Q = linearised_predict(belief, process, u, dt)
+            BQ = psd_sqrt_rows(Q)
             S1 = qr_lower(np.concatenate((F @ S, BQ.T), axis=1).T, overwrite=True)   # sqrt(F P F^T + Q)
-            return Belief(belief.t + dt, process.normalize(process.f(x, u, dt)), S=S1)
+            return Belief(belief.t + dt, x1, S=S1, events=tuple(events))
+        Q = process.Q(belief.x, u, dt)
         return self.sigma_predict(belief, process, lambda X: process.f(X, u, dt), lambda x0, x1: Q, dt)
 
     def sigma_predict(self, belief: Belief, process: ProcessModel, propagate, noise, dt: float) -> Belief:
         x = belief.x
-        S = self.sqrt_of(belief)
+        events: list = []
+        S = self.sqrt_of(belief, events)
         sp = self.sigma_points(x.shape[0])
         Y = propagate(x + sp.E @ S.T)                               # eqs. 3-4, one call
         xm, D1, v0, w0 = self.deviations(sp, Y, np.subtract)        # eq. 5
         xm = process.normalize(xm)
-        BQ = self.noise_rows("Q", noise(x, xm))
-        S1 = self.sqrt_transform(sp, D1, BQ, v0, w0, belief.t, "srukf predict")  # eqs. 6-7
-        return Belief(belief.t + dt, xm, S=S1)
+        BQ = psd_sqrt_rows(noise(x, xm))
+        S1 = self.sqrt_transform(sp, D1, BQ, v0, w0, belief.t, "srukf predict", events)  # eqs. 6-7
+        return Belief(belief.t + dt, xm, S=S1, events=tuple(events))
 
     # ------------------------------------------------------------------ update
-    def _whiten(self, belief, Sy: np.ndarray, y: np.ndarray, gate, m: int):
+    def _whiten(self, belief, Sy: np.ndarray, y: np.ndarray, gate, m: int, events: list):
         """w = S_y^-1 y, the NIS w.w, S = S_y S_y^T and the gate's verdict (None to go on, else the
         rejected result)."""
         w = solve_lower(Sy, y)
         nis, Syy = float(w.dot(w)), Sy @ Sy.T
-        return w, nis, Syy, self.rejected(belief, y, Syy, nis, gate, m)
+        return w, nis, Syy, self.rejected(belief, y, Syy, nis, gate, m, tuple(events), 0)
 
     def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                gate: Gate | None = None) -> UpdateResult:
         x = belief.x
-        S = belief.S if belief.S is not None else self.sqrt_of(belief)
+        events: list = []
+        S = belief.S if belief.S is not None else self.sqrt_of(belief, events)
         z = as_vector(z)
         m = z.shape[0]
         n = x.shape[0]
-        BR = self.noise_rows("R", R if getattr(R, "shape", None) == (m, m) else as_covariance(R, m))
+        BR = psd_sqrt_rows(as_covariance(R, m))
         sp = self.sigma_points(n)
-        dX = sp.E @ S.T
-        Z = model.h(x + dX)                                          # eq. 8, one call
-        diff = residual_of(model)
+        dX, Z, diff = measurement_transform(sp, x, S, model)         # eq. 8, one call
         if self._recentred:                                          # eq. 9 (deviations(), inline)
             Z0 = Z[0]
             D1 = diff(Z[1:], Z0)
@@ -227,33 +208,32 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
             A = np.zeros((k + m + (w0 > 0.0), m + n), order="F")
             A[:k, :m] = D1
             A[:k, m:] = dX1
-            A[k:k + m, :m] = self.scaled_rows(BR, c)
+            A[k:k + m, :m] = BR / c
             if w0 > 0.0:
                 A[-1, :m] = V[1] if V is not None else v0 * (math.sqrt(w0) / c)
             L = qr_lower_scaled(A, c)                                # eqs. 10, 12-13, 15-16 at once
             if w0 < 0.0:
-                L = self.rank1(L, np.concatenate((v0, np.zeros(n))), w0, belief.t, "srukf update")  # eq. 11
+                L = self.rank1(L, np.concatenate((v0, np.zeros(n))), w0, belief.t, "srukf update", events)  # eq. 11
             Sy = L[:m, :m]
-            w, nis, Syy, out = self._whiten(belief, Sy, y, gate, m)
+            w, nis, Syy, out = self._whiten(belief, Sy, y, gate, m, events)
             if out is not None:
                 return out
             x1 = x + L[m:, :m] @ w                                   # eq. 14: K y = (P_xz S_y^-T) S_y^-1 y
             S1 = L[m:, m:]
         else:
-            Sy = self.sqrt_transform(sp, D1, BR, v0, w0, belief.t, "srukf innovation")  # eqs. 10-11
+            Sy = self.sqrt_transform(sp, D1, BR, v0, w0, belief.t, "srukf innovation", events)  # eqs. 10-11
             Pxz = (sp.w * dX1.T) @ D1                                # eq. 12 (chi_0 - x^- = 0)
-            w, nis, Syy, out = self._whiten(belief, Sy, y, gate, m)
+            w, nis, Syy, out = self._whiten(belief, Sy, y, gate, m, events)
             if out is not None:
                 return out
             W = solve_lower(Sy, Pxz.T)                               # S_y^-1 P_xz^T
             x1 = x + w @ W                                           # eq. 14: K y = W^T S_y^-1 y
             Kt = solve_lower(Sy, W, trans=1)                         # eq. 13: K^T = S_y^-T S_y^-1 P_xz^T
             if mode == "qr":
-                S1 = self.sqrt_transform(sp, dX1 - D1 @ Kt, BR @ Kt, v0 @ Kt, w0, belief.t, "srukf update")
+                S1 = self.sqrt_transform(sp, dX1 - D1 @ Kt, BR @ Kt, v0 @ Kt, w0, belief.t, "srukf update", events)
             else:
                 U = Kt.T @ Sy                                        # eq. 15
                 S1 = S
                 for j in range(m):                                   # eq. 16: m downdates (columns, not points)
-                    S1 = self.rank1(S1, U[:, j], -1.0, belief.t, "srukf update")
-        self.counters["updates"] += 1
-        return UpdateResult(Belief(belief.t, self.normalize(x1), S=S1), y, Syy, nis, True)
+                    S1 = self.rank1(S1, U[:, j], -1.0, belief.t, "srukf update", events)
+        return UpdateResult(Belief(belief.t, self.normalizer(model)(x1), S=S1), y, Syy, nis, True, tuple(events), 0)

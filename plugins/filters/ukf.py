@@ -3,93 +3,19 @@ from __future__ import annotations
 
 import numpy as np
 from pydantic import Field
-
-from fusion.api import Belief, Gate, MeasurementModel, ProcessModel, UpdateResult
-
 from scipy.linalg import blas
 
-from .base import (KalmanBase, as_covariance, as_vector, covariance_of, linear_predict,
-                   residual_of)
-from .jacobian import process_jacobian
+from fusion.api import (Belief, Gate, MeasurementModel, NonAdditiveMeasurementNoise, NonAdditiveProcessNoise,
+                        ProcessModel, UpdateResult, has)
+
+from .base import as_covariance, as_vector, covariance_of, linear_predict, linearised_predict, residual_of
 from .linalg import psd_sqrt_rows, symmetrise
+from .sigma_point_filter import SigmaPointFilter, measurement_transform
+from .sigma_points import UnscentedParams
+
+__all__ = ["UnscentedKalmanFilter", "SigmaPointFilter"]   # SigmaPointFilter: import shim, now in sigma_point_filter.py
 
 _dtrsm = blas.dtrsm
-from .sigma_points import SigmaPoints, UnscentedParams
-
-
-class SigmaPointFilter(KalmanBase):
-    """Base of ukf and srukf: the cached sigma-point weights and the choice of prediction."""
-
-    def __init__(self, params=None, context=None):
-        super().__init__(params, context)
-        self._sp: dict[int, SigmaPoints] = {}
-        # read once: a missing pydantic attribute costs ~5 us through its AttributeError
-        self._mode = self.params.linear_prediction
-        self._augmented = bool(getattr(self.params, "augmented", False))
-        self._batch_inputs = bool(self.params.batch_inputs)
-        if self.context.layout is not None:   # wired for a state: bad alpha/beta/kappa are a config error
-            self.sigma_points(self.context.layout.n)
-
-    def sigma_points(self, n: int) -> SigmaPoints:
-        """Weights and deviation pattern for dimension n (cached)."""
-        sp = self._sp.get(n)
-        if sp is None:
-            p = self.params
-            sp = self._sp[n] = SigmaPoints(n, p.alpha, p.beta, p.kappa)
-        return sp
-
-    def use_linear_prediction(self, process: ProcessModel) -> bool:
-        mode = self._mode
-        return mode == "always" or (mode == "auto" and process.linear and not self._augmented)
-
-    def predict_inputs(self, belief: Belief, process: ProcessModel, us: np.ndarray, dts: np.ndarray) -> Belief:
-        r"""Integrate a run of k input samples (IMU) between two measurements in one sigma-point step.
-
-        ``us`` (k, m), sample j held over ``dts[j]`` (s), T = sum dts. The sigma points are drawn once,
-        from the belief at the start of the run, and carried through all k samples (``process.f_inputs``
-        when the model has it, one vectorised call for the whole run, else k calls of ``f`` on all points);
-        the mean and covariance (or its square root) are formed once at the end, with the process noise
-        of the whole interval added once::
-
-            chi = [x, x +- eta S_i];  Y_i = f(... f(f(chi_i, u_1, dt_1), u_2, dt_2) ..., u_k, dt_k)
-            x^- = sum W_m^i Y_i;      P^- = sum W_c^i (Y_i - x^-)(Y_i - x^-)^T + Q_T
-
-        Q_T is ``process.Q_inputs(x, x^-, us, dts)`` when the model has it (ins: the noise of the interval
-        propagated through the error dynamics), else ``process.Q(x^-, mean u, T)`` (exact for a linear
-        time-invariant model such as pv). The same as k predictions sample by sample when f is linear
-        and Q_T is the propagated sum; for the INS it differs from them by the sigma points not being
-        redrawn after each sample (tests/filters/test_predict_inputs.py states the tolerances).
-        ``batch_inputs: false``, a single sample, the linear prediction and the augmented UKF predict
-        sample by sample."""
-        k = len(dts)
-        if k == 1 or not self._batch_inputs or self._augmented or self.use_linear_prediction(process):
-            return super().predict_inputs(belief, process, us, dts)
-        us = np.asarray(us, dtype=float)
-        dts = np.asarray(dts, dtype=float)
-        self.process = process
-        self.counters["predicts"] += k
-        self.counters["batched_predicts"] += 1
-        f_inputs = getattr(process, "f_inputs", None)
-        Q_inputs = getattr(process, "Q_inputs", None)
-
-        def propagate(X: np.ndarray) -> np.ndarray:
-            if f_inputs is not None:
-                return f_inputs(X, us, dts)
-            for u, dt in zip(us, dts):
-                X = process.f(X, u, float(dt))
-            return X
-
-        def noise(x0: np.ndarray, x1: np.ndarray) -> np.ndarray:
-            if Q_inputs is not None:
-                return Q_inputs(x0, x1, us, dts)
-            return process.Q(x1, us.mean(axis=0), float(dts.sum()))
-
-        return self.sigma_predict(belief, process, propagate, noise, float(dts.sum()))
-
-    def sigma_predict(self, belief: Belief, process: ProcessModel, propagate, noise, dt: float) -> Belief:
-        """The sigma-point prediction over ``dt``: ``propagate(X)`` maps the (2n+1, n) points, ``noise(x,
-        x1)`` gives the process noise from the prior mean x and the (normalised) predicted mean x1."""
-        raise NotImplementedError
 
 
 class UnscentedKalmanFilter(SigmaPointFilter):
@@ -138,45 +64,44 @@ class UnscentedKalmanFilter(SigmaPointFilter):
 
     # ------------------------------------------------------------------ predict
     def predict(self, belief: Belief, process: ProcessModel, u: np.ndarray | None, dt: float) -> Belief:
-        self.process = process
         if dt == 0.0:
             return belief
-        x = belief.x
-        P = covariance_of(belief)
-        Q = process.Q(x, u, dt)
-        self.counters["predicts"] += 1
         if self.use_linear_prediction(process):
-            F = process_jacobian(process, x, u, dt)
-            return Belief(belief.t + dt, process.normalize(process.f(x, u, dt)), P=linear_predict(x, P, F, Q))
+            x1, F, Q = linearised_predict(belief, process, u, dt)
+            return Belief(belief.t + dt, x1, P=linear_predict(belief.x, covariance_of(belief), F, Q))
+        Q = process.Q(belief.x, u, dt)
         if self._augmented:
-            return self._predict_augmented(belief, process, u, dt, P, Q)
+            return self._predict_augmented(belief, process, u, dt, covariance_of(belief), Q)
         return self.sigma_predict(belief, process, lambda X: process.f(X, u, dt), lambda x0, x1: Q, dt)
 
     def sigma_predict(self, belief: Belief, process: ProcessModel, propagate, noise, dt: float) -> Belief:
         x = belief.x
         sp = self.sigma_points(x.shape[0])
-        S = self.factor(covariance_of(belief), belief.t, "ukf predict")
-        Y = propagate(x + sp.E @ S.T)                        # 000 eq. 4, one call
+        L, _, event = self.factor(covariance_of(belief), belief.t, "ukf predict")   # L L^T = P
+        Y = propagate(x + sp.E @ L.T)                        # 000 eq. 4, one call
         xm = sp.Wm @ Y                                       # 000 eq. 5
         D = Y - xm
         xm = process.normalize(xm)
         P1 = (D.T * sp.Wc) @ D + noise(x, xm)
-        return Belief(belief.t + dt, xm, P=symmetrise(P1))
+        return Belief(belief.t + dt, xm, P=symmetrise(P1), events=(event,) if event is not None else ())
 
     def _predict_augmented(self, belief, process, u, dt, P, Q) -> Belief:
         n = belief.x.shape[0]
         sp = self.sigma_points(2 * n)
-        Sa = np.zeros((2 * n, 2 * n))
-        Sa[:n, :n] = self.factor(P, belief.t, "ukf predict")
-        Sa[n:, n:] = psd_sqrt_rows(Q).T
-        dX = sp.E @ Sa.T
+        La = np.zeros((2 * n, 2 * n))
+        La[:n, :n], _, event = self.factor(P, belief.t, "ukf predict")
+        La[n:, n:] = psd_sqrt_rows(Q).T
+        dX = sp.E @ La.T
         X = belief.x + dX[:, :n]
         W = dX[:, n:]
-        fn = getattr(process, "f_with_noise", None)
-        Y = fn(X, W, u, dt) if fn is not None else process.f(X, u, dt) + W
+        if has(process, NonAdditiveProcessNoise):
+            Y = process.f_with_noise(X, W, u, dt)
+        else:
+            Y = process.f(X, u, dt) + W
         xm = sp.Wm @ Y
         D = Y - xm
-        return Belief(belief.t + dt, process.normalize(xm), P=symmetrise((D.T * sp.Wc) @ D))
+        return Belief(belief.t + dt, process.normalize(xm), P=symmetrise((D.T * sp.Wc) @ D),
+                      events=(event,) if event is not None else ())
 
     # ------------------------------------------------------------------ update
     def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
@@ -187,33 +112,33 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         m = z.shape[0]
         R = as_covariance(R, m)
         n = x.shape[0]
-        S = self.factor(P, belief.t, "ukf update")
-        if self.repaired is not None:
-            P = self.repaired
+        L, P, event = self.factor(P, belief.t, "ukf update")      # L L^T = P (repaired if need be)
+        events = (event,) if event is not None else ()
         if self._augmented:
             sp = self.sigma_points(n + m)
-            Sa = np.zeros((n + m, n + m))
-            Sa[:n, :n] = S
-            Sa[n:, n:] = psd_sqrt_rows(R).T
-            dXa = sp.E @ Sa.T
+            La = np.zeros((n + m, n + m))
+            La[:n, :n] = L
+            La[n:, n:] = psd_sqrt_rows(R).T
+            dXa = sp.E @ La.T
             dX = dXa[:, :n]
-            fn = getattr(model, "h_with_noise", None)
-            Z = fn(x + dX, dXa[:, n:]) if fn is not None else model.h(x + dX) + dXa[:, n:]
+            if has(model, NonAdditiveMeasurementNoise):
+                Z = model.h_with_noise(x + dX, dXa[:, n:])
+            else:
+                Z = model.h(x + dX) + dXa[:, n:]
             R = None
+            diff = residual_of(model)
         else:
             sp = self.sigma_points(n)
-            dX = sp.E @ S.T
-            Z = model.h(x + dX)                                # 001 eq. 14, one call
+            dX, Z, diff = measurement_transform(sp, x, L, model)   # 001 eq. 14, one call
         zm = sp.Wm @ Z
-        diff = residual_of(model)
         dZ = diff(Z, zm)
         A = dZ * sp.Wc_col
-        Pzz = dZ.T @ A                                         # 001 eq. 16
+        S = dZ.T @ A                                           # 001 eq. 16
         if R is not None:
-            Pzz += R                                           # 001 eq. 17
-        Ly = self.factor(Pzz, belief.t, "ukf innovation covariance")
-        if self.repaired is not None:
-            Pzz = self.repaired
+            S += R                                             # 001 eq. 17
+        Ly, S, event = self.factor(S, belief.t, "ukf innovation covariance")
+        if event is not None:
+            events += (event,)
         # [P_xz; y^T] (n + 1, m) in one buffer, so that one triangular solve gives both
         # W = L_y^-1 P_xz^T and w = L_y^-1 y (its transpose is Fortran-ordered: no copy for BLAS)
         B = np.empty((n + 1, m))
@@ -223,12 +148,11 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         W = V[:, :n]
         w = V[:, n]
         nis = float(w.dot(w))
-        out = self.rejected(belief, y, Pzz, nis, gate, m)
+        out = self.rejected(belief, y, S, nis, gate, m, events, 0)
         if out is not None:
             return out
         x1 = x + w @ W                                         # 001 eqs. 18-19
         P1 = P - W.T @ W                                       # 001 eq. 20
         # W.T @ W is computed by BLAS syrk (numpy detects a.T @ a), exactly symmetric, so P1 is exactly
         # symmetric when P is (tests/filters/test_filters_exactness.py checks it bit for bit)
-        self.counters["updates"] += 1
-        return UpdateResult(Belief(belief.t, self.normalize(x1), P=P1), y, Pzz, nis, True)
+        return UpdateResult(Belief(belief.t, self.normalizer(model)(x1), P=P1), y, S, nis, True, events, 0)

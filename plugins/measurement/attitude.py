@@ -44,6 +44,7 @@ class Attitude(MeasurementModel):
     """
 
     name: ClassVar[str] = "attitude"
+    carries_R = True    # a 10-value fix carries its covariance
     Params: ClassVar[type[Params]] = AttitudeParams
     dim: int = 3
 

@@ -70,6 +70,7 @@ class Direction(MeasurementModel):
     """
 
     name = "direction"
+    carries_R = True    # R from its own arrival/direction sd params
 
     class Params(Params):
         receivers: Literal["truncated_icosahedron"] | list[tuple[float, float, float]] = Field(

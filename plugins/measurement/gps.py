@@ -45,6 +45,7 @@ class Gps(MeasurementModel):
     """
 
     name: ClassVar[str] = "gps"
+    carries_R = True    # R from the fix's HDOP/VDOP (R_of)
     Params: ClassVar[type[Params]] = GpsParams
 
     def __init__(self, params: GpsParams | None = None, context: BuildContext | None = None,

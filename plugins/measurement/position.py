@@ -8,7 +8,7 @@ import numpy as np
 from pydantic import Field
 
 from fusion import quaternion as quat
-from fusion.api import (MAX_MAGNITUDE, BuildContext, ConfigError, MalformedMessage, MeasurementModel, Message,
+from fusion.api import (MAX_MAGNITUDE, BuildContext, ConfigError, Fix, MalformedMessage, MeasurementModel, Message,
                         Observation, Params)
 
 
@@ -36,7 +36,7 @@ class PositionParams(Params):
                                      "(False: always the sensor's configured noise)")
 
 
-class Position(MeasurementModel):
+class Position(MeasurementModel[PositionParams]):
     """Position fix ``z = p + C_b^n(q) r`` (paper 000 eq. 53), z (m, navigation frame, NED).
 
     Works on any layout with a ``p`` block (2-D or 3-D); ``dim`` is the size of ``p`` (or the ``dim``
@@ -56,7 +56,7 @@ class Position(MeasurementModel):
 
     def __init__(self, params: PositionParams | None = None, context: BuildContext | None = None):
         super().__init__(params, context)
-        p: PositionParams = self.params  # type: ignore[assignment]
+        p = self.params
         layout = self.context.layout
         if layout is None or "p" not in layout:
             blocks = [b.name for b in layout.blocks] if layout is not None else []
@@ -77,11 +77,12 @@ class Position(MeasurementModel):
             if qblocks:
                 self._q = layout["q" if "q" in qblocks else qblocks[0]]
                 # R(q) r = outer(q, q).ravel() @ _Kr: the rotated lever arm in one product (times |q|^2)
-                self._Kr = quat._K.reshape(16, 3, 3) @ self.lever_arm
+                self._Kr = quat.rotation_form(self.lever_arm)
             else:
                 self.note = ("lever_arm ignored: the state has no attitude (quaternion block), so the fix is "
                              "taken as the position p itself")
                 warnings.warn(f"position: {self.note}", stacklevel=2)
+        self.linear = self._q is None   # z = p (the first dim elements): affine; with a lever arm, not
 
     def h(self, x: np.ndarray) -> np.ndarray:
         """Predicted fix (..., dim) (m) for states x (..., n): eq. 53."""
@@ -91,7 +92,7 @@ class Position(MeasurementModel):
             return z.copy()
         q = x[..., self._q]
         qq = (q[..., :, None] * q[..., None, :]).reshape(q.shape[:-1] + (16,))
-        arm = (qq @ self._Kr) / qq[..., quat._DIAG16].sum(axis=-1, keepdims=True)   # C_b^n r
+        arm = (qq @ self._Kr) / qq[..., quat.NORM_TERMS].sum(axis=-1, keepdims=True)   # C_b^n r
         return z + arm[..., :self.dim]
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
@@ -111,11 +112,14 @@ class Position(MeasurementModel):
             return z.copy()
         return z - quat.rotate(np.asarray(x, dtype=float)[self._q], self.lever_arm)[:self.dim]
 
-    def observe(self, message: Message) -> Observation | None:
-        """Observation of a fix message: ``dim`` (or 3) coordinates, or 9 values with the covariance, or 10:
-        the covariance and the fix's age (s: the position is of that long before the message time).
+    def observe(self, message: Message | Fix) -> Observation | None:
+        """Observation of a solver's typed :class:`fusion.api.Fix` (position, covariance, age), or of a fix
+        message of a recording: ``dim`` (or 3) coordinates, or 9 values with the covariance, or 10: the
+        covariance and the fix's age (s: the position is of that long before the message time).
         MalformedMessage, with the reason, for another count, a value that is no finite number, a negative
         age or a covariance that is not positive definite."""
+        if isinstance(message, Fix):
+            return self._observe_fix(message)
         z = message.floats()
         if z.ndim != 1:   # sequences where numbers belong (a message from another source)
             raise MalformedMessage(f"position expects numbers, got {message.values!r}")
@@ -135,19 +139,39 @@ class Position(MeasurementModel):
                 model = AgedPosition(self, float(z[9]))
             z = z[:9]
         if z.size == 9:
-            cov = z[_SYM3]                      # the upper triangle x y z cxx cxy cxz cyy cyz czz, mirrored
-            if self.params.use_fix_covariance:  # type: ignore[attr-defined]
-                R = cov[:self.dim, :self.dim]
-                try:                            # a covariance a filter cannot factor: no use as R
-                    np.linalg.cholesky(R)
-                except np.linalg.LinAlgError:
-                    raise MalformedMessage(f"position: the fix's covariance {R.tolist()} (m^2) is not positive "
-                                           "definite") from None
+            R = self._fix_R(z[_SYM3])           # the upper triangle x y z cxx cxy cxz cyy cyz czz, mirrored
             z = z[:3]
         elif z.size not in (self.dim, 3) or z.size < self.dim:
             raise MalformedMessage(f"position expects {self.dim} coordinates (or 9 values: x y z and the "
                                    f"covariance upper triangle), got {z.size}")
         return Observation(message.t, z[:self.dim], model, R)
+
+    def _fix_R(self, cov: np.ndarray) -> np.ndarray | None:
+        """R from a fix's covariance (3, 3) (its leading dim x dim block), or None with
+        ``use_fix_covariance: false``; MalformedMessage when a filter could not factor it."""
+        if not self.params.use_fix_covariance:
+            return None
+        R = cov[:self.dim, :self.dim]
+        try:
+            np.linalg.cholesky(R)
+        except np.linalg.LinAlgError:
+            raise MalformedMessage(f"position: the fix's covariance {R.tolist()} (m^2) is not positive "
+                                   "definite") from None
+        return R
+
+    def _observe_fix(self, fix: Fix) -> Observation:
+        z = np.asarray(fix.value, dtype=float)
+        if z.ndim != 1 or z.size < self.dim or not np.all(np.isfinite(z)) or np.any(np.abs(z) > MAX_MAGNITUDE):
+            raise MalformedMessage(f"position: a fix needs {self.dim} finite coordinates, got {fix.value!r}")
+        if fix.age < 0.0:
+            raise MalformedMessage(f"position: negative fix age {fix.age}")
+        model: MeasurementModel = self
+        if fix.age > 0.0:
+            if self._v is None:
+                raise MalformedMessage("position: a fix with an age needs a state with a velocity block 'v'")
+            model = AgedPosition(self, float(fix.age))
+        R = self._fix_R(np.asarray(fix.cov, dtype=float)) if fix.cov is not None else None
+        return Observation(fix.t, z[:self.dim], model, R)
 
 
 class AgedPosition(MeasurementModel):

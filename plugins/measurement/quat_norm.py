@@ -28,6 +28,7 @@ class QuatNorm(MeasurementModel):
     """
 
     name: ClassVar[str] = "quat_norm"
+    carries_R = True    # R = sd^2 of its own params
     Params: ClassVar[type[Params]] = QuatNormParams
     dim: int = 1
     rule: str = "after_predict"

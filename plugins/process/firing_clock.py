@@ -24,7 +24,6 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field, field_validator
 
-from fusion import quaternion as quat
 from fusion.api import Block, Params, ProcessModel, StateLayout
 
 from .static_orientation import attitude_noise
@@ -98,9 +97,4 @@ class FiringClock(ProcessModel):
             Q[5:, 5:] = attitude_noise(np.asarray(x, float)[5:9], n * self._qa, n * self.params.norm_sd ** 2)
         return Q
 
-    def normalize(self, x: np.ndarray) -> np.ndarray:
-        if not self.attitude:
-            return x
-        out = np.array(x, dtype=float, copy=True)
-        out[..., 5:9] = quat.normalize(out[..., 5:9])
-        return out
+    # normalize: ProcessModel's (the layout's unit quaternion block q, when there is one)

@@ -1,95 +1,19 @@
 """Process ``ins``: IMU-driven 16-state strapdown INS (paper 000, sec. V-A, eqs. 33-52)."""
 from __future__ import annotations
 
-import math
-from typing import ClassVar, Literal
+from typing import ClassVar
 
 import numpy as np
-from pydantic import Field, model_validator
 
 from fusion import quaternion as quat
-from fusion.api import BuildContext, MalformedMessage, Message, Params, ProcessModel, RejectedMessage, StateLayout
+from fusion.api import BuildContext, MalformedMessage, Message, Params, ProcessModel, RejectedMessage, StateLayout  # noqa: F401
 
-from .ins_batch import K10T as _K10T, T16T as _T16T, add_hold_noise, integrate_inputs, interval_noise
+from .ins_batch import K10T as _K10T, T16T as _T16T, integrate_inputs
+from .ins_noise import InsNoise
+from .ins_params import (ADIS16364_ACCEL_BIAS_RW, ADIS16364_ACCEL_ND, ADIS16364_GYRO_BIAS_RW, ADIS16364_GYRO_ND,  # noqa: F401
+                         EARTH_RATE, STANDARD_GRAVITY, Density, InsParams, density_variance, somigliana_gravity)
 
-STANDARD_GRAVITY = 9.80665          # m/s^2
-EARTH_RATE = 7.292115e-5            # rad/s (WGS84)
-
-# ADIS16364 data sheet (Analog Devices, Rev. B): angular random walk 2.0 deg/sqrt(h), velocity random walk
-# 0.12 m/s/sqrt(h), in-run bias stability 25 deg/h and 0.1 mg. The bias random-walk densities are those
-# stabilities spread over ~100 s (stability / sqrt(100 s)), a common engineering reading of the sheet.
-ADIS16364_GYRO_ND = 2.0 * np.pi / 180.0 / 60.0            # rad/s/sqrt(Hz)  (= 5.82e-4)
-ADIS16364_ACCEL_ND = 0.12 / 60.0                          # m/s^2/sqrt(Hz)  (= 2.0e-3)
-ADIS16364_GYRO_BIAS_RW = 25.0 * np.pi / 180.0 / 3600.0 / 10.0   # rad/s^2/sqrt(Hz) (= 1.2e-5)
-ADIS16364_ACCEL_BIAS_RW = 0.1e-3 * STANDARD_GRAVITY / 10.0      # m/s^3/sqrt(Hz)  (= 9.8e-5)
-
-Density = float | tuple[float, float, float]
-
-
-
-def somigliana_gravity(latitude_deg: float, height_m: float = 0.0) -> float:
-    """Normal gravity (m/s^2) on the WGS84 ellipsoid (Somigliana) with the free-air correction -3.086e-6 h."""
-    s2 = np.sin(np.radians(latitude_deg)) ** 2
-    g0 = 9.7803253359 * (1.0 + 0.00193185265241 * s2) / np.sqrt(1.0 - 0.00669437999013 * s2)
-    return float(g0 - 3.086e-6 * height_m)
-
-
-class InsParams(Params):
-    """YAML parameters of ``ins``. Noise densities are one value (all axes) or three (x y z, FRD).
-
-    Data-sheet conversions: ARW [deg/sqrt(h)] * pi/180 / 60 = rad/s/sqrt(Hz);
-    VRW [m/s/sqrt(h)] / 60 = m/s^2/sqrt(Hz). Defaults are ADIS16364-class figures.
-    """
-
-    gravity: float | None = Field(None, gt=0, description="local gravity g (m/s^2); default: from latitude, "
-                                  "else the system's gravity (context.extra['gravity']), else 9.80665")
-    latitude_deg: float | None = Field(None, ge=-90, le=90, description="latitude (deg) for g and Earth rate")
-    height_m: float = Field(0.0, description="ellipsoidal height (m) for g from latitude")
-    earth_rate: bool = Field(False, description="subtract the Earth rate C_n^b w_ie (eq. 38; needs latitude)")
-    eta: float = Field(0.0, ge=0, description="quaternion norm-correction gain eta (1/s) of eq. 50; eta*dt < 1")
-    integration: Literal["euler", "trapezoidal"] = Field(
-        "euler", description="euler: eqs. 40-41 as in the paper; trapezoidal: mean of C_k f and C_k+1 f, "
-        "p += v dt + a dt^2/2 (second order)")
-    accel_noise_density: Density = Field(ADIS16364_ACCEL_ND, description="white noise of f (m/s^2/sqrt(Hz))")
-    gyro_noise_density: Density = Field(ADIS16364_GYRO_ND, description="white noise of w (rad/s/sqrt(Hz))")
-    accel_bias_rw: Density = Field(ADIS16364_ACCEL_BIAS_RW, description="accel bias random walk (m/s^3/sqrt(Hz))")
-    gyro_bias_rw: Density = Field(ADIS16364_GYRO_BIAS_RW, description="gyro bias random walk (rad/s^2/sqrt(Hz))")
-    quat_norm_variance: float = Field(0.0, ge=0, description="variance added along q per step so Q is "
-                                      "positive definite (the norm direction is otherwise noise-free)")
-    max_specific_force: float | None = Field(None, gt=0, description="sensor range (m/s^2, any axis)")
-    max_rate: float | None = Field(None, gt=0, description="sensor range (rad/s, any axis)")
-    hold_after: float | None = Field(None, gt=0, description="s: a sample held longer than this (an IMU gap) "
-                                     "adds hold noise over the excess time (None: never)")
-    hold_accel_rw: float = Field(0.7, ge=0, description="m/s^3/sqrt(Hz): random walk of the true specific "
-                                 "force away from a held sample (the vehicle's manoeuvres)")
-    hold_rate_rw: float = Field(1.0, ge=0, description="rad/s^2/sqrt(Hz): the same for the angular rate")
-    align_gyro_bias: bool = Field(True, description="initial alignment also takes the mean static gyro "
-                                  "rate as the gyro bias")
-    states: Literal[10, 16, 22] = Field(16, description="state set (paper 002): 10 [p v q], 16 + biases "
-                                        "[ba bw], 22 + scale factors [sa sw] (eqs. 11-13); see ins_states.py")
-    accel_scale_rw: Density = Field(0.0, description="22 states: accelerometer scale-factor random walk "
-                                    "(1/s^0.5, eq. 13)")
-    gyro_scale_rw: Density = Field(0.0, description="22 states: gyro scale-factor random walk (1/s^0.5, eq. 13)")
-    renormalize: bool = Field(True, description="bring the mean quaternion back to unit norm after each "
-                              "step; false leaves the norm to eq. 50 (eta) or the quat_norm pseudo-observation")
-
-    @model_validator(mode="after")
-    def _earth_rate_needs_latitude(self) -> "InsParams":
-        if self.earth_rate and self.latitude_deg is None:
-            raise ValueError("earth_rate: true needs latitude_deg")
-        if self.states != 22 and (np.any(np.asarray(self.accel_scale_rw)) or np.any(np.asarray(self.gyro_scale_rw))):
-            raise ValueError("accel_scale_rw / gyro_scale_rw need states: 22 (the scale-factor states)")
-        return self
-
-
-def _var(density: Density) -> np.ndarray:
-    d = np.broadcast_to(np.asarray(density, dtype=float), (3,))
-    if np.any(d < 0):
-        raise ValueError(f"noise densities must be >= 0, got {density}")
-    return d * d
-
-
-class Ins(ProcessModel):
+class Ins(InsNoise, ProcessModel):
     """Strapdown INS driven by the IMU (paper 000 eqs. 33-52), NED navigation frame, FRD body frame.
 
     State (eq. 33), 16 elements: ``p`` position (m, NED), ``v`` velocity (m/s, NED), ``q`` attitude
@@ -154,6 +78,8 @@ class Ins(ProcessModel):
     def __init__(self, params: InsParams | None = None, context: BuildContext | None = None):
         super().__init__(params, context)
         p: InsParams = self.params  # type: ignore[assignment]
+        if not p.renormalize:   # the filters leave |q| to eta or a quat_norm pseudo-observation
+            self.layout = type(self).layout.with_unit(False)
         if p.gravity is not None:
             g = p.gravity
         elif p.latitude_deg is not None:
@@ -167,8 +93,8 @@ class Ins(ProcessModel):
             self.w_ie: np.ndarray | None = EARTH_RATE * np.array([np.cos(lat), 0.0, -np.sin(lat)])
         else:
             self.w_ie = None
-        self._var_a, self._var_w = _var(p.accel_noise_density), _var(p.gyro_noise_density)
-        self._var_ba, self._var_bw = _var(p.accel_bias_rw), _var(p.gyro_bias_rw)
+        self._var_a, self._var_w = density_variance(p.accel_noise_density), density_variance(p.gyro_noise_density)
+        self._var_ba, self._var_bw = density_variance(p.accel_bias_rw), density_variance(p.gyro_bias_rw)
         self._trap = p.integration == "trapezoidal"
         self._g_col = self.g_n[:, None]
         # Q's attitude-independent blocks per power of dt (accelerometer noise isotropic: C N^2 C^T = N^2 I)
@@ -271,15 +197,7 @@ class Ins(ProcessModel):
     def normalize(self, x: np.ndarray) -> np.ndarray:
         """Renormalise the quaternion block of states x (..., 16) to unit norm (a new array); with
         ``renormalize: false``, x itself (the norm is left to eta or the quat_norm pseudo-observation)."""
-        if not self.params.renormalize:  # type: ignore[attr-defined]
-            return x
-        x = np.array(x, dtype=float, copy=True)
-        q = x[..., 6:10]
-        if x.ndim == 1:
-            q /= math.sqrt(float(q @ q))
-        else:
-            q /= np.sqrt((q * q).sum(axis=-1, keepdims=True))
-        return x
+        return self.layout.normalize(x)   # renormalize: false -> a layout whose q block is not unit
 
     # ------------------------------------------------------------------ linearisation
     def _dq_dw(self, w: np.ndarray, dt: float) -> np.ndarray:
@@ -341,75 +259,7 @@ class Ins(ProcessModel):
                 F[rows, 13:16] += k * dfn_dbw
         return F
 
-    # ------------------------------------------------------------------ noise
-    def Q(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
-        """Discrete process noise (16, 16) over dt (s) at x (16,); see the class doc for the discretisation.
-
-        The attitude-independent blocks are cached per power of dt; with isotropic gyro noise the q block
-        is ``N_w^2 dt / 4 (|q|^2 I - q q^T)`` (= Xi N_w^2 Xi^T: the columns of [q, Xi(q)] are orthogonal)."""
-        q = np.asarray(x, dtype=float)[6:10]
-        Qm = self._Qdt[0] * dt
-        if self._Qdt[1] is not None:
-            Qm += self._Qdt[1] * (dt * dt)
-            Qm += self._Qdt[2] * (dt * dt * dt)
-        else:
-            C = quat.to_matrix(q)
-            Sa = (C * self._var_a) @ C.T
-            Qm[3:6, 3:6] = Sa * dt
-            Qm[0:3, 3:6] = Qm[3:6, 0:3] = Sa * (dt * dt / 2.0)
-            Qm[0:3, 0:3] = Sa * (dt**3 / 3.0)
-        qq = q[:, None] * q
-        if self._iso_w:
-            Qqq = (np.diag(np.full(4, q @ q)) - qq) * (self._var_w[0] * dt / 4.0)
-        else:
-            q0, q1, q2, q3 = q
-            Xi = np.array([[-q1, -q2, -q3], [q0, -q3, q2], [q3, q0, -q1], [-q2, q1, q0]])   # q (x) [0, v] = Xi v
-            Qqq = (Xi * self._var_w) @ Xi.T * (dt / 4.0)
-            Qqq = 0.5 * (Qqq + Qqq.T)
-        qnv = self.params.quat_norm_variance  # type: ignore[attr-defined]
-        if qnv:
-            Qqq += qq * (qnv / (q @ q))
-        Qm[6:10, 6:10] = Qqq
-        if self._hold is not None and dt > self._hold:
-            add_hold_noise(Qm, q, dt - self._hold, self.params.hold_accel_rw, self.params.hold_rate_rw)  # type: ignore[attr-defined]
-        return Qm
-
-    def Q_batch(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
-        """:meth:`Q` for states x (N, 16) at once, (N, 16, 16) (batched filters, fusion.batch): with isotropic
-        accelerometer and gyro noise and no hold noise, the shared blocks plus the attitude block of each
-        state in one vectorised evaluation; otherwise :meth:`Q` state by state."""
-        x = np.asarray(x, dtype=float)
-        if self._Qdt[1] is None or not self._iso_w or (self._hold is not None and dt > self._hold):
-            return np.stack([self.Q(xi, u if u is None or np.ndim(u) == 1 else u[i], dt) for i, xi in enumerate(x)])
-        base = self._Qdt[0] * dt
-        base += self._Qdt[1] * (dt * dt)
-        base += self._Qdt[2] * (dt * dt * dt)
-        q = x[:, 6:10]
-        qq = q[:, :, None] * q[:, None, :]
-        n2 = np.einsum("ki,ki->k", q, q)
-        Qqq = (n2[:, None, None] * np.eye(4) - qq) * (self._var_w[0] * dt / 4.0)
-        qnv = self.params.quat_norm_variance  # type: ignore[attr-defined]
-        if qnv:
-            Qqq += qq * (qnv / n2)[:, None, None]
-        Qm = np.repeat(base[None], x.shape[0], axis=0)
-        Qm[:, 6:10, 6:10] = Qqq
-        return Qm
-
-    def Q_inputs(self, x0: np.ndarray, x1: np.ndarray, us: np.ndarray, dts: np.ndarray) -> np.ndarray:
-        """Process noise (16, 16) of a run of samples integrated in one step (:meth:`f_inputs`), from the
-        mean before (x0) and after (x1) the run: the white noises and bias random walks of the whole
-        interval T = sum dts propagated through the linearised error dynamics (gyro noise tilts the
-        specific force into v, early accelerometer noise moves p by the end), exactly for a constant
-        specific force (``ins_batch.interval_noise``). For one sample it is :meth:`Q` plus the couplings
-        of order dt^2 and higher that :meth:`Q` leaves to the propagation of later steps."""
-        Qm = interval_noise(x0, x1, dts, self.g_n, self._var_a, self._var_w, self._var_ba, self._var_bw,
-                            self._qc_diag, self.params.quat_norm_variance)  # type: ignore[attr-defined]
-        if self._hold is not None:
-            e = float(np.maximum(np.asarray(dts) - self._hold, 0.0).sum())
-            if e > 0.0:
-                add_hold_noise(Qm, np.asarray(x1, dtype=float)[6:10], e, self.params.hold_accel_rw,  # type: ignore[attr-defined]
-                               self.params.hold_rate_rw)  # type: ignore[attr-defined]
-        return Qm
+    # noise: Q and Q_inputs in ins_noise.py (InsNoise)
 
     # ------------------------------------------------------------------ input
     def input_from(self, message: Message) -> np.ndarray:

@@ -18,11 +18,11 @@ from fusion import quaternion as quat
 __all__ = ["integrate_inputs", "interval_noise", "add_hold_noise", "K10T", "T16T"]
 
 # [R(q).ravel(), |q|^2] = outer(q, q).ravel() @ K10 (one product gives the rotation matrix and its normaliser)
-K10 = np.concatenate([quat._K, np.eye(16)[:, quat._DIAG16].sum(axis=1, keepdims=True)], axis=1)
+K10 = np.concatenate([quat.ROTATION_FORM, np.eye(16)[:, quat.NORM_TERMS].sum(axis=1, keepdims=True)], axis=1)
 # The same forms transposed, for states stored component-first ((16, N): one row per element, one column
 # per sigma point): every product below is then one BLAS gemm on whole rows instead of N tiny ones.
 K10T = np.ascontiguousarray(K10.T)          # (10, 16): [R(q) rows (9), |q|^2] = K10T @ outer(q, q)
-T16T = np.ascontiguousarray(quat._T16.T)     # (4, 16):  p (x) q = T16T @ outer(p, q)
+T16T = np.ascontiguousarray(quat.PRODUCT_FORM.T)     # (4, 16):  p (x) q = T16T @ outer(p, q)
 _ONE = np.array([1.0, 0.0, 0.0, 0.0])
 _GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(4)   # on [-1, 1]; mapped to [0, 1] below
 _GL_NODES, _GL_WEIGHTS = 0.5 * (_GL_NODES + 1.0), 0.5 * _GL_WEIGHTS

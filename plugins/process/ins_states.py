@@ -28,7 +28,7 @@ import numpy as np
 
 from fusion.api import BuildContext, Message, Params, ProcessModel, StateLayout
 
-from .ins import Ins, InsParams, _var
+from .ins import Ins, InsParams, density_variance
 
 __all__ = ["InsStates"]
 
@@ -56,11 +56,11 @@ class InsStates(ProcessModel):
         if p.states not in _LAYOUTS:
             raise ValueError(f"InsStates builds states 10 or 22, got {p.states}")
         self.states = p.states
-        self.layout = _LAYOUTS[p.states]
+        self.layout = _LAYOUTS[p.states] if p.renormalize else _LAYOUTS[p.states].with_unit(False)
         self.core = Ins(p.model_copy(update={"states": 16, "accel_scale_rw": 0.0, "gyro_scale_rw": 0.0}), context)
         self.g, self.g_n = self.core.g, self.core.g_n
         self.counters = self.core.counters
-        self._var_s = np.concatenate([_var(p.accel_scale_rw), _var(p.gyro_scale_rw)])
+        self._var_s = np.concatenate([density_variance(p.accel_scale_rw), density_variance(p.gyro_scale_rw)])
         # Fast path for one point (the EKF): the paper's Euler step without eta, Earth rate or anisotropic
         # noise, in scalar arithmetic with f, F and Q computed once per (x, u, dt) (the EKF asks for all
         # three). The same numbers as the general path to rounding (tests/models/test_ins_states.py).
@@ -107,9 +107,6 @@ class InsStates(ProcessModel):
         for u, dt in zip(us, dts):
             x = self.f(x, u, float(dt))
         return x
-
-    def normalize(self, x: np.ndarray) -> np.ndarray:
-        return self.core.normalize(x)
 
     def input_from(self, message: Message) -> np.ndarray:
         return self.core.input_from(message)

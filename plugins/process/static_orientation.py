@@ -60,5 +60,4 @@ class StaticOrientation(ProcessModel):
         n = max(dt, 0.0) / self.params.step_s
         return attitude_noise(x, n * self._var, n * self._nvar)
 
-    def normalize(self, x: np.ndarray) -> np.ndarray:
-        return quat.normalize(x)
+    # normalize: ProcessModel's (the layout's unit quaternion block q)

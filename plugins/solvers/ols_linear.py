@@ -11,7 +11,7 @@ from scipy.linalg.lapack import dpotrf as _dpotrf, dpotrs as _dpotrs, dtrtrs as 
 from fusion_plugins.solvers.range_fix import Cycle, Fit, NoFix, range_cov
 
 
-def _condition(D: np.ndarray, dim: int, degenerate_condition: float) -> float:
+def condition(D: np.ndarray, dim: int, degenerate_condition: float) -> float:
     """cond(A^T A) of eq. 28 (A = D[:, :dim], the beacons relative to the reference); raises NoFix
     ``degenerate`` above ``degenerate_condition`` (collinear beacons in 2-D, coplanar in 3-D)."""
     A = D[:, :dim]
@@ -30,7 +30,7 @@ def _condition(D: np.ndarray, dim: int, degenerate_condition: float) -> float:
     return cond
 
 
-def _solve_linear(B: np.ndarray, r: np.ndarray, dim: int, z: float, ref: int,
+def solve_linear(B: np.ndarray, r: np.ndarray, dim: int, z: float, ref: int,
                   qr_condition: float, degenerate_condition: float,
                   gain: bool = True) -> tuple[np.ndarray, np.ndarray | None, dict]:
     """OLS/QR solution of eqs. 25-32 with beacon ``ref`` as the reference point; returns the position (3,),
@@ -43,7 +43,7 @@ def _solve_linear(B: np.ndarray, r: np.ndarray, dim: int, z: float, ref: int,
     if dim == 2:
         b = b - D[:, 2] * (z - B[ref, 2])                     # known height: its term moves to b
     AtA = A.T @ A
-    cond = _condition(D, dim, degenerate_condition)
+    cond = condition(D, dim, degenerate_condition)
     M = None
     if cond <= qr_condition:                                  # eq. 32 by Cholesky of the normal equations
         c, info = _dpotrf(AtA, lower=1)                        # LAPACK directly: ~2 us, scipy's wrappers ~20
@@ -70,7 +70,7 @@ def _solve_linear(B: np.ndarray, r: np.ndarray, dim: int, z: float, ref: int,
     return pos, M @ Jb, {"method": method, "cond": cond}
 
 
-def _ols_fit(cyc: Cycle, idx: np.ndarray, dim: int, z: float, z_sd: float, sigma: float, reference: str | int,
+def ols_fit(cyc: Cycle, idx: np.ndarray, dim: int, z: float, z_sd: float, sigma: float, reference: str | int,
              qr_condition: float, degenerate_condition: float) -> Fit:
     """The paper's OLS fix (eqs. 25-32) of the ranges ``idx`` with its first-order covariance
     ``G Sigma_r G^T`` (G = d position / d ranges through the linear model; Sigma_r as in range_fix)."""
@@ -78,7 +78,7 @@ def _ols_fit(cyc: Cycle, idx: np.ndarray, dim: int, z: float, z_sd: float, sigma
     ref = int(np.argmin(r)) if reference == "nearest" else (0 if reference == "first" else
                                                             int(np.flatnonzero(idx == reference)[0])
                                                             if reference in idx else 0)
-    pos, G, info = _solve_linear(B, r, dim, z, ref, qr_condition, degenerate_condition)
+    pos, G, info = solve_linear(B, r, dim, z, ref, qr_condition, degenerate_condition)
     d = pos - B
     rho = np.sqrt(np.einsum("ij,ij->i", d, d))
     U = d / np.maximum(rho, 1e-12)[:, None]

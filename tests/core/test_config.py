@@ -14,7 +14,7 @@ process: {type: pv, dims: 2, spectral_density: 0.5}
 initial:
   mean: {p: [1, 2], v: [0, 0]}
   sd: {p: 2.0, v: 1.0}
-filter: kf
+filter: ekf
 sensors:
   uwb:
     model: range
@@ -38,7 +38,7 @@ def test_good_config_wires(tmp_path):
 
 
 @pytest.mark.parametrize("old,new,expect", [
-    ("filter: kf", "filter: ukff", r"sys.yaml:7: filter: unknown filter 'ukff'; did you mean 'ukf'\?"),
+    ("filter: ekf", "filter: ukff", r"sys.yaml:7: filter: unknown filter 'ukff'; did you mean 'ukf'\?"),
     ("model: range", "model: rnge", r"sys.yaml:10: .*unknown measurement 'rnge'; did you mean 'range'"),
     ("noise: {sd: 0.1}", "noise: {R: [[1, 0], [0, 1]]}", r"sys.yaml:11: sensors.uwb.noise.R: must be 1 x 1"),
     ("mean: {p: [1, 2], v: [0, 0]}", "mean: {p: [1, 2, 3], v: [0, 0]}", r"sys.yaml:5: initial.mean.p: block 'p' has 2 elements, got 3"),

@@ -42,8 +42,6 @@ def test_plugin_can_be_blocked(installed_example, monkeypatch):
 
 
 def test_misspelt_hook_fails_loudly():
-    import pluggy
-
     from fusion import hookimpl
 
     class Bad:
@@ -51,7 +49,8 @@ def test_misspelt_hook_fails_loudly():
         def fusion_register_componets(self, registry):  # typo on purpose
             pass
 
-    with pytest.raises(pluggy.PluginValidationError):
+    with pytest.raises(ConfigError, match=r"test_registry.py:\d+: hook 'fusion_register_componets' is not a fusion "
+                                          r"hook \(did you mean 'fusion_register_components'\?\).*FUSION_BLOCK_PLUGINS="):
         make_plugin_manager(extra_plugins=[Bad()])
 
 

@@ -7,7 +7,7 @@ import pytest
 from pydantic import ValidationError
 
 from fusion import testing
-from fusion.api import Belief, Filter, MeasurementModel, ProcessModel, StateLayout
+from fusion.api import Belief, BuildContext, Filter, MeasurementModel, ProcessModel, StateLayout
 from fusion.registry import default_registry
 
 
@@ -76,8 +76,12 @@ class QuatDirect(MeasurementModel):
 def test_normalize_applied_to_predicted_and_updated_mean(name):
     if name == "kf":
         pytest.skip("kf needs a linear process")
-    flt = testing.build("filter", name)
+    # wired as a config wires it: the filter knows the state layout (its unit quaternion block q)
+    flt = testing.build("filter", name, context=BuildContext(layout=Spin.layout))
     b = flt.initial_belief(0.0, [1.0, 0.0, 0.0, 0.0], np.eye(4) * 1e-3)
+    # an update before any predict is normalised too (no process model remembered from a predict)
+    b0 = flt.update(b, QuatDirect(), np.array([1.0, 0.2, 0.0, 0.0]), np.eye(4) * 1e-2).belief
+    assert abs(np.linalg.norm(b0.x) - 1.0) < 1e-12 and b0.x[1] > 0.01   # moved, and back on the unit sphere
     for k in range(5):
         b = flt.predict(b, Spin(), None, 0.1)
         assert abs(np.linalg.norm(b.x) - 1.0) < 1e-12

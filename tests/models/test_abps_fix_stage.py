@@ -148,13 +148,13 @@ def test_every_cycle_is_compensated_with_the_filter_velocity_also_after_a_failed
 
     s, fixes, asked = run(True)
     assert s.counters["compensated"] == len(asked) == s.counters["cycles"] - s.counters["too_few_beacons"] >= 11
-    errs = [np.linalg.norm(unpack_fix(f.values)[0][:2] - route(f.t)[:2]) for _, f in fixes]
+    errs = [np.linalg.norm(f.value[:2] - route(f.t)[:2]) for _, f in fixes]
     assert len(fixes) >= 10 and max(errs) < 6e-3 and np.median(errs) < 2e-3
     assert s.counters["fixes"] == len(fixes) and s.counters["inconsistent"] == 1
     after = [e for (n, _), e in zip(fixes, errs) if n is not None and n > bad_cycle]
     assert after and after[0] < 6e-3                       # the cycle after the refused one: compensated
     _, fixes_off, _ = run(False)
-    errs_off = [np.linalg.norm(unpack_fix(f.values)[0][:2] - route(f.t)[:2]) for _, f in fixes_off]
+    errs_off = [np.linalg.norm(f.value[:2] - route(f.t)[:2]) for _, f in fixes_off]
     assert np.median(errs_off) > 3 * np.median(errs)
 
 
@@ -167,9 +167,9 @@ def test_a_belief_later_than_the_cycle_gives_a_fix_with_its_age():
     s.bind_belief(lambda t: _belief(t, v, route(t + 0.12), late=0.12))
     fixes = [f for t, b, r, _ in firings(route, list(MINE), n_cycles=6, t0=0.0)
              for f in s.feed(Message(t, "abps", (b, r)))]
-    assert fixes and all(len(f.values) == 10 and f.values[9] == pytest.approx(0.12) for f in fixes)
+    assert fixes and all(f.age == pytest.approx(0.12) for f in fixes)
     for f in fixes:
-        assert np.linalg.norm(unpack_fix(f.values[:9])[0][:2] - route(f.t - f.values[9])[:2]) < 1e-3
+        assert np.linalg.norm(f.value[:2] - route(f.t - f.age)[:2]) < 1e-3
 
 
 # --------------------------------------------------------------------------- 3. honest covariance
@@ -217,7 +217,7 @@ def test_uncompensated_fixes_claim_the_motion_they_did_not_remove():
         s = _solver(motion_compensation=False, range_sd=0.05, max_outliers=2)
         for t, b, r, _ in firings(route, list(MINE), n_cycles=40, t0=0.0):
             for f in s.feed(Message(t, "abps", (b, r + rng.normal(0, 0.05)))):
-                pos, cov = unpack_fix(f.values)
+                pos, cov = f.value, f.cov
                 e = pos[:2] - route(f.t)[:2]
                 nees.append(float(e @ np.linalg.solve(cov[:2, :2], e)))
                 worst = max(worst, float(np.max(np.abs(e) / np.sqrt(np.diag(cov)[:2]))))

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fusion.api import BuildContext, MalformedMessage, Message
+from fusion.api import BuildContext, Fix, MalformedMessage, Message
 from fusion_plugins.solvers.ols_trilateration import (NoFix, OlsParams, OlsTrilateration, pack_fix, trilaterate,
                                                       unpack_fix)
 
@@ -174,9 +174,10 @@ def test_feed_gathers_cycles_and_emits_fixes():
     outs = [o for m in msgs for o in s.feed(m)]
     assert len(outs) == 1 and s.counters["fixes"] == 1          # closed at once: every expected beacon heard
     fix = outs[0]
-    assert fix.sensor == "abps" and len(fix.values) == 9
+    assert isinstance(fix, Fix) and fix.sensor == "abps" and fix.value.shape == (3,) and fix.age == 0.0
     assert fix.t == pytest.approx(0.04)                          # mean time of the ranges
-    pos, cov = unpack_fix(fix.values)
+    assert fix.used == ("B1", "B2", "B3", "B4", "B5")
+    pos, cov = fix.value, fix.cov
     np.testing.assert_allclose(pos, x, atol=1e-9)
     assert cov[2, 2] == pytest.approx(0.1**2) and np.all(np.linalg.eigvalsh(cov) > 0)
     # a beacon twice within one firing period breaks the schedule: the cycle is split there; the last,
@@ -213,7 +214,8 @@ def test_outlier_dropped_in_a_redundant_cycle():
     outs = [o for m in msgs for o in s.feed(m)]
     assert len(outs) == 1 and s.counters["outliers_removed"] == 1
     assert any(e.kind == "rejected" and "B4" in e.detail for e in s.events)
-    np.testing.assert_allclose(unpack_fix(outs[0].values)[0], x, atol=1e-9)
+    np.testing.assert_allclose(outs[0].value, x, atol=1e-9)
+    assert "B4" not in outs[0].used
 
 
 def test_bad_messages():

@@ -58,7 +58,7 @@ def test_headline_run_meets_the_accuracy_bar(srukf_run):
     assert sensors["imu"]["used"] == sensors["imu"]["received"] == 14717
     assert sensors["abps"]["late"] == 0 and s["steps"]["update"] > 300
     assert result[0].stats.filter_counters["batched_predicts"] > 300  # IMU runs integrated in one step each
-    assert not system.filter.counters                        # the run worked on its own copy of the filter
+    assert not hasattr(system.filter, "counters")           # counted by the run, never inside the filter
 
 
 def test_ukf_gives_the_same_estimates(srukf_run):

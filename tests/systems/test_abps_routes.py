@@ -94,7 +94,7 @@ def test_every_cycle_is_compensated_through_the_scheduler_and_noise_free_fixes_a
 
     def spy(self, cycle):
         out = solve(self, cycle)
-        fixes.extend((m.t, m.values) for m in out)
+        fixes.extend(out)                      # typed fusion.api.Fix
         return out
 
     monkeypatch.setattr(cls, "_solve", spy)
@@ -103,8 +103,9 @@ def test_every_cycle_is_compensated_through_the_scheduler_and_noise_free_fixes_a
     assert pre._belief_at is not None and pre.counters["compensated"] > 0.8 * pre.counters["cycles"]
     truth = result["truth"]
     errs = []
-    for t, vals in fixes:
-        tv = truth.at(t - (vals[9] if len(vals) > 9 else 0.0))
+    for fix in fixes:
+        t, vals = fix.t, fix.value
+        tv = truth.at(t - fix.age)
         if tv is None or t < 6.0:
             continue
         q = np.array([tv["qw"], tv["qx"], tv["qy"], tv["qz"]])

@@ -133,24 +133,33 @@ def test_replay_is_paced_by_sensor_time_and_snapshots_are_coalesced(monkeypatch)
     assert snaps[-1].state == "finished" and len(snaps) < 400 / 10  # coalesced, not one per line
 
 
-def test_pausing_a_live_feed_freezes_only_the_view():
+def test_pausing_a_live_feed_freezes_only_the_view(monkeypatch):
+    import fusion.tui.feed as feed_mod
+
+    clock = VirtualClock()
+    monkeypatch.setattr(feed_mod, "time", clock)
+    held = []
     feed = LiveFeed(load_system(CONFIG), _lines(50), lambda s: None, live=True, speed=1.0)
+    monkeypatch.setattr(feed, "_hold", lambda: held.append(1) or 0.0)
     feed.pause()
-    t0 = time.monotonic()
     final = feed.run()
-    assert time.monotonic() - t0 < 5.0 and final.state == "finished" and final.lines == 51
+    # a live source is read on while paused: never held, never paced, every line through
+    assert final.state == "finished" and final.lines == 51 and final.counters["uwb"]["received"] == 50
+    assert held == [] and clock.slept == 0.0
 
 
 def test_stop_ends_a_paused_replay():
     import threading
 
-    feed = LiveFeed(load_system(CONFIG), _lines(100), lambda s: None, speed=1.0)
+    holding = threading.Event()
+    # the feed posts a snapshot when it starts holding a paused replay (after its first line)
+    feed = LiveFeed(load_system(CONFIG), _lines(100), lambda s: holding.set() if s.lines else None, speed=1.0)
     feed.pause()
     done = []
     worker = threading.Thread(target=lambda: done.append(feed.run()))
     worker.start()
-    time.sleep(0.2)
-    assert not done
+    assert holding.wait(60.0)  # hang guard only
+    assert not done            # held: nothing but stop() or resume() lets it on
     feed.stop()
-    worker.join(2.0)
+    worker.join(60.0)
     assert done and done[0].state == "stopped" and done[0].lines <= 2

@@ -1,0 +1,74 @@
+"""The scheduler's initialisation: the first belief from the configured one, a static-start alignment
+(the process model's Aligns capability, then every AlignsState measurement model) and a first fix of
+``initial.from_sensor`` (through the model's PositionFromFix capability when it has one). A mixin of
+fusion.scheduler.Scheduler, whose attributes it uses."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from fusion.api import Aligns, PositionFromFix, has
+from fusion.config import SensorRuntime
+
+
+class Initialisation:
+    """Mixin: ``_start``, ``_align``, ``_take_fix``, ``_initial`` (see fusion.scheduler)."""
+
+    def _start(self, t: float) -> None:
+        """The first belief, at ``t``: the configured one, aligned and with the remembered fix if any."""
+        belief = self.filter.initial_belief(t, *self._initial())
+        if belief.events:   # a repaired initial covariance (srukf): reported with the first prediction's
+            for e in belief.events:
+                self.filter_counters[e.kind] += 1
+            self._filter_events.extend(belief.events)
+            belief = belief.with_(events=())
+        self.belief = belief
+        self._next_output = t + self.output_dt if self.output_dt else math.inf
+
+    def _align(self, good: list[tuple[float, np.ndarray]], sensor: SensorRuntime) -> list[tuple[float, np.ndarray]]:
+        """Before the first belief: gather the static start; create the belief once aligned (and fixed).
+        Returns the samples left to integrate after the belief exists."""
+        for i, (t, u) in enumerate(good):
+            if self._align_t0 is None:
+                self._align_t0 = t
+            if t - self._align_t0 < self._align_s or not self._have_fix:
+                self._align_u.append(u)
+                sensor.counters["used"] += 1
+                continue
+            if self._align_s and self._align_u:
+                u_mean = np.mean(self._align_u, axis=0)
+                if has(self.process, Aligns):   # wiring refuses align_s for a process without it
+                    self._x0, self._P0 = self.process.align(self._x0, self._P0, u_mean)
+                for name, observations in self._aligners.items():
+                    if observations:
+                        s = self.sensors[name]
+                        self._x0, self._P0 = s.model.align_state(self._x0, self._P0, u_mean, observations, s.R)  # type: ignore[union-attr]
+            self._start(t)
+            self.u = u
+            sensor.counters["used"] += 1
+            return good[i + 1:]
+        return []
+
+    def _take_fix(self, obs) -> None:
+        """Remember a fix of ``initial.from_sensor`` for the initial position (latest fix wins)."""
+        self._fix = obs
+        self._have_fix = True
+
+    def _initial(self) -> tuple[np.ndarray, np.ndarray]:
+        """x0, P0 with the position block from the remembered fix. A model with ``position_from`` (a
+        position with a lever arm) turns the fix into the state's position at the initial attitude."""
+        x0, P0 = self._x0.copy(), self._P0.copy()
+        obs = getattr(self, "_fix", None)
+        if obs is None:
+            return x0, P0
+        sl = self.system.layout["p"]
+        m = len(obs.z)
+        to_state = obs.model.position_from if has(obs.model, PositionFromFix) else None
+        x0[sl.start:sl.start + m] = to_state(obs.z, x0)[:m] if to_state else obs.z
+        if obs.R is not None:
+            idx = np.arange(sl.start, sl.start + m)
+            P0[idx, :] = 0.0
+            P0[:, idx] = 0.0
+            P0[np.ix_(idx, idx)] = obs.R
+        return x0, P0

@@ -1,0 +1,70 @@
+"""The scheduler's ``late_policy: replay``: a bounded log of processed messages and snapshots of the
+belief, and the rewind that re-runs the buffered messages around a late one. A mixin of
+fusion.scheduler.Scheduler."""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+from typing import Iterator
+
+import numpy as np
+
+from fusion.api import Belief, Estimate, Event, Message
+
+
+@dataclass
+class _Snapshot:
+    t: float
+    belief: Belief
+    u: np.ndarray | None
+    next_output: float
+    index: int  # position in the processed-message log after which this snapshot was taken
+
+
+class Replay:
+    """Mixin: ``_record``, ``_snapshot``, ``_replay`` (see fusion.scheduler)."""
+
+    def _record(self, msg: Message) -> None:
+        if self.late_policy != "replay":
+            return
+        if len(self._log) == self._log.maxlen:
+            self._log_start += 1
+        self._log.append(msg)
+
+    def _snapshot(self) -> None:
+        if self.late_policy != "replay" or self._replaying or self.belief is None:
+            return
+        self._history.append(_Snapshot(self.belief.t, self.belief, self.u, self._next_output,
+                                       self._log_start + len(self._log)))
+
+    def _replay(self, late: Message) -> Iterator[Estimate | Event]:
+        snap = None
+        for s in reversed(self._history):
+            if s.t <= late.t and s.index >= self._log_start:
+                snap = s
+                break
+        sensor = self.sensors[late.sensor]
+        if snap is None:
+            yield Event(late.t, "late", late.sensor, "older than the replay history; dropped")
+            return
+        rerun = list(itertools.islice(self._log, snap.index - self._log_start, None))
+        rerun.append(late)
+        rerun.sort(key=lambda m: m.t)
+        self.belief, self.u, self._next_output = snap.belief, snap.u, snap.next_output
+        self._replaying = True
+        counters = {n: dict(s.counters) for n, s in self.sensors.items()}
+        try:
+            for msg in rerun:
+                for out in self._process(msg):
+                    pass
+        finally:
+            self._replaying = False
+        for n, s in self.sensors.items():  # re-run messages were already counted
+            s.counters.update(counters[n])
+        sensor.counters["used"] += 1
+        self._record(late)
+        self._history.clear()
+        self._snapshot()
+        yield Event(late.t, "replayed", late.sensor, f"re-ran {len(rerun)} messages")
+        if self.on_update and self.belief is not None:
+            yield Estimate(self.belief.t, self.belief, "update", late.sensor)

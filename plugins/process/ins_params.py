@@ -1,0 +1,85 @@
+"""Parameters of the ``ins`` process model (paper 000 sec. V-A): gravity, noise densities (SI units)."""
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from fusion.api import Params
+
+STANDARD_GRAVITY = 9.80665          # m/s^2
+EARTH_RATE = 7.292115e-5            # rad/s (WGS84)
+
+# ADIS16364 data sheet (Analog Devices, Rev. B): angular random walk 2.0 deg/sqrt(h), velocity random walk
+# 0.12 m/s/sqrt(h), in-run bias stability 25 deg/h and 0.1 mg. The bias random-walk densities are those
+# stabilities spread over ~100 s (stability / sqrt(100 s)), a common engineering reading of the sheet.
+ADIS16364_GYRO_ND = 2.0 * np.pi / 180.0 / 60.0            # rad/s/sqrt(Hz)  (= 5.82e-4)
+ADIS16364_ACCEL_ND = 0.12 / 60.0                          # m/s^2/sqrt(Hz)  (= 2.0e-3)
+ADIS16364_GYRO_BIAS_RW = 25.0 * np.pi / 180.0 / 3600.0 / 10.0   # rad/s^2/sqrt(Hz) (= 1.2e-5)
+ADIS16364_ACCEL_BIAS_RW = 0.1e-3 * STANDARD_GRAVITY / 10.0      # m/s^3/sqrt(Hz)  (= 9.8e-5)
+
+Density = float | tuple[float, float, float]
+
+
+
+def somigliana_gravity(latitude_deg: float, height_m: float = 0.0) -> float:
+    """Normal gravity (m/s^2) on the WGS84 ellipsoid (Somigliana) with the free-air correction -3.086e-6 h."""
+    s2 = np.sin(np.radians(latitude_deg)) ** 2
+    g0 = 9.7803253359 * (1.0 + 0.00193185265241 * s2) / np.sqrt(1.0 - 0.00669437999013 * s2)
+    return float(g0 - 3.086e-6 * height_m)
+
+
+class InsParams(Params):
+    """YAML parameters of ``ins``. Noise densities are one value (all axes) or three (x y z, FRD).
+
+    Data-sheet conversions: ARW [deg/sqrt(h)] * pi/180 / 60 = rad/s/sqrt(Hz);
+    VRW [m/s/sqrt(h)] / 60 = m/s^2/sqrt(Hz). Defaults are ADIS16364-class figures.
+    """
+
+    gravity: float | None = Field(None, gt=0, description="local gravity g (m/s^2); default: from latitude, "
+                                  "else the system's gravity (context.extra['gravity']), else 9.80665")
+    latitude_deg: float | None = Field(None, ge=-90, le=90, description="latitude (deg) for g and Earth rate")
+    height_m: float = Field(0.0, description="ellipsoidal height (m) for g from latitude")
+    earth_rate: bool = Field(False, description="subtract the Earth rate C_n^b w_ie (eq. 38; needs latitude)")
+    eta: float = Field(0.0, ge=0, description="quaternion norm-correction gain eta (1/s) of eq. 50; eta*dt < 1")
+    integration: Literal["euler", "trapezoidal"] = Field(
+        "euler", description="euler: eqs. 40-41 as in the paper; trapezoidal: mean of C_k f and C_k+1 f, "
+        "p += v dt + a dt^2/2 (second order)")
+    accel_noise_density: Density = Field(ADIS16364_ACCEL_ND, description="white noise of f (m/s^2/sqrt(Hz))")
+    gyro_noise_density: Density = Field(ADIS16364_GYRO_ND, description="white noise of w (rad/s/sqrt(Hz))")
+    accel_bias_rw: Density = Field(ADIS16364_ACCEL_BIAS_RW, description="accel bias random walk (m/s^3/sqrt(Hz))")
+    gyro_bias_rw: Density = Field(ADIS16364_GYRO_BIAS_RW, description="gyro bias random walk (rad/s^2/sqrt(Hz))")
+    quat_norm_variance: float = Field(0.0, ge=0, description="variance added along q per step so Q is "
+                                      "positive definite (the norm direction is otherwise noise-free)")
+    max_specific_force: float | None = Field(None, gt=0, description="sensor range (m/s^2, any axis)")
+    max_rate: float | None = Field(None, gt=0, description="sensor range (rad/s, any axis)")
+    hold_after: float | None = Field(None, gt=0, description="s: a sample held longer than this (an IMU gap) "
+                                     "adds hold noise over the excess time (None: never)")
+    hold_accel_rw: float = Field(0.7, ge=0, description="m/s^3/sqrt(Hz): random walk of the true specific "
+                                 "force away from a held sample (the vehicle's manoeuvres)")
+    hold_rate_rw: float = Field(1.0, ge=0, description="rad/s^2/sqrt(Hz): the same for the angular rate")
+    align_gyro_bias: bool = Field(True, description="initial alignment also takes the mean static gyro "
+                                  "rate as the gyro bias")
+    states: Literal[10, 16, 22] = Field(16, description="state set (paper 002): 10 [p v q], 16 + biases "
+                                        "[ba bw], 22 + scale factors [sa sw] (eqs. 11-13); see ins_states.py")
+    accel_scale_rw: Density = Field(0.0, description="22 states: accelerometer scale-factor random walk "
+                                    "(1/s^0.5, eq. 13)")
+    gyro_scale_rw: Density = Field(0.0, description="22 states: gyro scale-factor random walk (1/s^0.5, eq. 13)")
+    renormalize: bool = Field(True, description="bring the mean quaternion back to unit norm after each "
+                              "step; false leaves the norm to eq. 50 (eta) or the quat_norm pseudo-observation")
+
+    @model_validator(mode="after")
+    def _earth_rate_needs_latitude(self) -> "InsParams":
+        if self.earth_rate and self.latitude_deg is None:
+            raise ValueError("earth_rate: true needs latitude_deg")
+        if self.states != 22 and (np.any(np.asarray(self.accel_scale_rw)) or np.any(np.asarray(self.gyro_scale_rw))):
+            raise ValueError("accel_scale_rw / gyro_scale_rw need states: 22 (the scale-factor states)")
+        return self
+
+
+def density_variance(density: Density) -> np.ndarray:
+    d = np.broadcast_to(np.asarray(density, dtype=float), (3,))
+    if np.any(d < 0):
+        raise ValueError(f"noise densities must be >= 0, got {density}")
+    return d * d
