@@ -57,18 +57,33 @@ class Initialisation:
 
     def _initial(self) -> tuple[np.ndarray, np.ndarray]:
         """x0, P0 with the position block from the remembered fix. A model with ``position_from`` (a
-        position with a lever arm) turns the fix into the state's position at the initial attitude."""
+        position with a lever arm) turns the fix's position into the state's at the initial attitude.
+        Values of the fix beyond the position (a GPS fix's velocity) set the state elements their rows of
+        h select (a row of dh/dx that is a unit vector); rows that are not a plain selection are left to
+        the first update."""
         x0, P0 = self._x0.copy(), self._P0.copy()
         obs = getattr(self, "_fix", None)
         if obs is None:
             return x0, P0
         sl = self.system.layout["p"]
-        m = len(obs.z)
+        z = np.asarray(obs.z, dtype=float)
+        k = min(len(z), sl.stop - sl.start)
         to_state = obs.model.position_from if has(obs.model, PositionFromFix) else None
-        x0[sl.start:sl.start + m] = to_state(obs.z, x0)[:m] if to_state else obs.z
+        x0[sl.start:sl.start + k] = to_state(z, x0)[:k] if to_state else z[:k]
+        rows, cols = list(range(k)), list(range(sl.start, sl.start + k))
+        if len(z) > k:
+            from fusion_plugins.filters.jacobian import measurement_jacobian
+
+            H = measurement_jacobian(obs.model, x0)
+            for i in range(k, len(z)):
+                j = int(np.argmax(np.abs(H[i])))
+                if abs(H[i, j] - 1.0) < 1e-6 and np.sum(np.abs(H[i])) < 1.0 + 1e-6 and j not in cols:
+                    x0[j] = z[i]
+                    rows.append(i)
+                    cols.append(j)
         if obs.R is not None:
-            idx = np.arange(sl.start, sl.start + m)
+            idx = np.array(cols)
             P0[idx, :] = 0.0
             P0[:, idx] = 0.0
-            P0[np.ix_(idx, idx)] = obs.R
+            P0[np.ix_(idx, idx)] = np.asarray(obs.R)[np.ix_(rows, rows)]
         return x0, P0
