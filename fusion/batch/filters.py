@@ -35,6 +35,15 @@ class BatchFilter:
         self.process: Any = None      # the process model of the last predict (normalize in the update)
 
     # ------------------------------------------------------------------ helpers
+    def normalizer(self, model: Any):
+        """The updated means' normalisation: the single filter's (its layout's quaternion blocks, else
+        the measurement model's layout: plugins/filters/base.py ``KalmanBase.normalizer``), so that the
+        batch stays equal to single filters."""
+        single = getattr(self.single, "normalizer", None)
+        if single is not None:
+            return single(model)
+        return self.process.normalize if self.process is not None else (lambda x: x)
+
     def reset(self, N: int) -> None:
         """Zero the per-filter counters for a batch of N."""
         self.N = N
@@ -169,8 +178,7 @@ class BatchEKF(BatchFilter):
         x1 = x + np.einsum("kmn,km->kn", Kt, r)
         A = np.eye(x.shape[1]) - T(Kt) @ H                   # I - K H
         P1 = sym(A @ P @ T(A) + T(Kt) @ R @ Kt)              # Joseph form
-        if self.process is not None:
-            x1 = self.process.normalize(x1)
+        x1 = self.normalizer(model)(x1)
         self._count("updates", ok)
         post = BatchBelief(b.t, x1, P=P1).where(ok, BatchBelief(b.t, x, P=P))
         return BatchUpdate(post, r, S, nis, ok)
@@ -240,7 +248,7 @@ class BatchUKF(BatchFilter):
         dZ = diff(Z, zm[:, None, :])
         A = dZ * sp.Wc_col
         if m == 1:                                           # a range: scalars per filter, no matrices
-            return self._update_scalar(b, x, P, L, dZ[:, :, 0], A[:, :, 0], R, diff(z, zm), gate)
+            return self._update_scalar(b, x, P, L, dZ[:, :, 0], A[:, :, 0], R, diff(z, zm), gate, model)
         dX = sigma_deviations(sp.eta, L)
         Pzz = T(dZ) @ A + R                                  # 001 eqs. 16-17
         _, rep = self.factor(Pzz)
@@ -253,14 +261,13 @@ class BatchUKF(BatchFilter):
         ok = self.gate_mask(nis, gate, m)
         x1 = x + np.einsum("kmn,km->kn", Kt, y)             # 001 eqs. 18-19
         P1 = sym(P - Pxz @ Kt)                               # 001 eq. 20: P - K S K^T
-        if self.process is not None:
-            x1 = self.process.normalize(x1)
+        x1 = self.normalizer(model)(x1)
         self._count("updates", ok)
         post = BatchBelief(b.t, x1, P=P1).where(ok, BatchBelief(b.t, x, P=b.cov))
         return BatchUpdate(post, y, Pzz, nis, ok)
 
 
-    def _update_scalar(self, b, x, P, L, dz, a, R, y, gate) -> BatchUpdate:
+    def _update_scalar(self, b, x, P, L, dz, a, R, y, gate, model) -> BatchUpdate:
         """001 eqs. 15-20 for m = 1: P_zz, P_xz and K per filter as scalars and n-vectors."""
         r = R.reshape(-1)[0] if R.ndim == 2 else R[:, 0, 0]
         Pzz = (dz * a).sum(axis=1) + r                       # 001 eqs. 16-17
@@ -277,8 +284,7 @@ class BatchUKF(BatchFilter):
         ok = self.gate_mask(nis, gate, 1)
         x1 = x + W * wy[:, None]                             # 001 eqs. 18-19
         P1 = P - W[:, :, None] * W[:, None, :]               # 001 eq. 20: P - W^T W (exactly symmetric)
-        if self.process is not None:
-            x1 = self.process.normalize(x1)
+        x1 = self.normalizer(model)(x1)
         self._count("updates", ok)
         post = BatchBelief(b.t, x1, P=P1).where(ok, BatchBelief(b.t, x, P=b.cov))
         return BatchUpdate(post, y, Pzz[:, None, None], nis, ok)
@@ -368,8 +374,7 @@ class BatchSRUKF(BatchUKF):
         ok = self.gate_mask(nis, gate, m)
         x1 = x + np.einsum("knm,km->kn", Lj[:, m:, :m], w)               # eq. 14
         S1 = Lj[:, m:, m:]
-        if self.process is not None:
-            x1 = self.process.normalize(x1)
+        x1 = self.normalizer(model)(x1)
         self._count("updates", ok)
         post = BatchBelief(b.t, x1, S=S1).where(ok, BatchBelief(b.t, x, S=S))
         return BatchUpdate(post, y, Syy, nis, ok)

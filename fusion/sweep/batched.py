@@ -181,7 +181,7 @@ def run_batch(trials: list[Trial], timings: dict[str, float] | None = None) -> l
             sc["used"] += int(c["used"][i])
             sc["rejected"] += int(c["rejected"][i])
             sc["late"] += c["late"]
-        fc = sched.filter.counters
+        fc = sched.filter_counters      # the run's counts of the filter (fusion/scheduling/reporting.py)
         for key, v in bf.counters.items():
             if int(v[i]):
                 fc[key] += int(v[i])
