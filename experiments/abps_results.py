@@ -34,13 +34,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 sys.path.insert(0, str(ROOT / "experiments"))
 
-from fusion import quaternion as quat  # noqa: E402
 from fusion import pipeline  # noqa: E402
 from fusion.config import SystemSpec, wire  # noqa: E402
 from fusion.consistency import chi2_interval  # noqa: E402
 from fusion.metrics import Truth  # noqa: E402
 
 import abps_routes  # noqa: E402  (experiments/, on the path above)
+from abps_smoothed import error_rows  # noqa: E402
 
 CONFIG = ROOT / "configs" / "abps_ins.yaml"
 OUT = ROOT / "docs" / "results" / "abps_ins.md"
@@ -65,40 +65,10 @@ def run(changes: dict | None = None) -> dict:
     cpu = time.process_time() - c0
     summary = result.summary
     truth = Truth.from_recording(system.recording)
-    rows = []
-    for est in kept.estimates:
-        tv = truth.at(est.t)
-        if tv is None:
-            continue
-        x, P = est.belief.x, est.belief.cov
-        qt = np.array([tv["qw"], tv["qx"], tv["qy"], tv["qz"]])
-        q = x[6:10] / np.linalg.norm(x[6:10])
-        d = quat.multiply(quat.conjugate(qt), q)       # q_true^-1 (x) q_est: body-frame error rotation
-        d = -d if d[0] < 0 else d
-        w, a, b, c = q[0], -q[1], -q[2], -q[3]           # rows of L(q_est^-1), doubled: d theta = 2 vec(q^-1 dq)
-        Tq = 2.0 * np.array([[a, w, -c, b], [b, c, w, -a], [c, -b, a, w]])
-        T = np.zeros((15, 16))
-        T[0:6, 0:6] = np.eye(6)
-        T[6:9, 6:10] = Tq
-        T[9:15, 10:16] = np.eye(6)
-        err = np.concatenate([x[0:6] - [tv[n] for n in ("px", "py", "pz", "vx", "vy", "vz")], 2.0 * d[1:],
-                              x[10:16] - [tv[n] for n in ("bax", "bay", "baz", "bwx", "bwy", "bwz")]])
-        C = T @ P @ T.T
-        rows.append((est.t, err, np.sqrt(np.diag(C)), C, est.update.nis if est.update else np.nan,
-                     x.copy(), [tv["px"], tv["py"]]))
-    t = np.array([r[0] for r in rows])
-    E = np.array([r[1] for r in rows])
-    SD = np.array([r[2] for r in rows])
-    nees = np.array([float(e @ np.linalg.solve(C, e)) for _, e, _, C, *_ in rows])
-    blocks = {}
-    i = 0
-    for name, k in BLOCKS:
-        blocks[name] = np.array([float(e[i:i + k] @ np.linalg.solve(C[i:i + k, i:i + k], e[i:i + k]))
-                                 for _, e, _, C, *_ in rows])
-        i += k
-    return {"system": system, "summary": summary, "result": result, "estimates": kept.estimates, "cpu_s": cpu, "t": t, "E": E, "SD": SD,
-            "nees": nees, "blocks": blocks, "nis": np.array([r[4] for r in rows]),
-            "X": np.array([r[5] for r in rows]), "truth": truth}
+    er = error_rows(kept.estimates, truth)    # the 15-element error state, its covariance and NEES
+    return {"system": system, "summary": summary, "result": result, "estimates": kept.estimates, "cpu_s": cpu,
+            "t": er["t"], "E": er["E"], "SD": er["SD"], "nees": er["nees"], "blocks": er["blocks"], "nis": er["nis"],
+            "X": er["X"], "truth": truth}
 
 
 def scores(r: dict) -> dict:
