@@ -361,7 +361,8 @@ class Run:
         clock = sched.clock
         newest = sched._newest
         t = msg.t
-        comp = self.stats.comparison(msg.sensor)
+        stats = self.stats
+        comp = stats.truth if msg.sensor == "truth" and stats.truth is not None else stats.comparison(msg.sensor)
         if not clock.busy and newest - clock.future_s <= t <= newest + clock.future_s:
             clock.on_base(msg.sensor)  # the common case, without building the lists admit() returns
             if comp is not None:

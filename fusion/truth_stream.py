@@ -108,21 +108,23 @@ class TruthWindow:
             self._unwrap_row(arr)
             row = tuple(arr.tolist())
         t = float(message.t)
-        if self._t and t < self._t[-1]:  # out of order: insert in place
-            i = bisect.bisect_right(self._t, t)
-            self._t.insert(i, t)
+        ts = self._t
+        if ts and t < ts[-1]:  # out of order: insert in place
+            i = bisect.bisect_right(ts, t)
+            ts.insert(i, t)
             self._v.insert(i, row)
         else:
-            if self._t:
-                self._intervals.append(t - self._t[-1])
-            self._t.append(t)
+            if ts:
+                self._intervals.append(t - ts[-1])
+            ts.append(t)
             self._v.append(row)
-        self.newest = max(self.newest, t)
-        self.received += 1
-        if self.received <= 64 or self.received % 256 == 0:
+        if t > self.newest:
+            self.newest = t
+        n = self.received = self.received + 1
+        if n <= 64 or not n & 255:   # every 256th sample (the median of the intervals costs ~20 us)
             self.period = float(np.median(self._intervals)) if self._intervals else 0.0
-        if len(self._t) > self.max_samples:
-            self._drop(len(self._t) - self.max_samples)
+        if len(ts) > self.max_samples:
+            self._drop(len(ts) - self.max_samples)
         return True
 
     def _unwrap_row(self, row: np.ndarray) -> None:
@@ -200,8 +202,11 @@ class TruthComparison:
         self._last_t = -math.inf  # time of the last estimate evaluated
 
     def add_truth(self, message: Message) -> None:
-        if self.window.add(message):
-            self._release(self.window.newest)
+        w = self.window
+        if w.add(message):
+            pend = self._pending
+            if (pend and pend[0].t < w.newest) or len(w._t) > 4 * _KEEP_BEHIND:   # else _release does nothing
+                self._release(w.newest)
 
     def add_estimate(self, estimate: Estimate) -> None:
         self._pending.append(estimate)
@@ -220,7 +225,7 @@ class TruthComparison:
         # interpolates with the one after it, as the whole-recording Truth does).
         while pend and pend[0].t < newest:
             self._evaluate(pend.popleft())
-        if len(self.window) > 4 * _KEEP_BEHIND:  # trim now and then, not at every sample
+        if len(self.window._t) > 4 * _KEEP_BEHIND:  # trim now and then, not at every sample (len(): no call)
             self.window.forget_before(pend[0].t if pend else self._last_t)
 
     def _evaluate(self, estimate: Estimate) -> None:
