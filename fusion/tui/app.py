@@ -14,6 +14,7 @@ from typing import Any, Iterator
 
 from textual.app import App, ComposeResult
 from textual.binding import Binding
+from textual.css.query import NoMatches
 from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.widgets import ContentSwitcher, Footer, Header, TabbedContent, TabPane
 
@@ -188,10 +189,11 @@ class FusionApp(App):
         self.updates += 1
         if self.feed.paused and not self.paused:  # the feed held itself (pause_at)
             self.paused = True
-        if not self.paused or self.feed._stepping or message.snapshot.state not in ("running", "waiting"):
-            self._render(message.snapshot)
-        else:
-            self._render(message.snapshot, only_status=True)
+        only_status = not (not self.paused or self.feed._stepping or message.snapshot.state not in ("running", "waiting"))
+        try:
+            self._render(message.snapshot, only_status=only_status)
+        except NoMatches:  # an update from the feed's thread racing the screen's mount or teardown: nothing to draw
+            return
 
     def _render(self, snap: FeedSnapshot, force: bool = False, only_status: bool = False) -> None:
         if only_status and not self.feed.live:  # a paused replay: a single step still shows
