@@ -32,17 +32,13 @@ class BatchFilter:
         self.single = single
         self.counters: dict[str, np.ndarray] = {}
         self.N = 0
-        self.process: Any = None      # the process model of the last predict (normalize in the update)
 
     # ------------------------------------------------------------------ helpers
     def normalizer(self, model: Any):
         """The updated means' normalisation: the single filter's (its layout's quaternion blocks, else
         the measurement model's layout: plugins/filters/base.py ``KalmanBase.normalizer``), so that the
         batch stays equal to single filters."""
-        single = getattr(self.single, "normalizer", None)
-        if single is not None:
-            return single(model)
-        return self.process.normalize if self.process is not None else (lambda x: x)
+        return self.single.normalizer(model)
 
     def reset(self, N: int) -> None:
         """Zero the per-filter counters for a batch of N."""
@@ -156,7 +152,6 @@ class BatchEKF(BatchFilter):
             return b
         x1, P1 = self._linear_predict(b, process, u, dt)
         self._count("predicts")
-        self.process = process
         return BatchBelief(b.t + dt, x1, P=P1)
 
     def update(self, b: BatchBelief, model: Any, z, R, gate: Gate | None = None) -> BatchUpdate:
@@ -212,7 +207,6 @@ class BatchUKF(BatchFilter):
         return self.single.sigma_points(n)
 
     def predict(self, b: BatchBelief, process: Any, u, dt: float) -> BatchBelief:
-        self.process = process
         if dt == 0.0:
             return b
         self._count("predicts")
@@ -319,7 +313,6 @@ class BatchSRUKF(BatchUKF):
         return qr_lower(A)
 
     def predict(self, b: BatchBelief, process: Any, u, dt: float) -> BatchBelief:
-        self.process = process
         if dt == 0.0:
             return b
         self._count("predicts")

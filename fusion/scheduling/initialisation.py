@@ -59,8 +59,8 @@ class Initialisation:
         """x0, P0 with the position block from the remembered fix. A model with ``position_from`` (a
         position with a lever arm) turns the fix's position into the state's at the initial attitude.
         Values of the fix beyond the position (a GPS fix's velocity) set the state elements their rows of
-        h select (a row of dh/dx that is a unit vector); rows that are not a plain selection are left to
-        the first update."""
+        h select (a row of the model's analytic dh/dx that is a unit vector); rows that are not a plain
+        selection, or a model without an analytic Jacobian, leave those elements to the first update."""
         x0, P0 = self._x0.copy(), self._P0.copy()
         obs = getattr(self, "_fix", None)
         if obs is None:
@@ -71,10 +71,9 @@ class Initialisation:
         to_state = obs.model.position_from if has(obs.model, PositionFromFix) else None
         x0[sl.start:sl.start + k] = to_state(z, x0)[:k] if to_state else z[:k]
         rows, cols = list(range(k)), list(range(sl.start, sl.start + k))
-        if len(z) > k:
-            from fusion_plugins.filters.jacobian import measurement_jacobian
-
-            H = measurement_jacobian(obs.model, x0)
+        H = obs.model.jacobian(x0) if len(z) > k else None   # the model's analytic dh/dx (None: none)
+        if H is not None:
+            H = np.atleast_2d(H)
             for i in range(k, len(z)):
                 j = int(np.argmax(np.abs(H[i])))
                 if abs(H[i, j] - 1.0) < 1e-6 and np.sum(np.abs(H[i])) < 1.0 + 1e-6 and j not in cols:

@@ -1,5 +1,9 @@
 """Time sanity (issue 10 item 2, fusion/clock.py): wild stamps never move the horizon, clock jumps and
-restarts are detected and re-synchronised, gaps are bounded."""
+restarts are detected and re-synchronised, gaps are bounded.
+
+Every time asserted here is a sensor stamp of the recording (or the span they cover, ``duration_s``),
+set by the test's own re-timing of the lines; nothing measures how long the code takes (speed is in
+benchmarks/)."""
 from __future__ import annotations
 
 import json
