@@ -17,7 +17,8 @@ from fusion.errors import ConfigError, FusionError, InputError, MalformedMessage
 from fusion.kinds import KINDS
 
 from .capabilities import (CAPABILITIES, Aligns, AlignsState, CapabilityWarning, ChecksGeometry, Closes,
-                           HasThreshold, InputRunNoise, IntegratesInputRuns, NonAdditiveMeasurementNoise,
+                           HasThreshold, InputRunNoise, IntegratesInputRuns, LinearisesInputRuns,
+                           NonAdditiveMeasurementNoise,
                            NonAdditiveProcessNoise, Opens, PositionFromFix, PredictsInputRuns, PseudoMeasurement,
                            ReadsBelief, ReportsIdle, ReportsInfo, ReportsStatus, UsesInput, capabilities_of, has,
                            near_misses)
@@ -47,7 +48,8 @@ __all__ = [
     "ConfigError", "InputError", "MalformedMessage", "RejectedMessage", "KINDS", "MAX_MAGNITUDE",
     "Importer", "ImportRequest", "Stream", "ImportedLog",
     # optional capabilities (fusion.api.capabilities)
-    "Aligns", "IntegratesInputRuns", "InputRunNoise", "NonAdditiveProcessNoise", "ChecksGeometry",
+    "Aligns", "IntegratesInputRuns", "InputRunNoise", "LinearisesInputRuns", "NonAdditiveProcessNoise",
+    "ChecksGeometry",
     "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState", "UsesInput", "PseudoMeasurement",
     "PredictsInputRuns", "HasThreshold", "ReadsBelief", "ReportsInfo", "Opens", "Closes", "ReportsIdle",
     "ReportsStatus", "CAPABILITIES", "CapabilityWarning", "has", "capabilities_of", "near_misses",

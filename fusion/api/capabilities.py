@@ -22,7 +22,7 @@ from .state import Belief
 
 __all__ = [
     # process models
-    "Aligns", "IntegratesInputRuns", "InputRunNoise", "NonAdditiveProcessNoise",
+    "Aligns", "IntegratesInputRuns", "InputRunNoise", "LinearisesInputRuns", "NonAdditiveProcessNoise",
     # measurement models
     "ChecksGeometry", "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState", "UsesInput",
     "PseudoMeasurement",
@@ -69,6 +69,22 @@ class InputRunNoise(Protocol):
 
     def Q_inputs(self, x0: np.ndarray, x1: np.ndarray, us: np.ndarray, dts: np.ndarray) -> np.ndarray:
         """Q (n, n) of the run, from the mean before (x0, (n,)) and after (x1, (n,))."""
+        ...
+
+
+@runtime_checkable
+class LinearisesInputRuns(Protocol):
+    """A process model that linearises a run of input samples in one call: the EKF's batched prediction
+    (``ekf.predict_inputs``) then propagates the covariance through the returned ``F_j``, ``Q_j`` instead
+    of calling f, jacobian and Q once per sample. The same numbers as k per-sample predictions to
+    rounding (the INS: its Jacobians vectorised over the run)."""
+
+    def linearise_inputs(self, x: np.ndarray, us: np.ndarray, dts: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """``(x_k, F, Q)`` for the inputs ``us`` (k, input_dim), sample j held over ``dts[j]`` > 0 s, from
+        the state x (n,): x_k (n,) the normalised mean after the run, F (k, n, n) and Q (k, n, n) the
+        Jacobian and process noise of sample j at the (normalised) mean before it. None when the model
+        has no run path for these inputs (the filter then predicts sample by sample)."""
         ...
 
 
@@ -231,9 +247,9 @@ class ReportsStatus(Protocol):
 # --------------------------------------------------------------------------- detection
 #: Every capability protocol, by the member names it is detected by.
 CAPABILITIES: tuple[type, ...] = (
-    Aligns, IntegratesInputRuns, InputRunNoise, NonAdditiveProcessNoise, ChecksGeometry, PositionFromFix,
-    NonAdditiveMeasurementNoise, AlignsState, UsesInput, PseudoMeasurement, PredictsInputRuns, HasThreshold,
-    ReportsInfo, ReadsBelief, Opens, Closes, ReportsIdle, ReportsStatus,
+    Aligns, IntegratesInputRuns, InputRunNoise, LinearisesInputRuns, NonAdditiveProcessNoise, ChecksGeometry,
+    PositionFromFix, NonAdditiveMeasurementNoise, AlignsState, UsesInput, PseudoMeasurement, PredictsInputRuns,
+    HasThreshold, ReportsInfo, ReadsBelief, Opens, Closes, ReportsIdle, ReportsStatus,
 )
 
 _METHODS: dict[type, tuple[str, ...]] = {

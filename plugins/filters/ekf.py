@@ -3,9 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from fusion.api import Belief, Gate, MeasurementModel, Params, ProcessModel, UpdateResult
+from fusion.api import Belief, Gate, LinearisesInputRuns, MeasurementModel, Params, ProcessModel, UpdateResult, has
 
 from .base import KalmanBase, covariance_of, linear_predict, linearised_predict, linearised_update
+from .linalg import symmetrise
 
 
 class ExtendedKalmanFilter(KalmanBase):
@@ -36,6 +37,25 @@ class ExtendedKalmanFilter(KalmanBase):
             return belief
         x1, F, Q = linearised_predict(belief, process, u, dt)
         return Belief(belief.t + dt, x1, P=linear_predict(belief.x, covariance_of(belief), F, Q))
+
+    def predict_inputs(self, belief: Belief, process: ProcessModel, us: np.ndarray, dts: np.ndarray) -> Belief:
+        """A run of input samples: when the process model linearises the whole run in one call
+        (LinearisesInputRuns: the INS's means, F_j and Q_j vectorised over the samples), the covariance
+        is propagated through them, ``P <- F_j P F_j^T + Q_j`` sample by sample (symmetrised once, at the
+        end of the run: ~2 us a sample less), the same numbers as k calls of :meth:`predict` to rounding;
+        otherwise k calls of :meth:`predict`."""
+        run = process.linearise_inputs(belief.x, us, dts) if has(process, LinearisesInputRuns) else None
+        if run is None:
+            return super().predict_inputs(belief, process, us, dts)
+        x1, F, Q = run
+        P = covariance_of(belief)
+        t = belief.t
+        for j, dt in enumerate(dts.tolist()):
+            Fj = F[j]
+            P = Fj @ P @ Fj.T
+            P += Q[j]
+            t += dt
+        return Belief(t, x1, P=symmetrise(P))
 
     def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                gate: Gate | None = None) -> UpdateResult:

@@ -29,6 +29,7 @@ import numpy as np
 from fusion.api import BuildContext, Message, Params, ProcessModel, StateLayout
 
 from .ins import Ins, InsParams, density_variance
+from .ins_linearise import linearise_run
 
 __all__ = ["InsStates"]
 
@@ -152,6 +153,25 @@ class InsStates(ProcessModel):
         a[:10], b[:10] = np.asarray(x0, float)[:10], np.asarray(x1, float)[:10]
         return self._embed(self.core.Q_inputs(a, b, us, dts), float(np.sum(dts)))
 
+    def linearise_inputs(self, x: np.ndarray, us: np.ndarray, dts: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The EKF's run of samples (capability LinearisesInputRuns): the normalised mean after ``us``
+        (k, 6) held over ``dts`` (k,) s, and each sample's F and Q (k, n, n) at the mean before it, in one
+        vectorised pass (ins_linearise.py); the fast path's conditions only, else None."""
+        if not self._fast or np.ndim(x) != 1:
+            return None
+        dts = np.asarray(dts, dtype=float)
+        if dts.shape[0] == 0 or dts.max() > self._hold or dts.min() <= 0.0:
+            return None
+        n = self.layout.n
+        if dts.min() == dts.max():
+            Qb = np.broadcast_to(self._q_base(float(dts[0])), (dts.shape[0], n, n))
+        else:
+            Qb = np.stack([self._q_base(dt) for dt in dts.tolist()])
+        return linearise_run(np.asarray(x, dtype=float), np.asarray(us, dtype=float), dts, self.g,
+                             bool(self.layout.unit_quaternions), Qb, float(self.core._var_w[0]),
+                             self.params.quat_norm_variance)  # type: ignore[attr-defined]
+
     # ------------------------------------------------------------------ the one-point fast path
     def _step(self, x: np.ndarray, u: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """(f, F) of one state x (n,) for the Euler step (eq. 8 with ``p += v dt``, ins.py's ``euler``),
@@ -222,9 +242,8 @@ class InsStates(ProcessModel):
         self._cache_key, self._cache = key, (y, F)
         return y, F
 
-    def _noise(self, x: np.ndarray, dt: float) -> np.ndarray:
-        """Q (n, n) of the fast path: the attitude-independent blocks cached per dt, the q block
-        ``N_w^2 dt / 4 (|q|^2 I - q q^T)`` plus ``quat_norm_variance`` along q (as ins.py's Q)."""
+    def _q_base(self, dt: float) -> np.ndarray:
+        """The attitude-independent blocks of the fast path's Q over dt (q block zero), cached per dt."""
         base = self._Qc.get(dt)
         if base is None:
             base = self._embed(self.core.Q(np.r_[np.zeros(6), 1.0, np.zeros(9)], None, dt), dt)
@@ -232,7 +251,12 @@ class InsStates(ProcessModel):
             if len(self._Qc) > 8:
                 self._Qc.clear()
             self._Qc[dt] = base
-        Qm = base.copy()
+        return base
+
+    def _noise(self, x: np.ndarray, dt: float) -> np.ndarray:
+        """Q (n, n) of the fast path: the attitude-independent blocks cached per dt, the q block
+        ``N_w^2 dt / 4 (|q|^2 I - q q^T)`` plus ``quat_norm_variance`` along q (as ins.py's Q)."""
+        Qm = self._q_base(dt).copy()
         q = x[6:10]
         n2 = float(q @ q)
         kw = self.core._var_w[0] * dt / 4.0

@@ -1,0 +1,157 @@
+"""The EKF's run of IMU samples for the paper-002 state sets (10 and 22 states, Euler, no eta or Earth rate):
+means, Jacobians and process noise of k samples in one vectorised pass (``InsStates.linearise_inputs``).
+
+Why not k calls of ``InsStates._step``: one scalar step costs ~40 us of Python, most of a 50 Hz replay.
+Within a run between two measurements the biases and scale factors do not change (their mean is kept by
+the prediction), so every sample's corrected input, its rotation increment ``dq`` and the blocks of F that
+depend on it are known at once and computed over the whole run; only the attitude chain
+``q_{j+1} = normalize(q_j (x) dq_j)`` is sequential (four-element products in plain floats). Velocity and
+position follow by running sums in the same order as the per-sample additions. The numbers are those of
+``_step`` / ``_noise`` to rounding (tests/models/test_ins_linearise.py).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["linearise_run"]
+
+def _homogeneous_dcm(q: np.ndarray) -> np.ndarray:
+    """R(q) with C_b^n = R(q) / |q|^2 (paper 000 eq. 35, not normalised): quadratic in q."""
+    q0, q1, q2, q3 = q
+    return np.array([[q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3, 2 * (q1 * q2 - q0 * q3), 2 * (q1 * q3 + q0 * q2)],
+                     [2 * (q1 * q2 + q0 * q3), q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3, 2 * (q2 * q3 - q0 * q1)],
+                     [2 * (q1 * q3 - q0 * q2), 2 * (q2 * q3 + q0 * q1), q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3]])
+
+
+def _quadratic_form() -> np.ndarray:
+    """A (4, 4, 3, 3) symmetric in its first two axes with R(q)_rc = sum_jl q_j q_l A[j, l, r, c]
+    (polarisation on the basis quaternions)."""
+    E = np.eye(4)
+    A = np.empty((4, 4, 3, 3))
+    for j in range(4):
+        for l in range(4):
+            A[j, l] = (_homogeneous_dcm(E[j] + E[l]) - _homogeneous_dcm(E[j]) - _homogeneous_dcm(E[l])) / 2.0 \
+                if j != l else _homogeneous_dcm(E[j])
+    return A
+
+
+# Constant tensors so that each block of F is one product over the whole run (a handful of numpy calls
+# instead of one per matrix element: the block shapes are tiny, so call overhead is the cost):
+#   R(q) (k, 9)          = (q q^T) (k, 16) @ _R_OF_QQ (16, 9)
+#   dR/dq a (k, 3 x 4)   = (q a^T) (k, 12) @ _DRA_OF_QA (12, 12),   dR_r/dq_j = 2 sum_lc A[j, l, r, c] q_l a_c
+#   R(p), L(q) (k, 16)   = p (k, 4) @ _RIGHT / _LEFT (4, 16):       q (x) p = R(p) q = L(q) p
+_A = _quadratic_form()
+_R_OF_QQ = _A.reshape(16, 9)
+_DRA_OF_QA = (2.0 * _A).transpose(1, 3, 2, 0).reshape(12, 12)   # [(l, c), (r, j)]
+
+
+def _product_matrices() -> tuple[np.ndarray, np.ndarray]:
+    def mul(a, b):
+        a0, a1, a2, a3 = a
+        b0, b1, b2, b3 = b
+        return np.array([a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3, a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
+                         a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1, a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0])
+    E = np.eye(4)
+    # R(p)[i, j] = d(q (x) p)_i / dq_j, linear in p: column block of basis p = e_m
+    right = np.array([[mul(E[j], E[m]) for j in range(4)] for m in range(4)])   # [m, j, i]
+    left = np.array([[mul(E[m], E[j]) for j in range(4)] for m in range(4)])    # [m, j, i] for L(q)
+    return right.transpose(0, 2, 1).reshape(4, 16), left.transpose(0, 2, 1).reshape(4, 16)
+
+
+_RIGHT, _LEFT = _product_matrices()
+_I3 = np.eye(3)
+_I4 = np.eye(4)
+
+
+def _chain(q: list[float], dq: np.ndarray, unit: bool) -> np.ndarray:
+    """Attitudes before each sample and after the last: (k + 1, 4); q_{j+1} = q_j (x) dq_j, renormalised
+    when ``unit`` (the filter renormalises the predicted mean)."""
+    out = [q]
+    q0, q1, q2, q3 = q
+    for p0, p1, p2, p3 in dq.tolist():
+        q0, q1, q2, q3 = (q0 * p0 - q1 * p1 - q2 * p2 - q3 * p3, q0 * p1 + q1 * p0 + q2 * p3 - q3 * p2,
+                          q0 * p2 - q1 * p3 + q2 * p0 + q3 * p1, q0 * p3 + q1 * p2 - q2 * p1 + q3 * p0)
+        if unit:
+            r = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+            q0, q1, q2, q3 = q0 / r, q1 / r, q2 / r, q3 / r
+        out.append([q0, q1, q2, q3])
+    return np.array(out)
+
+
+def linearise_run(x: np.ndarray, us: np.ndarray, dts: np.ndarray, g: float, unit: bool,
+                  Q_base: np.ndarray, var_w: float, quat_norm_variance: float
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x after the run (n,), F (k, n, n), Q (k, n, n)) for states x (n,) = [p v q (ba bw sa sw)] (m, m/s,
+    Hamilton scalar-first C_b^n, m/s^2, rad/s, 1), IMU samples us (k, 6) (m/s^2, rad/s, FRD) held over dts
+    (k,) s. ``Q_base`` (k, n, n): each sample's attitude-independent noise (q block zero); ``var_w`` the
+    gyro's white-noise variance density (rad^2/s), ``quat_norm_variance`` the variance along q."""
+    n = x.shape[0]
+    k = dts.shape[0]
+    a = us[:, :3]
+    w = us[:, 3:]
+    if n == 22:
+        a = (a - x[10:13]) / x[16:19]                              # eq. 11 solved for the true input
+        w = (w - x[13:16]) / x[19:22]
+    hh = (0.5 * dts)[:, None] * w                                  # half rotation vector (k, 3)
+    s = np.sqrt((hh * hh).sum(axis=1))
+    tiny = s <= 1e-300
+    ss = np.where(tiny, 1.0, s)
+    sinc = np.where(tiny, 1.0, np.sin(s) / ss)
+    small = s <= 1e-4
+    c3 = np.where(small, -1.0 / 3.0 + s * s / 30.0, (ss * np.cos(s) - np.sin(s)) / ss ** 3)
+    dq = np.empty((k, 4))
+    dq[:, 0] = np.cos(s)
+    dq[:, 1:] = sinc[:, None] * hh                                 # eqs. 43-49
+    qs = _chain(x[6:10].tolist(), dq, unit)
+    q = qs[:-1]                                                     # attitude before each sample (k, 4)
+    q0, q1, q2, q3 = q.T
+    n2 = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
+    qq = q[:, :, None] * q[:, None, :]
+    C = (qq.reshape(k, 16) @ _R_OF_QQ).reshape(k, 3, 3)            # C_b^n = R(q) / |q|^2 (eq. 35)
+    C /= n2[:, None, None]
+    Ca = C[:, :, 0] * a[:, 0:1] + C[:, :, 1] * a[:, 1:2] + C[:, :, 2] * a[:, 2:3]
+    acc = Ca.copy()
+    acc[:, 2] += g
+    # v_{j+1} = v_j + (C a + g) dt, r_{j+1} = r_j + v_j dt: running sums in the order of the per-sample steps
+    steps = np.empty((k + 1, 3))
+    steps[0] = x[3:6]
+    np.multiply(acc, dts[:, None], out=steps[1:])
+    v = np.cumsum(steps, axis=0)
+    steps[0] = x[0:3]
+    np.multiply(v[:-1], dts[:, None], out=steps[1:])
+    r = np.cumsum(steps, axis=0)
+    x1 = x.copy()
+    x1[0:3], x1[3:6], x1[6:10] = r[-1], v[-1], qs[-1]
+
+    F = np.zeros((k, n, n))
+    F.reshape(k, n * n)[:, ::n + 1] = 1.0
+    F[:, 0, 3] = F[:, 1, 4] = F[:, 2, 5] = dts
+    # d(C a)/dq for the normalised C: (dR/dq a - 2 C a q^T) / |q|^2, R the homogeneous form
+    dRa = ((q[:, :, None] * a[:, None, :]).reshape(k, 12) @ _DRA_OF_QA).reshape(k, 3, 4)
+    F[:, 3:6, 6:10] = (dts / n2)[:, None, None] * (dRa - 2.0 * Ca[:, :, None] * q[:, None, :])
+    F[:, 6:10, 6:10] = (dq @ _RIGHT).reshape(k, 4, 4)                 # R(dq): q_new = R(dq) q
+    if n == 22:
+        # d dq / dw (4, 3), then d q_new / dw = L(q) d dq / dw
+        D = np.empty((k, 4, 3))
+        D[:, 0] = (-0.5 * sinc * dts)[:, None] * hh
+        D[:, 1:] = (0.5 * c3 * dts)[:, None, None] * hh[:, :, None] * hh[:, None, :]
+        D[:, 1:] += (0.5 * sinc * dts)[:, None, None] * _I3
+        L = (q @ _LEFT).reshape(k, 4, 4)                             # L(q): q (x) p = L(q) p
+        Ldw = L @ D
+        inv_sa = 1.0 / x[16:19]
+        inv_sw = 1.0 / x[19:22]
+        Cm = C * -dts[:, None, None]
+        F[:, 3:6, 10:13] = Cm * inv_sa                               # df/dba = -C / sa dt
+        F[:, 3:6, 16:19] = Cm * (a * inv_sa)[:, None, :]             # df/dsa = -C a / sa dt
+        F[:, 6:10, 13:16] = -Ldw * inv_sw
+        F[:, 6:10, 19:22] = -Ldw * (w * inv_sw)[:, None, :]
+
+    # the q block of Q: N_w^2 dt / 4 (|q|^2 I - q q^T) plus quat_norm_variance along q (ins_states._noise)
+    Q = Q_base.copy()
+    kw = var_w * dts / 4.0
+    blk = qq * (quat_norm_variance / n2 - kw)[:, None, None]
+    blk += (n2 * kw)[:, None, None] * _I4
+    Q[:, 6:10, 6:10] = blk
+    return x1, F, Q
