@@ -204,6 +204,12 @@ class RunStats:
         the scheduler from what the filter returned (filters keep no counters)."""
         return dict(self.scheduler.filter_counters)
 
+    @property
+    def gate_counters(self) -> dict[str, dict[str, int]]:
+        """Per gated sensor, its gate's decisions this run (``checked``, ``rejected``, and reasons such as the
+        ``reopening`` gate's ``opened``), counted by the run (gates keep nothing: fusion.api.GateRun)."""
+        return self.scheduler.gate_counters
+
     def summary(self, source: str, wall_s: float) -> dict[str, Any]:
         """The summary dict of DESIGN.md "Outputs"."""
         system, sched = self.system, self.scheduler

@@ -31,7 +31,7 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from fusion.api import (AlignsState, Belief, Estimate, Event, HasThreshold, MalformedMessage, Message,
+from fusion.api import (AlignsState, Belief, Estimate, Event, GateRun, HasThreshold, MalformedMessage, Message,
                         PredictsInputRuns, PseudoMeasurement, ReadsBelief, UsesInput, has)
 from fusion.clock import ClockGuard
 from fusion.recovery import LockoutWatch, recover
@@ -121,6 +121,8 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         self._pseudo = [s for s in self.sensors.values()
                         if isinstance(s.model, PseudoMeasurement) and s.model.rule == "after_predict"]
         self._thresholds = {n: s.gate.threshold for n, s in self.sensors.items() if has(s.gate, HasThreshold)}
+        # The gates' per-run state and decision counts (fusion.api.GateRun), what the filter's update is given.
+        self.gates = {n: GateRun(s.gate) for n, s in self.sensors.items() if s.gate is not None}
         if self._pseudo:
             self._batch = False
 
@@ -244,7 +246,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             if obs is None:
                 continue
             R = obs.R if obs.R is not None else sensor.R
-            result = self.filter.update(self.belief, obs.model, obs.z, R, sensor.gate)
+            result = self.filter.update(self.belief, obs.model, obs.z, R, self.gates.get(sensor.name))
             self._tally(result)
             if result.accepted:
                 self.belief = result.belief
@@ -357,7 +359,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         if R.shape[0] != len(obs.z) and len(obs.z) % R.shape[0] == 0:
             R = np.kron(np.eye(len(obs.z) // R.shape[0]), R)  # R per item (a range) for a message of several
         t0 = time.perf_counter()
-        result = self.filter.update(self.belief, obs.model, obs.z, R, sensor.gate)
+        result = self.filter.update(self.belief, obs.model, obs.z, R, self.gates.get(sensor.name))
         self.time_s["update"] += time.perf_counter() - t0
         self.steps["update"] += 1
         self._tally(result)
@@ -371,7 +373,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                 self.belief, event = recover(sensor.recovery, self.belief, self.system.layout, obs, R,  # type: ignore[arg-type]
                                              self.filter, sensor.name)
                 yield event
-                result = self.filter.update(self.belief, obs.model, obs.z, R, sensor.gate)
+                result = self.filter.update(self.belief, obs.model, obs.z, R, self.gates.get(sensor.name))
                 self.steps["update"] += 1
                 self._tally(result)
         if self._filter_events:

@@ -1,5 +1,5 @@
 """chi2 gate: thresholds from scipy.stats.chi2, n-sigma for scalars, rejection leaves the belief
-untouched and is counted."""
+untouched and is counted by the run's GateRun (the gate itself keeps nothing)."""
 from __future__ import annotations
 
 import numpy as np
@@ -8,6 +8,7 @@ from pydantic import ValidationError
 from scipy.stats import chi2
 
 from fusion import testing
+from fusion.api import GateDecision, GateRun
 
 
 def _gate(**params):
@@ -21,7 +22,8 @@ def test_threshold_is_chi2_ppf(p, dim):
     th = chi2.ppf(p, dim)
     assert g.threshold(dim) == pytest.approx(th, rel=1e-12)
     assert g.accept(th * (1 - 1e-9), dim) and not g.accept(th * (1 + 1e-9), dim)
-    assert g.last_threshold == pytest.approx(th)
+    decision, state = g.check(th * 0.5, dim)
+    assert decision == GateDecision(True, pytest.approx(th)) and state is None
 
 
 def test_default_probability():
@@ -40,9 +42,13 @@ def test_n_sigma_on_scalars(n):
 
 def test_counts_and_nan():
     g = _gate(probability=0.95)
-    results = [g.accept(v, 2) for v in (0.5, 100.0, 1.0, 5.9, float("nan"))]
+    before = dict(vars(g))
+    run = GateRun(g)
+    results = [run.accept(v, 2) for v in (0.5, 100.0, 1.0, 5.9, float("nan"))]
     assert results == [True, False, True, True, False]
-    assert g.checked == 5 and g.rejected == 2
+    assert run.counters == {"checked": 5, "rejected": 2}
+    assert run.last == GateDecision(False, pytest.approx(chi2.ppf(0.95, 2)))
+    assert vars(g) == before                   # the gate itself is unchanged: the run counted
 
 
 def test_params_validation():
@@ -65,13 +71,13 @@ def test_rejected_update_leaves_belief_untouched(name):
     R = np.eye(2) * 0.01
     b = flt.predict(flt.initial_belief(0.0, [3.0, 4.0, 0.5, 0.0], np.eye(4) * 0.1), proc, None, 0.1)
     x_before, cov_before = b.x.copy(), b.cov.copy()
-    gate = _gate(n_sigma=3.0)
+    gate = GateRun(_gate(n_sigma=3.0))
     z_good = meas.h(b.x)
     res = flt.update(b, meas, z_good + 0.01, R, gate=gate)
     assert res.accepted and res.belief is not b
     res = flt.update(b, meas, z_good + np.array([5.0, 0.0]), R, gate=gate)   # an echo, 5 m long
     assert res.accepted is False and res.belief is b
     assert np.array_equal(b.x, x_before) and np.array_equal(b.cov, cov_before)
-    assert res.nis > gate.threshold(2)
+    assert res.nis > gate.gate.threshold(2) == gate.last.threshold
     np.testing.assert_allclose(res.innovation, [5.0, 0.0], atol=0.2)
-    assert gate.rejected == 1 and gate.checked == 2   # counted by the gate; the filter keeps no counters
+    assert gate.counters == {"rejected": 1, "checked": 2}   # counted in the run's GateRun; the filter keeps none

@@ -7,9 +7,10 @@ Shapes: a state is ``(..., n)``; process and measurement functions are vectorise
 axes, so a sigma-point filter calls them once per step with all ``2n+1`` points.
 
 Modules: ``state`` (StateLayout, Belief), ``messages`` (Message, Observation, Fix, UpdateResult, Event,
-Estimate), ``components`` (the bases of every kind), ``capabilities`` (the optional capabilities, one
-Protocol each), ``importing`` (the importer kind); the errors live in fusion.errors. Everything is
-importable from ``fusion.api`` itself.
+Estimate), ``gates`` (GateDecision, GateRun: a gate's verdict, and its state and counts in one run),
+``components`` (the bases of every kind), ``capabilities`` (the optional capabilities, one Protocol each),
+``importing`` (the importer kind); the errors live in fusion.errors. Everything is importable from
+``fusion.api`` itself.
 """
 from __future__ import annotations
 
@@ -17,13 +18,14 @@ from fusion.errors import ConfigError, FusionError, InputError, MalformedMessage
 from fusion.kinds import KINDS
 
 from .capabilities import (CAPABILITIES, Aligns, AlignsState, CapabilityWarning, ChecksGeometry, Closes,
-                           HasThreshold, InputRunNoise, IntegratesInputRuns, LinearisesInputRuns,
-                           NonAdditiveMeasurementNoise,
-                           NonAdditiveProcessNoise, Opens, PositionFromFix, PredictsInputRuns, PseudoMeasurement,
+                           HasThreshold, InputRunNoise, IntegratesInputRuns, KeepsGateState, LinearisesInputRuns,
+                           NonAdditiveMeasurementNoise, NonAdditiveProcessNoise, Opens, PositionFromFix,
+                           PredictsInputRuns, PseudoMeasurement,
                            ReadsBelief, ReportsIdle, ReportsInfo, ReportsStatus, UsesInput, capabilities_of, has,
                            near_misses)
 from .components import (BuildContext, Component, Decoder, Filter, Gate, MeasurementModel, Params,
                          ProcessModel, Simulator, Sink, Solver, Source)
+from .gates import GateDecision, GateRun
 from .importing import ImportedLog, Importer, ImportRequest, Stream
 from .messages import MAX_MAGNITUDE, Estimate, Event, Fix, Message, Observation, UpdateResult
 from .state import Belief, Block, BlockKind, StateLayout
@@ -44,14 +46,13 @@ def __getattr__(name: str):
 __all__ = [
     "Block", "BlockKind", "StateLayout", "Belief", "Message", "Observation", "Fix", "UpdateResult", "Event",
     "Estimate", "Params", "BuildContext", "Component", "ProcessModel", "MeasurementModel",
-    "Filter", "Gate", "Decoder", "Solver", "Source", "Sink", "Simulator", "FusionError",
+    "Filter", "Gate", "GateDecision", "GateRun", "Decoder", "Solver", "Source", "Sink", "Simulator", "FusionError",
     "ConfigError", "InputError", "MalformedMessage", "RejectedMessage", "KINDS", "MAX_MAGNITUDE",
     "Importer", "ImportRequest", "Stream", "ImportedLog",
     # optional capabilities (fusion.api.capabilities)
     "Aligns", "IntegratesInputRuns", "InputRunNoise", "LinearisesInputRuns", "NonAdditiveProcessNoise",
-    "ChecksGeometry",
-    "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState", "UsesInput", "PseudoMeasurement",
-    "PredictsInputRuns", "HasThreshold", "ReadsBelief", "ReportsInfo", "Opens", "Closes", "ReportsIdle",
-    "ReportsStatus", "CAPABILITIES", "CapabilityWarning", "has", "capabilities_of", "near_misses",
+    "ChecksGeometry", "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState", "UsesInput",
+    "PseudoMeasurement", "PredictsInputRuns", "HasThreshold", "KeepsGateState", "ReadsBelief", "ReportsInfo",
+    "Opens", "Closes", "ReportsIdle", "ReportsStatus", "CAPABILITIES", "CapabilityWarning", "has", "capabilities_of", "near_misses",
     *_SIMULATION,
 ]

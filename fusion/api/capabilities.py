@@ -29,7 +29,7 @@ __all__ = [
     # filters
     "PredictsInputRuns",
     # gates
-    "HasThreshold",
+    "HasThreshold", "KeepsGateState",
     # solvers, decoders, models
     "ReadsBelief", "ReportsInfo",
     # sources
@@ -187,6 +187,18 @@ class HasThreshold(Protocol):
     def threshold(self, dim: int) -> float: ...
 
 
+@runtime_checkable
+class KeepsGateState(Protocol):
+    """A gate whose decision depends on the measurements before (the ``reopening`` gate's integrator of
+    the recent fit). The gate stays immutable: ``initial_state()`` returns the value its memory starts
+    from (immutable: a tuple, a frozen dataclass), called once per run by the run's
+    :class:`fusion.api.GateRun`; every ``check(nis, dim, state)`` then gets the current state and returns
+    ``(GateDecision, next state)``. The run owns the state (and rewinds it with the belief on a replay),
+    so two runs of one wired System decide alike. Without it a gate's ``check`` gets and returns None."""
+
+    def initial_state(self) -> Any: ...
+
+
 # --------------------------------------------------------------------------- solvers, decoders, models
 @runtime_checkable
 class ReportsInfo(Protocol):
@@ -249,7 +261,7 @@ class ReportsStatus(Protocol):
 CAPABILITIES: tuple[type, ...] = (
     Aligns, IntegratesInputRuns, InputRunNoise, LinearisesInputRuns, NonAdditiveProcessNoise, ChecksGeometry,
     PositionFromFix, NonAdditiveMeasurementNoise, AlignsState, UsesInput, PseudoMeasurement, PredictsInputRuns,
-    HasThreshold, ReportsInfo, ReadsBelief, Opens, Closes, ReportsIdle, ReportsStatus,
+    HasThreshold, KeepsGateState, ReportsInfo, ReadsBelief, Opens, Closes, ReportsIdle, ReportsStatus,
 )
 
 _METHODS: dict[type, tuple[str, ...]] = {

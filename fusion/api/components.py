@@ -10,6 +10,8 @@ from pydantic import BaseModel, ConfigDict
 
 from fusion.errors import MalformedMessage
 
+from .capabilities import KeepsGateState, has
+from .gates import GateDecision, GateRun
 from .messages import Estimate, Event, Message, Observation, UpdateResult
 from .state import Belief, StateLayout
 
@@ -144,12 +146,27 @@ class MeasurementModel(Component[P]):
 
 
 class Gate(Component[P]):
-    """Validation gate on the normalised innovation squared (NIS = y^T S^-1 y)."""
+    """Validation gate on the normalised innovation squared (NIS = y^T S^-1 y), an immutable object.
+
+    ``check`` returns the decision as a value (fusion.api.GateDecision: accepted, the threshold, reasons);
+    the gate counts nothing and keeps nothing. A gate with memory declares KeepsGateState
+    (``initial_state()``) and gets its state passed in and returns the next one; the run keeps it
+    (fusion.api.GateRun, what the filters are given). Optional: HasThreshold (``threshold(dim)``)."""
 
     kind: ClassVar[str] = "gate"
 
-    def accept(self, nis: float, dim: int) -> bool:
+    def check(self, nis: float, dim: int, state: Any = None) -> tuple[GateDecision, Any]:
+        """(decision, next state) for a measurement of ``dim`` values with NIS ``nis`` (dimensionless; NaN
+        must be refused); ``state`` is None for a gate without KeepsGateState, and returned as None."""
         raise NotImplementedError
+
+    def accept(self, nis: float, dim: int) -> bool:
+        """The decision alone, for a gate without memory (a filter may be given the gate itself). A gate
+        with KeepsGateState must be wrapped in a GateRun, which keeps its state: TypeError here."""
+        if has(self, KeepsGateState):
+            raise TypeError(f"gate {self.name!r} keeps per-run state: give the filter GateRun(gate) "
+                            "(fusion.api), which holds it")
+        return self.check(nis, dim, None)[0].accepted
 
 
 class Filter(Component[P]):
@@ -168,7 +185,10 @@ class Filter(Component[P]):
         raise NotImplementedError
 
     def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
-               gate: Gate | None = None) -> UpdateResult:
+               gate: Gate | GateRun | None = None) -> UpdateResult:
+        """The belief after measurement ``z`` (m,) with noise ``R`` (m, m), or the input belief when
+        ``gate.accept(nis, m)`` refuses it (the only call a filter makes on its gate; the run passes a
+        GateRun)."""
         raise NotImplementedError
 
     # Optional capability: PredictsInputRuns (``predict_inputs``, fusion.api.capabilities); the built-ins

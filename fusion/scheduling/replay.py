@@ -1,11 +1,11 @@
 """The scheduler's ``late_policy: replay``: a bounded log of processed messages and snapshots of the
-belief, and the rewind that re-runs the buffered messages around a late one. A mixin of
-fusion.scheduler.Scheduler."""
+belief (with the gates' per-run states, values like the belief), and the rewind that re-runs the buffered
+messages around a late one. A mixin of fusion.scheduler.Scheduler."""
 from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
-from typing import Iterator
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -19,6 +19,7 @@ class _Snapshot:
     u: np.ndarray | None
     next_output: float
     index: int  # position in the processed-message log after which this snapshot was taken
+    gates: dict[str, Any]  # sensor -> its gate's state (fusion.api.GateRun.state)
 
 
 class Replay:
@@ -35,7 +36,8 @@ class Replay:
         if self.late_policy != "replay" or self._replaying or self.belief is None:
             return
         self._history.append(_Snapshot(self.belief.t, self.belief, self.u, self._next_output,
-                                       self._log_start + len(self._log)))
+                                       self._log_start + len(self._log),
+                                       {n: g.state for n, g in self.gates.items()}))
 
     def _replay(self, late: Message) -> Iterator[Estimate | Event]:
         snap = None
@@ -51,8 +53,11 @@ class Replay:
         rerun.append(late)
         rerun.sort(key=lambda m: m.t)
         self.belief, self.u, self._next_output = snap.belief, snap.u, snap.next_output
+        for n, state in snap.gates.items():
+            self.gates[n].state = state
         self._replaying = True
         counters = {n: dict(s.counters) for n, s in self.sensors.items()}
+        gate_counts = {n: g.counters.copy() for n, g in self.gates.items()}
         try:
             for msg in rerun:
                 for out in self._process(msg):
@@ -61,6 +66,8 @@ class Replay:
             self._replaying = False
         for n, s in self.sensors.items():  # re-run messages were already counted
             s.counters.update(counters[n])
+        for n, g in self.gates.items():
+            g.counters = gate_counts[n]
         sensor.counters["used"] += 1
         self._record(late)
         self._history.clear()

@@ -1,5 +1,6 @@
 """What the scheduler counts and reports: the filter's returned events and outcomes (filters keep no
-counters), a model's geometry warnings (ChecksGeometry), messages a plugin refused, a preprocessor's
+counters), the gates' decisions (counted in the run's fusion.api.GateRun of each sensor: gates keep
+nothing), a model's geometry warnings (ChecksGeometry), messages a plugin refused, a preprocessor's
 events. A mixin of fusion.scheduler.Scheduler."""
 from __future__ import annotations
 
@@ -15,6 +16,12 @@ _CHECK_EVERY_S = 0.5  # a model's check() (geometry) runs at most this often per
 class Reporting:
     """Mixin: ``_predicted``, ``_tally``, ``_take_filter_events``, ``_check``, ``_bad``,
     ``_drain_solver_events``, ``_count_wild`` (see fusion.scheduler)."""
+
+    @property
+    def gate_counters(self) -> dict[str, dict[str, int]]:
+        """Per gated sensor, its gate's decisions this run: ``checked``, ``rejected`` and the reasons the
+        decisions gave (the ``reopening`` gate's ``opened``, ``closed``, ``accepted_open``)."""
+        return {n: dict(g.counters) for n, g in self.gates.items()}
 
     def _take_filter_events(self) -> list[Event]:
         events, self._filter_events = self._filter_events, []

@@ -8,7 +8,7 @@ from typing import Iterable
 import numpy as np
 from pydantic import Field
 
-from fusion.api import Belief, Gate, MeasurementModel, Params, ProcessModel, StateLayout
+from fusion.api import Belief, Gate, GateDecision, MeasurementModel, Params, ProcessModel, StateLayout
 
 __all__ = ["ConstantVelocity", "PositionMeasurement", "RangeMeasurement", "RejectAll", "reference_kf", "nees"]
 
@@ -128,8 +128,8 @@ class RejectAll(Gate):
 
     name = "test_reject_all"
 
-    def accept(self, nis: float, dim: int) -> bool:
-        return False
+    def check(self, nis: float, dim: int, state: None = None) -> tuple[GateDecision, None]:
+        return GateDecision(False, 0.0), None
 
 
 # --------------------------------------------------------------------------- reference filter

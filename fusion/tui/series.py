@@ -14,7 +14,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from fusion.api import Estimate
+from fusion.api import Estimate, HasThreshold, has
 
 
 @dataclass(frozen=True)
@@ -28,10 +28,12 @@ class Sample:
 
 
 class InnovationHistory:
-    """The last ``maxlen`` samples per sensor; ``gates`` maps a sensor to its gate (``threshold(dim)``)."""
+    """The last ``maxlen`` samples per sensor; ``gates`` maps a sensor to its gate (the ratio needs its
+    ``threshold(dim)``: fusion.api.HasThreshold)."""
 
     def __init__(self, gates: Mapping[str, Any], maxlen: int = 600):
         self.gates = dict(gates)
+        self.thresholds = {n: g.threshold for n, g in self.gates.items() if has(g, HasThreshold)}
         self.maxlen = maxlen
         self.samples: dict[str, deque[Sample]] = {}
 
@@ -42,8 +44,7 @@ class InnovationHistory:
         y = np.asarray(up.innovation, dtype=float).reshape(-1)
         S = np.asarray(up.S, dtype=float).reshape(y.size, y.size) if y.size else np.zeros((0, 0))
         nis = float(up.nis)
-        gate = self.gates.get(est.sensor)
-        threshold = getattr(gate, "threshold", None)
+        threshold = self.thresholds.get(est.sensor)
         ratio = math.nan
         if threshold is not None and y.size:
             try:

@@ -25,7 +25,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from fusion.api import ConfigError, Estimate, StateLayout
+from fusion.api import ConfigError, Estimate, HasThreshold, StateLayout, has
 
 DEFAULT_PORT = 9870  # PlotJuggler's UDP server default
 
@@ -63,6 +63,7 @@ class UdpStream:
         self.sock.setblocking(False)
         self.names = [n for b in layout.blocks for n in b.element_names()]
         self.gates = dict(gates or {})
+        self.thresholds = {n: g.threshold for n, g in self.gates.items() if has(g, HasThreshold)}
         self.sent = 0
         self.errors = 0
 
@@ -77,7 +78,7 @@ class UdpStream:
             y = np.asarray(up.innovation, dtype=float).reshape(-1)
             S = np.asarray(up.S, dtype=float).reshape(y.size, y.size)
             inn: dict[str, Any] = {"nis": _num(up.nis), "accepted": int(bool(up.accepted)), "dim": int(y.size)}
-            threshold = getattr(self.gates.get(est.sensor), "threshold", None)
+            threshold = self.thresholds.get(est.sensor)
             if threshold is not None and y.size:
                 inn["ratio"] = _num(up.nis / threshold(y.size))
             for k in range(y.size):

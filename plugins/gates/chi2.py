@@ -1,9 +1,37 @@
 """chi2: validation gate on the normalised innovation squared (NIS)."""
 from __future__ import annotations
 
+from functools import lru_cache
+
 from pydantic import Field, model_validator
 
-from fusion.api import Gate, Params
+from fusion.api import Gate, GateDecision, Params
+
+__all__ = ["Chi2Gate", "chi2_threshold", "n_sigma_threshold"]
+
+
+@lru_cache(maxsize=256)
+def chi2_threshold(probability: float, dim: int) -> float:
+    """``chi2.ppf(probability, dim)``: the NIS a consistent filter's measurement of ``dim`` values stays under
+    with that probability."""
+    if dim < 1:
+        raise ValueError(f"measurement dimension must be >= 1, got {dim}")
+    from fusion.chisquare import chi2
+
+    return float(chi2.ppf(probability, dim))
+
+
+@lru_cache(maxsize=256)
+def n_sigma_threshold(n_sigma: float, dim: int) -> float:
+    """The NIS threshold of an n-sigma gate: ``n_sigma^2`` for a scalar, else the chi-square quantile of the
+    same probability as the 1-D interval, ``chi2.ppf(chi2.cdf(n_sigma^2, 1), dim)``."""
+    if dim < 1:
+        raise ValueError(f"measurement dimension must be >= 1, got {dim}")
+    if dim == 1:
+        return float(n_sigma) ** 2
+    from fusion.chisquare import chi2
+
+    return float(chi2.ppf(chi2.cdf(n_sigma ** 2, 1), dim))
 
 
 class Chi2Gate(Gate):
@@ -17,8 +45,8 @@ class Chi2Gate(Gate):
     as the 1-D n-sigma interval, ``chi2.ppf(chi2.cdf(n_sigma^2, 1), m)``. Give one of the two
     (default probability 0.997).
 
-    ``checked`` and ``rejected`` count the calls and the rejections (one gate per sensor, so these
-    are per-sensor counts); ``last_threshold`` is the threshold of the last call.
+    Memoryless and immutable: ``check`` returns the decision (fusion.api.GateDecision); the run counts
+    them (``checked``, ``rejected``: fusion.api.GateRun).
     """
 
     name = "chi2"
@@ -38,34 +66,17 @@ class Chi2Gate(Gate):
                 self.probability = 0.997
             return self
 
-    def __init__(self, params=None, context=None):
-        super().__init__(params, context)
-        self.checked = 0
-        self.rejected = 0
-        self.last_threshold: float | None = None
-        self._thresholds: dict[int, float] = {}
-
     def threshold(self, dim: int) -> float:
         """The NIS threshold for a measurement of dimension ``dim``."""
-        th = self._thresholds.get(dim)
-        if th is None:
-            if dim < 1:
-                raise ValueError(f"gate {self.name!r}: measurement dimension must be >= 1, got {dim}")
-            from fusion.chisquare import chi2
-
-            p = self.params
+        p = self.params
+        try:
             if p.n_sigma is not None:
-                th = float(p.n_sigma) ** 2 if dim == 1 else float(chi2.ppf(chi2.cdf(p.n_sigma ** 2, 1), dim))
-            else:
-                th = float(chi2.ppf(p.probability, dim))
-            self._thresholds[dim] = th
-        return th
+                return n_sigma_threshold(float(p.n_sigma), dim)
+            return chi2_threshold(float(p.probability), dim)
+        except ValueError as exc:
+            raise ValueError(f"gate {self.name!r}: {exc}") from None
 
-    def accept(self, nis: float, dim: int) -> bool:
-        """True when the measurement passes (NIS <= threshold); a NaN NIS is rejected."""
-        th = self.last_threshold = self.threshold(dim)
-        self.checked += 1
-        ok = bool(nis <= th)
-        if not ok:
-            self.rejected += 1
-        return ok
+    def check(self, nis: float, dim: int, state: None = None) -> tuple[GateDecision, None]:
+        """Accepted when NIS <= threshold(dim); a NaN NIS is refused."""
+        th = self.threshold(dim)
+        return GateDecision(bool(nis <= th), th), None

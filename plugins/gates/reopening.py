@@ -2,9 +2,24 @@
 re-opening rule after the Crazyflie LPS TDoA outlier filter)."""
 from __future__ import annotations
 
+from typing import NamedTuple
+
 from pydantic import Field, model_validator
 
-from fusion.api import Gate, Params
+from fusion.api import Gate, GateDecision, Params
+from fusion_plugins.gates.chi2 import n_sigma_threshold
+
+__all__ = ["ReopeningGate", "ReopeningState"]
+
+_OPEN = GateDecision(True, float("inf"), ("accepted_open",))
+_OPEN_NAN = GateDecision(False, float("inf"))
+
+
+class ReopeningState(NamedTuple):
+    """The gate's memory in one run: ``is_open`` and the ``integrator`` of the recent fit (0 to window)."""
+
+    is_open: bool
+    integrator: float
 
 
 class ReopeningGate(Gate):
@@ -24,8 +39,11 @@ class ReopeningGate(Gate):
     diverged) and then accepts every measurement; open, it closes again once the integrator is above
     ``close_fraction * window`` (samples fit again). It starts closed with a full integrator (the filter's
     initial covariance is wide, so early samples fit); ``start_open`` starts it open and empty, as the
-    Crazyflie does at start-up. Counters: ``checked``, ``rejected`` (refused while closed), ``opened``
-    (times the gate re-opened), ``accepted_open`` (measurements let through while open).
+    Crazyflie does at start-up.
+
+    The gate itself is immutable: its memory is a :class:`ReopeningState` value (fusion.api.KeepsGateState),
+    kept by the run. Decisions' reasons, counted by the run besides ``checked`` and ``rejected``:
+    ``opened`` (the gate re-opened), ``closed``, ``accepted_open`` (let through while open).
     """
 
     name = "reopening"
@@ -47,50 +65,35 @@ class ReopeningGate(Gate):
                                  f"({self.close_fraction})")
             return self
 
-    def __init__(self, params=None, context=None):
-        super().__init__(params, context)
+    def initial_state(self) -> ReopeningState:
+        """Closed with a full integrator, or open and empty with ``start_open``."""
         p = self.params
-        self.checked = 0
-        self.rejected = 0
-        self.opened = 0
-        self.accepted_open = 0
-        self.is_open = p.start_open
-        self.integrator = 0.0 if p.start_open else float(p.window)
-        self._thresholds: dict[tuple[int, float], float] = {}
+        return ReopeningState(True, 0.0) if p.start_open else ReopeningState(False, float(p.window))
 
     def threshold(self, dim: int, n_sigma: float | None = None) -> float:
         """NIS threshold of an n-sigma gate (default this gate's n_sigma) for dimension ``dim``."""
-        ns = self.params.n_sigma if n_sigma is None else n_sigma
-        key = (dim, ns)
-        th = self._thresholds.get(key)
-        if th is None:
-            if dim < 1:
-                raise ValueError(f"gate {self.name!r}: measurement dimension must be >= 1, got {dim}")
-            if dim == 1:
-                th = ns ** 2
-            else:
-                from fusion.chisquare import chi2
-                th = float(chi2.ppf(chi2.cdf(ns ** 2, 1), dim))
-            self._thresholds[key] = th
-        return th
+        try:
+            return n_sigma_threshold(float(self.params.n_sigma if n_sigma is None else n_sigma), dim)
+        except ValueError as exc:
+            raise ValueError(f"gate {self.name!r}: {exc}") from None
 
-    def accept(self, nis: float, dim: int) -> bool:
-        """True when the measurement passes; updates the integrator and the open/closed state. A NaN NIS
-        never passes and never fits."""
+    def check(self, nis: float, dim: int, state: ReopeningState | None = None
+              ) -> tuple[GateDecision, ReopeningState]:
+        """The decision and the next state (``state`` None: the initial one). A NaN NIS never passes and
+        never fits."""
         p = self.params
-        self.checked += 1
+        is_open, integrator = state if state is not None else self.initial_state()
         fits = bool(nis <= self.threshold(dim, p.trigger_sigma))
-        self.integrator = min(self.integrator + 1.0, p.window) if fits else max(self.integrator - 1.0, 0.0)
-        if self.is_open:
-            if self.integrator > p.close_fraction * p.window:
-                self.is_open = False
-            ok = bool(nis == nis)               # everything but NaN passes while open
-            self.accepted_open += ok
-            return ok
-        ok = bool(nis <= self.threshold(dim))
-        if not ok:
-            self.rejected += 1
-        if self.integrator < p.open_fraction * p.window:
-            self.is_open = True
-            self.opened += 1
-        return ok
+        integrator = min(integrator + 1.0, p.window) if fits else max(integrator - 1.0, 0.0)
+        if is_open:
+            closes = integrator > p.close_fraction * p.window
+            if nis == nis:                      # everything but NaN passes while open
+                decision = _OPEN if not closes else GateDecision(True, float("inf"), ("accepted_open", "closed"))
+            else:
+                decision = _OPEN_NAN if not closes else GateDecision(False, float("inf"), ("closed",))
+            return decision, ReopeningState(not closes, integrator)
+        th = self.threshold(dim)
+        ok = bool(nis <= th)
+        if integrator < p.open_fraction * p.window:
+            return GateDecision(ok, th, ("opened",)), ReopeningState(True, integrator)
+        return GateDecision(ok, th), ReopeningState(False, integrator)

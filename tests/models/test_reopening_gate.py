@@ -9,36 +9,39 @@ import pytest
 from pydantic import ValidationError
 
 from fusion import testing
-from fusion.api import Belief, BuildContext, Message
+from fusion.api import Belief, BuildContext, GateRun, Message
 
 LAB = {"B1": [0, 0, 0], "B2": [2.6, 0, 0], "B3": [0, 2.6, 0], "B4": [0, 0, 2.6]}
 C, T, SIGMA = 340.0, 0.225, 2e-4
 
 
 def _gate(**params):
-    return testing.build("gate", "reopening", params)
+    """The gate bound to a run of its own (fusion.api.GateRun: its state and counts)."""
+    return GateRun(testing.build("gate", "reopening", params))
 
 
 def test_closed_gate_is_n_sigma():
     g = _gate(n_sigma=2.0)
     assert g.accept(3.99, 1) and not g.accept(4.01, 1)
     assert not g.accept(float("nan"), 1)
-    assert g.rejected == 2 and g.checked == 3
+    assert g.counters["rejected"] == 2 and g.counters["checked"] == 3
     from scipy.stats import chi2
-    assert g.threshold(3) == pytest.approx(chi2.ppf(chi2.cdf(4.0, 1), 3), rel=1e-9)
+    assert g.gate.threshold(3) == pytest.approx(chi2.ppf(chi2.cdf(4.0, 1), 3), rel=1e-9)
 
 
 def test_opens_when_almost_everything_is_rejected_and_closes_once_samples_fit():
     g = _gate(n_sigma=2.0, window=10, open_fraction=0.1, close_fraction=0.9)
     # closed, integrator 10: each misfit takes one off; it opens when the integrator drops below 1
     for k in range(9):
-        assert not g.accept(100.0, 1) and not g.is_open, k
-    assert not g.accept(100.0, 1) and g.is_open and g.opened == 1       # 10th misfit: integrator 0
+        assert not g.accept(100.0, 1) and not g.state.is_open, k
+    assert not g.accept(100.0, 1) and g.state.is_open and g.counters["opened"] == 1   # 10th misfit: integrator 0
+    assert g.last.reasons == ("opened",)
     assert g.accept(100.0, 1) and g.accept(1e6, 1)                      # open: everything passes
-    assert g.accepted_open == 2
+    assert g.counters["accepted_open"] == 2 and g.last.threshold == float("inf")
     for k in range(9):                                                   # fits: 1, 2, ..., 9 (not > 9)
-        assert g.accept(0.5, 1) and g.is_open, k
-    assert g.accept(0.5, 1) and not g.is_open                           # 10 > 9: closed again
+        assert g.accept(0.5, 1) and g.state.is_open, k
+    assert g.accept(0.5, 1) and not g.state.is_open                     # 10 > 9: closed again
+    assert g.counters["closed"] == 1
     assert not g.accept(100.0, 1)                                       # and gating again
 
 
@@ -47,7 +50,7 @@ def test_an_echo_rate_does_not_open_it():
     g = _gate(window=20)
     for k in range(400):
         g.accept(100.0 if k % 4 == 0 else 0.3, 1)
-    assert g.opened == 0 and g.rejected == 100
+    assert g.counters["opened"] == 0 and g.counters["rejected"] == 100
 
 
 def test_params_checked():
@@ -104,7 +107,7 @@ def test_every_echo_rejected(seed):
     genuine = np.array([k for k in range(40, 440) if k not in echoes])
     # genuine arrivals outside 2 sigma: binomial(350, 4.6 %) ~ 16 +- 4; allow a little for the estimate's own error
     assert (~acc[genuine]).sum() < 35
-    assert system[3].opened == 0
+    assert system[3].counters["opened"] == 0
     assert np.abs(belief.x[:3] - r).max() < 0.05
 
 
@@ -114,12 +117,12 @@ def test_wrong_belief_recovers_only_with_reopening():
     stream = _stream(r, 800, rng)
     x0 = np.r_[r + np.array([0.35, -0.3, 0.25]), T, 0.137 - T]       # 0.5 m off ...
     b0 = Belief(stream[0][0] - T, x0, P=np.diag([0.003 ** 2] * 3 + [1e-12, 1e-12]))   # ... and sure of it
-    plain = _system(testing.build("gate", "chi2", {"n_sigma": 2.0}))
+    plain = _system(GateRun(testing.build("gate", "chi2", {"n_sigma": 2.0})))
     belief, acc = _run(plain, b0, stream)
     # locked out: the arrivals it still accepts are those the wrong state explains (t absorbs a common delay)
     assert np.linalg.norm(belief.x[:3] - r) > 0.3 and acc.mean() < 0.75
     gate = _gate(n_sigma=2.0, window=40)
     belief, acc = _run(_system(gate), b0, stream)
-    assert gate.opened >= 1 and not gate.is_open                          # opened, then closed again
+    assert gate.counters["opened"] >= 1 and not gate.state.is_open         # opened, then closed again
     assert np.linalg.norm(belief.x[:3] - r) < 3 * belief.sd[:3].max()     # within 3 sd of the truth again
     assert acc[-100:].mean() > 0.85                                        # and gating normally at the end
