@@ -287,7 +287,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         if self._batch and (len(good) > 1 or end is not None) and self.u is not None and self._next_output > last_t:
             # Whole run of samples in one call (the filter integrates them in order, DESIGN: same math).
             ts = np.array([self.belief.t] + [t for t, _ in good] + ([end] if end is not None else []))  # type: ignore[union-attr]
-            us = np.vstack([self.u] + [u for _, u in (good if end is not None else good[:-1])])
+            us = np.array([self.u] + [u for _, u in (good if end is not None else good[:-1])], dtype=float)
             dts = np.diff(ts)
             capped = dts.max() > self.max_predict
             if capped:
