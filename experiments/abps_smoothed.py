@@ -41,7 +41,8 @@ _BIAS = ("bax", "bay", "baz", "bwx", "bwy", "bwz")
 
 def error_rows(estimates, truth: Truth) -> dict:
     """Errors of ``estimates`` (16-state INS beliefs) against ``truth``: ``t`` (k,), ``E`` (k, 15) = estimate
-    - truth of [p (m) v (m/s) attitude (rad, body frame) ba (m/s^2) bw (rad/s)], ``SD`` (k, 15), ``C``
+    - truth of [p (m) v (m/s) attitude (rad, body frame) ba (m/s^2) bw (rad/s)] (appended Gauss-Markov
+    blocks have no truth and are left out), ``SD`` (k, 15), ``C``
     (k, 15, 15) the covariance of that error, ``nees`` (k,), ``blocks`` {name: (k,) NEES of the block},
     ``nis`` (k,) and ``X`` (k, 16) the estimates."""
     rows = []
@@ -61,7 +62,7 @@ def error_rows(estimates, truth: Truth) -> dict:
         T[9:15, 10:16] = np.eye(6)
         err = np.concatenate([x[0:6] - [tv[n] for n in _VEC], 2.0 * d[1:], x[10:16] - [tv[n] for n in _BIAS]])
         upd = getattr(est, "update", None)
-        rows.append((est.t, err, T @ P @ T.T, upd.nis if upd else np.nan, x.copy()))
+        rows.append((est.t, err, T @ P[:16, :16] @ T.T, upd.nis if upd else np.nan, x.copy()))
     E = np.array([r[1] for r in rows])
     C = np.array([r[2] for r in rows])
     nees = np.array([float(e @ np.linalg.solve(c, e)) for e, c in zip(E, C)])

@@ -69,7 +69,11 @@ class Ins(InsNoise, ProcessModel):
 
     def __new__(cls, params: InsParams | None = None, context: BuildContext | None = None):
         """``states: 10`` or ``22`` build the paper-002 state sets (ins_states.InsStates, which drives this
-        16-state model underneath); 16 is this class as it is."""
+        16-state model underneath); ``gauss_markov`` blocks build ins_gauss_markov.InsGaussMarkov (any of
+        those with the blocks appended); 16 without blocks is this class as it is."""
+        if cls is Ins and params is not None and getattr(params, "gauss_markov", None):
+            from .ins_gauss_markov import InsGaussMarkov
+            return InsGaussMarkov(params, context)
         if cls is Ins and params is not None and getattr(params, "states", 16) != 16:
             from .ins_states import InsStates
             return InsStates(params, context)
