@@ -19,7 +19,8 @@ from fusion.kinds import KINDS
 from .capabilities import (CAPABILITIES, Aligns, AlignsState, CapabilityWarning, ChecksGeometry, Closes,
                            HasThreshold, InputRunNoise, IntegratesInputRuns, NonAdditiveMeasurementNoise,
                            NonAdditiveProcessNoise, Opens, PositionFromFix, PredictsInputRuns, PseudoMeasurement,
-                           ReadsBelief, ReportsIdle, ReportsInfo, ReportsStatus, UsesInput, capabilities_of, has,
+                           ReadsBelief, ReportsIdle, ReportsInfo, ReportsStatus, ReportsStepEvents, UsesInput,
+                           capabilities_of, has,
                            near_misses)
 from .components import (BuildContext, Component, Decoder, Filter, Gate, MeasurementModel, Params,
                          ProcessModel, Simulator, Sink, Solver, Source)
@@ -50,6 +51,6 @@ __all__ = [
     "Aligns", "IntegratesInputRuns", "InputRunNoise", "NonAdditiveProcessNoise", "ChecksGeometry",
     "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState", "UsesInput", "PseudoMeasurement",
     "PredictsInputRuns", "HasThreshold", "ReadsBelief", "ReportsInfo", "Opens", "Closes", "ReportsIdle",
-    "ReportsStatus", "CAPABILITIES", "CapabilityWarning", "has", "capabilities_of", "near_misses",
+    "ReportsStatus", "ReportsStepEvents", "CAPABILITIES", "CapabilityWarning", "has", "capabilities_of", "near_misses",
     *_SIMULATION,
 ]
