@@ -22,7 +22,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from fusion.api import BuildContext, Message, Params, ProcessModel, StateLayout
+from fusion.api import BuildContext, Event, Message, Params, ProcessModel, ReportsStepEvents, StateLayout, has
 
 from .ins_params import InsParams
 
@@ -106,6 +106,10 @@ class InsGaussMarkov(ProcessModel):
         m = self.m
         Qi = self.core.Q_inputs(np.asarray(x0, float)[:m], np.asarray(x1, float)[:m], us, dts)
         return self._embed(Qi, float(np.sum(dts)))
+
+    def step_events(self, t: float, dts: np.ndarray) -> tuple[Event, ...]:
+        """The INS part's (fusion.api.ReportsStepEvents: ``ins``'s eta clamps); the blocks report nothing."""
+        return self.core.step_events(t, dts) if has(self.core, ReportsStepEvents) else ()
 
     def input_from(self, message: Message) -> np.ndarray:
         return self.core.input_from(message)
