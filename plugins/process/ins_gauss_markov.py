@@ -101,6 +101,19 @@ class InsGaussMarkov(ProcessModel):
         """Q (n, n) over dt (s): the INS Q and sd^2 (1 - exp(-2 dt / tau)), block diagonal."""
         return self._embed(self.core.Q(np.asarray(x, dtype=float)[:self.m], u, dt), dt)
 
+    def Q_batch(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        """:meth:`Q` for states x (N, n) at once (N, n, n) (the batched filters, fusion.batch): the INS's own
+        ``Q_batch`` when it has one, the blocks' variances on the diagonal."""
+        x = np.asarray(x, dtype=float)
+        core_batch = getattr(self.core, "Q_batch", None)
+        if core_batch is None:
+            return np.stack([self.Q(xi, u if u is None or np.ndim(u) == 1 else u[i], dt) for i, xi in enumerate(x)])
+        n, m = self.layout.n, self.m
+        out = np.zeros((x.shape[0], n, n))
+        out[:, :m, :m] = core_batch(x[:, :m], u, dt)
+        out[:, range(m, n), range(m, n)] = self.block_noise(dt)
+        return out
+
     def Q_inputs(self, x0: np.ndarray, x1: np.ndarray, us: np.ndarray, dts: np.ndarray) -> np.ndarray:
         """Q (n, n) of a run of samples: ``ins.Q_inputs`` and the blocks' noise over T = sum dts."""
         m = self.m

@@ -77,6 +77,12 @@ def test_noise_is_the_exact_discretisation_of_the_stationary_process():
     np.testing.assert_allclose(np.diag(m.jacobian(x, u, 1.0))[16:], f1 * f2, rtol=1e-15)
 
 
+def test_batched_noise_equals_state_by_state():
+    m = make()
+    X, u = states(4, seed=5), np.r_[0, 0, -G, 0, 0, 0]
+    np.testing.assert_allclose(m.Q_batch(X, u, 0.01), np.stack([m.Q(x, u, 0.01) for x in X]), rtol=0, atol=1e-18)
+
+
 def test_simulated_statistics_over_many_seeds():
     """Sampling x_k+1 = F x_k + N(0, Q) from the stationary start, over 4000 seeds: the variance stays sd^2 and
     the lag-T correlation is exp(-T / tau) (the continuous process's), within sampling error."""
