@@ -47,8 +47,8 @@ SYSTEMS = [  # config, scenario
 ]
 
 
-POSE_TEXT = ("ultrasonic_3d_pose (paper 003): the smoothed excess is the attitude block, not the position (per block "
-             "below). The direction model's error is the receivers' discretisation (the closest of 32 normals, cells "
+POSE_TEXT = ("ultrasonic_3d_pose (paper 003): the smoothed excess is the attitude block, not the position (per block at the "
+             "end of this paragraph). The direction model's error is the receivers' discretisation (the closest of 32 normals, cells "
              "of ~37 deg): the same pulse after pulse while a beacon's direction stays in one cell (~150 of its "
              "pulses). The config gives it as white noise of sd 30 deg (and the attitude walk 0.8 deg per firing "
              "instead of the true 0.57) so that the filter, averaging a limited past, is consistent; the smoother "
@@ -190,6 +190,8 @@ def main(argv=None) -> int:
               "at most like one sample; this is the conservative reading);",
               f"2. **fraction**: the fraction of samples inside the per-sample 95% chi-square interval at least "
               f"{MIN_IN95:.2f} (at most twice the nominal 5% outside; an over- or under-confident estimate both leave it).", "",
+              "\"mean low\" is under-confidence (the covariance larger than the errors: the UWB and example configs' "
+              "filters, and abps_ins's attitude and bias blocks, below), the safe side; \"mean high\" over-confidence.", "",
               "| config | scenario | dof | interval of the mean | filtered NEES | smoothed NEES | filtered in 95% | "
               "smoothed in 95% | filtered passes | smoothed passes |",
               "|---|---|---:|---|---:|---:|---:|---:|---|---|"]

@@ -22,11 +22,18 @@ from typing import ClassVar
 
 import numpy as np
 
-from fusion.api import BuildContext, Event, Message, Params, ProcessModel, ReportsStepEvents, StateLayout, has
+from fusion.api import Block, BuildContext, Event, Message, Params, ProcessModel, ReportsStepEvents, StateLayout, has
 
 from .ins_params import InsParams
 
-__all__ = ["InsGaussMarkov"]
+__all__ = ["InsGaussMarkov", "GaussMarkovBlock"]
+
+
+class GaussMarkovBlock(Block):
+    """A vector block whose one element is named by the block itself (``hz``, not ``hzx``)."""
+
+    def element_names(self) -> tuple[str, ...]:
+        return (self.name,) if self.size == 1 else super().element_names()
 
 
 class InsGaussMarkov(ProcessModel):
@@ -46,8 +53,7 @@ class InsGaussMarkov(ProcessModel):
         p: InsParams = self.params  # type: ignore[assignment]
         self.core = Ins(p.model_copy(update={"gauss_markov": []}), context)   # Ins or InsStates
         self.m = self.core.layout.n                          # INS part: the first m elements
-        spec = " ".join(f"{b.name}:{b.size}" for b in p.gauss_markov)
-        self.layout = StateLayout(self.core.layout.blocks + StateLayout.parse(spec).blocks)
+        self.layout = StateLayout(self.core.layout.blocks + tuple(GaussMarkovBlock(b.name, b.size) for b in p.gauss_markov))
         self.g, self.g_n = self.core.g, self.core.g_n
         self._tau = np.concatenate([np.full(b.size, b.tau) for b in p.gauss_markov])   # s, (k,)
         self._var = np.concatenate([np.full(b.size, b.sd * b.sd) for b in p.gauss_markov])

@@ -41,6 +41,7 @@ def test_the_default_is_the_16_state_ins_and_the_blocks_are_appended():
     m = make()
     assert isinstance(m, InsGaussMarkov)
     assert m.layout.n == 19 and m.layout["hz"] == slice(16, 17) and m.layout["o"] == slice(17, 19)
+    assert m.layout.names[16:] == ("hz", "ox", "oy")
     assert m.layout.blocks[:5] == Ins(InsParams()).layout.blocks
     with pytest.raises(ValueError, match="unique"):
         InsParams(gauss_markov=[{"name": "p", "tau": 1.0, "sd": 1.0}])
