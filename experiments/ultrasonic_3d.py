@@ -322,6 +322,13 @@ attitude is in Table III (row "smoothed"): {a3['pose']['mean']:.2f} -> {a3['pose
 
 {ts}
 
+The pose filter's smoothed NEES above its 6 dof is its attitude block (50 seeds: docs/results/smoothing.md):
+the directions' discretisation error is the same pulse after pulse while a direction stays in a receiver's
+cell, which the config gives as white noise inflated for the filter; the smoother, averaging both sides, is
+then over-confident. The backward pass itself keeps a quaternion block consistent
+(tests/smoothing/test_quaternion_smoothing.py). The fix on principle (a Gauss-Markov state for each beacon's
+direction error) is open.
+
 ## Time per filter step
 
 | filter | here (one predict + one update, this machine) | paper (16 MHz 80286) |

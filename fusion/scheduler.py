@@ -235,7 +235,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         t0 = time.perf_counter()
         belief = self.filter.predict(self.belief, self.process, self.u, dt)
         self.time_s["predict"] += time.perf_counter() - t0
-        self.belief = self._predicted(belief, 1)
+        self.belief = self._predicted(belief, 1, dts=dt)
         if self._pseudo:
             self._pseudo_updates()
 
@@ -300,7 +300,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                 k = int(keep.sum())
                 belief = self.filter.predict_inputs(self.belief, self.process, us[keep], dts[keep])
                 self.time_s["predict"] += time.perf_counter() - t0
-                self.belief = self._predicted(belief, k, batched=k > 1)
+                self.belief = self._predicted(belief, k, batched=k > 1, dts=dts[keep])
                 if capped:  # bounded gap: the run still ends at the last sample's time
                     self.belief = self.belief.with_(t=last_t)
                 if self._filter_events:

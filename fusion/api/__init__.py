@@ -20,8 +20,8 @@ from fusion.kinds import KINDS
 from .capabilities import (CAPABILITIES, Aligns, AlignsState, CapabilityWarning, ChecksGeometry, Closes,
                            HasThreshold, InputRunNoise, IntegratesInputRuns, KeepsGateState, LinearisesInputRuns,
                            NonAdditiveMeasurementNoise, NonAdditiveProcessNoise, Opens, PositionFromFix,
-                           PredictsInputRuns, PseudoMeasurement,
-                           ReadsBelief, ReportsIdle, ReportsInfo, ReportsStatus, UsesInput, capabilities_of, has,
+                           PredictsInputRuns, PseudoMeasurement, ReadsBelief, ReportsIdle, ReportsInfo, ReportsStatus,
+                           ReportsStepEvents, UsesInput, capabilities_of, has,
                            near_misses)
 from .components import (BuildContext, Component, Decoder, Filter, Gate, MeasurementModel, Params,
                          ProcessModel, Simulator, Sink, Solver, Source)
@@ -51,8 +51,9 @@ __all__ = [
     "Importer", "ImportRequest", "Stream", "ImportedLog",
     # optional capabilities (fusion.api.capabilities)
     "Aligns", "IntegratesInputRuns", "InputRunNoise", "LinearisesInputRuns", "NonAdditiveProcessNoise",
-    "ChecksGeometry", "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState", "UsesInput",
-    "PseudoMeasurement", "PredictsInputRuns", "HasThreshold", "KeepsGateState", "ReadsBelief", "ReportsInfo",
-    "Opens", "Closes", "ReportsIdle", "ReportsStatus", "CAPABILITIES", "CapabilityWarning", "has", "capabilities_of", "near_misses",
+    "ReportsStepEvents", "ChecksGeometry", "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState",
+    "UsesInput", "PseudoMeasurement", "PredictsInputRuns", "HasThreshold", "KeepsGateState", "ReadsBelief",
+    "ReportsInfo", "Opens", "Closes", "ReportsIdle", "ReportsStatus", "CAPABILITIES", "CapabilityWarning", "has",
+    "capabilities_of", "near_misses",
     *_SIMULATION,
 ]

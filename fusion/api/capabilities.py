@@ -23,6 +23,7 @@ from .state import Belief
 __all__ = [
     # process models
     "Aligns", "IntegratesInputRuns", "InputRunNoise", "LinearisesInputRuns", "NonAdditiveProcessNoise",
+    "ReportsStepEvents",
     # measurement models
     "ChecksGeometry", "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState", "UsesInput",
     "PseudoMeasurement",
@@ -95,6 +96,18 @@ class NonAdditiveProcessNoise(Protocol):
 
     def f_with_noise(self, x: np.ndarray, w: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
         """States (..., n) from states x (..., n) and noise samples w (..., n)."""
+        ...
+
+
+@runtime_checkable
+class ReportsStepEvents(Protocol):
+    """A process model whose propagation can say something about a step (the ``ins`` clamps its
+    norm-correction gain when eta dt >= 1). A pure function of the step, never a counter inside the model:
+    the run calls it after each prediction with the sample intervals it integrated, counts the events'
+    kinds with the filter's (``summary["filter_counters"]``) and puts them on the event stream."""
+
+    def step_events(self, t: float, dts: np.ndarray) -> tuple[Event, ...]:
+        """Events of the propagation over the intervals ``dts`` (k,) (s) that ended at time ``t`` (s)."""
         ...
 
 
@@ -259,9 +272,10 @@ class ReportsStatus(Protocol):
 # --------------------------------------------------------------------------- detection
 #: Every capability protocol, by the member names it is detected by.
 CAPABILITIES: tuple[type, ...] = (
-    Aligns, IntegratesInputRuns, InputRunNoise, LinearisesInputRuns, NonAdditiveProcessNoise, ChecksGeometry,
-    PositionFromFix, NonAdditiveMeasurementNoise, AlignsState, UsesInput, PseudoMeasurement, PredictsInputRuns,
-    HasThreshold, KeepsGateState, ReportsInfo, ReadsBelief, Opens, Closes, ReportsIdle, ReportsStatus,
+    Aligns, IntegratesInputRuns, InputRunNoise, LinearisesInputRuns, NonAdditiveProcessNoise, ReportsStepEvents,
+    ChecksGeometry, PositionFromFix, NonAdditiveMeasurementNoise, AlignsState, UsesInput, PseudoMeasurement,
+    PredictsInputRuns, HasThreshold, KeepsGateState, ReportsInfo, ReadsBelief, Opens, Closes, ReportsIdle,
+    ReportsStatus,
 )
 
 _METHODS: dict[type, tuple[str, ...]] = {

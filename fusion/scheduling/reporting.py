@@ -7,7 +7,10 @@ from __future__ import annotations
 import math
 from typing import Iterator
 
-from fusion.api import Belief, ChecksGeometry, Event, MalformedMessage, Message, RejectedMessage, UpdateResult, has
+import numpy as np
+
+from fusion.api import (Belief, ChecksGeometry, Event, MalformedMessage, Message, RejectedMessage, ReportsStepEvents,
+                        UpdateResult, has)
 from fusion.config import SensorRuntime
 
 _CHECK_EVERY_S = 0.5  # a model's check() (geometry) runs at most this often per sensor, s of sensor time
@@ -27,14 +30,19 @@ class Reporting:
         events, self._filter_events = self._filter_events, []
         return [] if self._replaying else events
 
-    def _predicted(self, belief: Belief, k: int, batched: bool = False) -> Belief:
+    def _predicted(self, belief: Belief, k: int, batched: bool = False, dts=None) -> Belief:
         """Count a prediction of ``k`` samples; the events the filter put on the belief are kept for the event
-        stream and counted, and dropped from the belief the run goes on with."""
+        stream and counted, and dropped from the belief the run goes on with; so are the process model's
+        events of the step (ReportsStepEvents, over the sample intervals ``dts``)."""
         self.steps["predict"] += k
         fc = self.filter_counters
         fc["predicts"] += k
         if batched:
             fc["batched_predicts"] += 1
+        if dts is not None and has(self.process, ReportsStepEvents):
+            for e in self.process.step_events(belief.t, np.atleast_1d(dts)):
+                fc[e.kind] += 1
+                self._filter_events.append(e)
         if belief.events:
             for e in belief.events:
                 fc[e.kind] += 1

@@ -32,6 +32,10 @@ class PositionParams(Params):
         (0.0, 0.0, 0.0), description="receiver position in the body frame (m, FRD): r_ABPS of eq. 53")
     dim: int | None = Field(None, ge=1, le=3, description="measure the first dim components of p "
                             "(default: all of them; 2 for a horizontal fix on a 3-D state)")
+    offset_block: str | None = Field(None, description="name of a state block (e.g. a Gauss-Markov block of "
+                                     "the ins process) added to the fix: a slowly varying error of the fix (m)")
+    offset_axes: tuple[int, ...] | None = Field(None, description="the fix's axes (0 x, 1 y, 2 z) the offset "
+                                                "block adds to, one per block element (default: the first ones)")
     use_fix_covariance: bool = Field(True, description="use the covariance a solver attaches to its fix as R "
                                      "(False: always the sensor's configured noise)")
 
@@ -48,7 +52,12 @@ class Position(MeasurementModel[PositionParams]):
     configured R; a message of 9 values ``x y z cxx cxy cxz cyy cyz czz`` (as ``ols_trilateration``
     emits) carries its own covariance, used as R (leading dim x dim block).
 
-    Jacobian: ``dz/dp = I``, ``dz/dq = d(C_b^n(q) r)/dq`` (analytic, fusion.quaternion.rotate_jacobian).
+    ``offset_block`` (with ``offset_axes``): a state block added to the fix's axes, ``z = p + C_b^n r + o``:
+    a slowly varying error of the fix modelled as a state (e.g. the height error of a 2-D fix that assumes
+    a known height, an ``ins`` ``gauss_markov`` block), so that it is not averaged as white noise.
+
+    Jacobian: ``dz/dp = I``, ``dz/dq = d(C_b^n(q) r)/dq`` (analytic, fusion.quaternion.rotate_jacobian),
+    ``dz/do = 1`` on the offset's axes.
     """
 
     name: ClassVar[str] = "position"
@@ -83,17 +92,41 @@ class Position(MeasurementModel[PositionParams]):
                              "taken as the position p itself")
                 warnings.warn(f"position: {self.note}", stacklevel=2)
         self.linear = self._q is None   # z = p (the first dim elements): affine; with a lever arm, not
+        self._off, self._off_axes = self._offset(layout)
+
+    def _offset(self, layout) -> tuple[slice | None, np.ndarray]:
+        """The offset block's slice and the fix axes it adds to (ConfigError when the block is missing or
+        the axes do not fit it)."""
+        p = self.params
+        if p.offset_block is None:
+            if p.offset_axes is not None:
+                raise ConfigError("position: offset_axes needs offset_block")
+            return None, np.zeros(0, dtype=int)
+        if p.offset_block not in layout:
+            raise ConfigError(f"position: offset_block {p.offset_block!r} is no block of the state (blocks are "
+                              f"{[b.name for b in layout.blocks]}; the ins process makes one with gauss_markov:)")
+        sl = layout[p.offset_block]
+        size = sl.stop - sl.start
+        axes = np.asarray(p.offset_axes if p.offset_axes is not None else range(size), dtype=int)
+        if axes.size != size or len(set(axes.tolist())) != size or np.any(axes < 0) or np.any(axes >= self.dim):
+            raise ConfigError(f"position: offset_axes {axes.tolist()} must name {size} distinct axes of the "
+                              f"{self.dim}-D fix (block {p.offset_block!r} has {size} elements)")
+        return sl, axes
 
     def h(self, x: np.ndarray) -> np.ndarray:
-        """Predicted fix (..., dim) (m) for states x (..., n): eq. 53."""
+        """Predicted fix (..., dim) (m) for states x (..., n): eq. 53, plus the offset block if configured."""
         x = np.asarray(x, dtype=float)
         z = x[..., self._p.start:self._p.start + self.dim]
         if self._q is None:
-            return z.copy()
-        q = x[..., self._q]
-        qq = (q[..., :, None] * q[..., None, :]).reshape(q.shape[:-1] + (16,))
-        arm = (qq @ self._Kr) / qq[..., quat.NORM_TERMS].sum(axis=-1, keepdims=True)   # C_b^n r
-        return z + arm[..., :self.dim]
+            z = z.copy()
+        else:
+            q = x[..., self._q]
+            qq = (q[..., :, None] * q[..., None, :]).reshape(q.shape[:-1] + (16,))
+            arm = (qq @ self._Kr) / qq[..., quat.NORM_TERMS].sum(axis=-1, keepdims=True)   # C_b^n r
+            z = z + arm[..., :self.dim]
+        if self._off is not None:
+            z[..., self._off_axes] += x[..., self._off]
+        return z
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         """dh/dx (dim, n) at x (n,)."""
@@ -102,15 +135,20 @@ class Position(MeasurementModel[PositionParams]):
         H[np.arange(self.dim), self._p.start + np.arange(self.dim)] = 1.0
         if self._q is not None:
             H[:, self._q] = quat.rotate_jacobian(x[self._q], self.lever_arm)[:self.dim]
+        if self._off is not None:
+            H[self._off_axes, np.arange(self._off.start, self._off.stop)] = 1.0
         return H
 
     def position_from(self, z: np.ndarray, x: np.ndarray) -> np.ndarray:
         """The position block value (dim,) that makes ``h`` equal the fix z at attitude x (n,): z - C_b^n r.
         For initialising p from a first fix of a receiver that is off the state's origin."""
-        z = np.asarray(z, dtype=float)[:self.dim]
+        z = np.array(z, dtype=float)[:self.dim]
+        x = np.asarray(x, dtype=float)
+        if self._off is not None:
+            z[self._off_axes] -= x[self._off]
         if self._q is None:
-            return z.copy()
-        return z - quat.rotate(np.asarray(x, dtype=float)[self._q], self.lever_arm)[:self.dim]
+            return z
+        return z - quat.rotate(x[self._q], self.lever_arm)[:self.dim]
 
     def observe(self, message: Message | Fix) -> Observation | None:
         """Observation of a solver's typed :class:`fusion.api.Fix` (position, covariance, age), or of a fix

@@ -6,7 +6,8 @@ from typing import ClassVar
 import numpy as np
 
 from fusion import quaternion as quat
-from fusion.api import BuildContext, MalformedMessage, Message, Params, ProcessModel, RejectedMessage, StateLayout  # noqa: F401
+from fusion.api import (BuildContext, Event, MalformedMessage, Message, Params, ProcessModel,  # noqa: F401
+                        RejectedMessage, StateLayout)
 
 from .ins_batch import K10T as _K10T, T16T as _T16T, integrate_inputs
 from .ins_noise import InsNoise
@@ -43,7 +44,8 @@ class Ins(InsNoise, ProcessModel):
 
     Norm correction (eq. 50): the step scales |q| by about ``1 + eta dt (1 - |q|^2)``, which converges
     for ``eta dt < 1`` (paper's condition); when a step has ``eta dt >= 1`` (a long gap) the product is
-    clamped to 0.5 (dead-beat) and counted in ``counters["eta_clamped"]``.
+    clamped to 0.5 (dead-beat) and reported by :meth:`step_events` (an ``eta_clamped`` event per such sample,
+    counted by the run in ``summary["filter_counters"]``).
 
     Noise ``Q(x, u, dt)``, from continuous white-noise densities N (YAML): accelerometer N_a enters v
     as in the integrated double integrator (Q_vv = C N_a^2 C^T dt, Q_pv = Q_vv dt/2, Q_pp = Q_vv dt^2/3);
@@ -69,7 +71,11 @@ class Ins(InsNoise, ProcessModel):
 
     def __new__(cls, params: InsParams | None = None, context: BuildContext | None = None):
         """``states: 10`` or ``22`` build the paper-002 state sets (ins_states.InsStates, which drives this
-        16-state model underneath); 16 is this class as it is."""
+        16-state model underneath); ``gauss_markov`` blocks build ins_gauss_markov.InsGaussMarkov (any of
+        those with the blocks appended); 16 without blocks is this class as it is."""
+        if cls is Ins and params is not None and getattr(params, "gauss_markov", None):
+            from .ins_gauss_markov import InsGaussMarkov
+            return InsGaussMarkov(params, context)
         if cls is Ins and params is not None and getattr(params, "states", 16) != 16:
             from .ins_states import InsStates
             return InsStates(params, context)
@@ -112,17 +118,28 @@ class Ins(InsNoise, ProcessModel):
         self._iso_w = bool(np.ptp(self._var_w) == 0.0)
         self._qc_diag = (np.concatenate([np.zeros(3), self._var_a, self._var_w, self._var_ba, self._var_bw])
                          if self._iso_w and np.ptp(self._var_a) == 0.0 else None)
-        self.counters: dict[str, int] = {"eta_clamped": 0}
+        # Nothing is counted inside the model: clamps are step_events, counted by the run.
         self._max_f, self._max_w = p.max_specific_force, p.max_rate
         self._hold = p.hold_after
 
     # ------------------------------------------------------------------ propagation
     def _eta_dt(self, dt: float) -> float:
         e = self.params.eta * dt  # type: ignore[attr-defined]
-        if e >= 1.0:
-            self.counters["eta_clamped"] += 1
-            return 0.5
-        return e
+        return 0.5 if e >= 1.0 else e
+
+    def step_events(self, t: float, dts: np.ndarray) -> tuple[Event, ...]:
+        """fusion.api.ReportsStepEvents: one ``eta_clamped`` event per sample of the step with eta dt >= 1
+        (the gain clamped to 0.5: a gap in the IMU samples), none otherwise. A pure function of
+        the intervals ``dts`` (s): the run counts the events (``summary["filter_counters"]``)."""
+        eta = self.params.eta  # type: ignore[attr-defined]
+        if not eta:
+            return ()
+        n = int(np.count_nonzero(np.asarray(dts, dtype=float) * eta >= 1.0))
+        if not n:
+            return ()
+        e = Event(float(t), "eta_clamped", None, f"IMU interval with eta dt >= 1 (eta {eta:g} /s): the "
+                  "norm-correction gain of eq. 50 clamped to 0.5")
+        return (e,) * n
 
     def f(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
         """Propagate states x (..., 16) over dt (s) with the IMU sample u (6,) or (..., 6); see the class doc.

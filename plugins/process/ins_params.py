@@ -23,6 +23,18 @@ Density = float | tuple[float, float, float]
 
 
 
+class GaussMarkovBlock(Params):
+    """A first-order Gauss-Markov state block appended to the INS state (``gauss_markov:`` in the ``ins``
+    params): ``size`` elements, each ``b_dot = -b / tau + w``, stationary sd ``sd`` (units of whatever a
+    measurement model adds it to, e.g. m for a fix's height error). Exact discretisation over dt:
+    ``b_k+1 = exp(-dt / tau) b_k``, ``Q = sd^2 (1 - exp(-2 dt / tau))`` per element."""
+
+    name: str = Field(..., pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="block name in the state")
+    size: int = Field(1, ge=1, le=6, description="number of elements")
+    tau: float = Field(..., gt=0, description="correlation time (s)")
+    sd: float = Field(..., gt=0, description="stationary standard deviation (units of the quantity)")
+
+
 def somigliana_gravity(latitude_deg: float, height_m: float = 0.0) -> float:
     """Normal gravity (m/s^2) on the WGS84 ellipsoid (Somigliana) with the free-air correction -3.086e-6 h."""
     s2 = np.sin(np.radians(latitude_deg)) ** 2
@@ -69,12 +81,20 @@ class InsParams(Params):
     renormalize: bool = Field(True, description="bring the mean quaternion back to unit norm after each "
                               "step; false leaves the norm to eq. 50 (eta) or the quat_norm pseudo-observation")
 
+    gauss_markov: list[GaussMarkovBlock] = Field(
+        default_factory=list, description="first-order Gauss-Markov blocks appended to the state (a slowly "
+        "varying measurement error, e.g. a fix's height error; ins_gauss_markov.py); none: the state as above")
+
     @model_validator(mode="after")
     def _earth_rate_needs_latitude(self) -> "InsParams":
         if self.earth_rate and self.latitude_deg is None:
             raise ValueError("earth_rate: true needs latitude_deg")
         if self.states != 22 and (np.any(np.asarray(self.accel_scale_rw)) or np.any(np.asarray(self.gyro_scale_rw))):
             raise ValueError("accel_scale_rw / gyro_scale_rw need states: 22 (the scale-factor states)")
+        names = [b.name for b in self.gauss_markov]
+        taken = {"p", "v", "q", "ba", "bw", "sa", "sw"}
+        if len(set(names)) != len(names) or taken & set(names):
+            raise ValueError(f"gauss_markov: block names must be unique and not one of {sorted(taken)}, got {names}")
         return self
 
 

@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from fusion.api import BuildContext, Message, Params, ProcessModel, StateLayout
+from fusion.api import BuildContext, Event, Message, Params, ProcessModel, StateLayout
 
 from .ins import Ins, InsParams, density_variance
 from .ins_linearise import linearise_run
@@ -60,7 +60,6 @@ class InsStates(ProcessModel):
         self.layout = _LAYOUTS[p.states] if p.renormalize else _LAYOUTS[p.states].with_unit(False)
         self.core = Ins(p.model_copy(update={"states": 16, "accel_scale_rw": 0.0, "gyro_scale_rw": 0.0}), context)
         self.g, self.g_n = self.core.g, self.core.g_n
-        self.counters = self.core.counters
         self._var_s = np.concatenate([density_variance(p.accel_scale_rw), density_variance(p.gyro_scale_rw)])
         # Fast path for one point (the EKF): the paper's Euler step without eta, Earth rate or anisotropic
         # noise, in scalar arithmetic with f, F and Q computed once per (x, u, dt) (the EKF asks for all
@@ -111,6 +110,10 @@ class InsStates(ProcessModel):
 
     def input_from(self, message: Message) -> np.ndarray:
         return self.core.input_from(message)
+
+    def step_events(self, t: float, dts: np.ndarray) -> tuple[Event, ...]:
+        """The 16-state model's events of a step (``eta_clamped``: the same eta, the same rule)."""
+        return self.core.step_events(t, dts)
 
     # ------------------------------------------------------------------ linearisation and noise
     def jacobian(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:

@@ -46,7 +46,7 @@ NON_FINITE = [  # (config, old, new, field path in the message, key whose line i
     (ABPS, "accel_noise_density: 2.0e-3", "accel_noise_density: .inf", "process.accel_noise_density", "accel_noise_density:"),
     (ABPS, "gyro_bias_rw: 1.2e-5", "gyro_bias_rw: [1.0e-5, .nan, 1.0e-5]", "process.gyro_bias_rw.1", "gyro_bias_rw:"),
     (ABPS, "      z: -0.75", "      z: .nan", "sensors.abps.preprocessor.z", "z: .nan"),
-    (ABPS, "      z_sd: 0.3", "      z_sd: .inf", "sensors.abps.preprocessor.z_sd", "z_sd:"),
+    (ABPS, "      z_sd: 0.05", "      z_sd: .inf", "sensors.abps.preprocessor.z_sd", "z_sd:"),
     (ABPS, "gravity: 9.80665", "gravity: .inf", "process.gravity", "gravity:"),
 ]
 

@@ -168,11 +168,50 @@ def test_eta_drives_norm_to_one():
     assert abs(np.linalg.norm(x[6:10]) - 1.1) < 1e-12
 
 
-def test_eta_dt_at_least_one_is_clamped_and_counted():
+def test_eta_dt_at_least_one_is_clamped_and_reported_as_a_value():
+    """The clamp is a step event returned by the model (fusion.api.ReportsStepEvents), nothing counted inside:
+    f twice gives the same numbers, and step_events says which intervals clamped."""
+    from fusion.api import ReportsStepEvents, has
+
     m = make(eta=50.0)
-    x = m.f(state(q=np.array([1.2, 0, 0, 0])), np.r_[0, 0, -G, 0, 0, 0], 0.05)   # eta dt = 2.5
-    assert m.counters["eta_clamped"] == 1
+    x0 = state(q=np.array([1.2, 0, 0, 0]))
+    x = m.f(x0, np.r_[0, 0, -G, 0, 0, 0], 0.05)   # eta dt = 2.5: clamped to 0.5 (dead-beat)
+    np.testing.assert_array_equal(m.f(x0, np.r_[0, 0, -G, 0, 0, 0], 0.05), x)
     assert abs(np.linalg.norm(x[6:10]) - 1.0) < abs(1.2 - 1.0)
+    assert has(m, ReportsStepEvents) and not hasattr(m, "counters")
+    ev = m.step_events(3.0, np.array([0.01, 0.05, 0.01, 0.02]))   # eta dt: 0.5, 2.5, 0.5, 1.0
+    assert [e.kind for e in ev] == ["eta_clamped"] * 2 and ev[0].t == 3.0
+    assert m.step_events(3.0, np.array([0.01])) == () and make().step_events(0.0, np.array([10.0])) == ()
+
+
+def test_eta_clamps_reach_the_summary(tmp_path):
+    """Run level: an IMU gap with eta dt >= 1 on configs/abps_ins.yaml (eta 10: a gap over 0.1 s) is counted
+    in the summary's filter counters and reported on the event stream, per sample or batched."""
+    from pathlib import Path
+
+    from fusion import pipeline
+    from fusion.config import load_system
+
+    root = Path(__file__).resolve().parents[2]
+    lines = (root / "recordings" / "abps_mine.log").read_text().splitlines()
+    keep, gap = [], (20.0, 20.35)            # drop the IMU samples of 0.35 s
+    for ln in lines[:8000]:
+        parts = ln.split(",")
+        if len(parts) > 2 and parts[1] == "imu" and gap[0] < float(parts[0]) < gap[1]:
+            continue
+        keep.append(ln)
+    log = tmp_path / "gap.log"
+    log.write_text("\n".join(keep) + "\n")
+    text = (root / "configs" / "abps_ins.yaml").read_text().replace("eta: 0.0", "eta: 10.0")
+    cfg = tmp_path / "abps_eta.yaml"
+    cfg.write_text(text.replace("recording: ../recordings/abps_mine.log", f"recording: {log}"))
+    for batch in (True, False):
+        system = load_system(cfg)
+        system.filter._batch_inputs = batch   # a run of samples in one step, or sample by sample
+        events: list = []
+        fc = pipeline.run(system, str(log), [], on_event=events.append).summary["filter_counters"]
+        assert fc.get("eta_clamped") == 1, (batch, fc)
+        assert [e.t for e in events if e.kind == "eta_clamped"] == [pytest.approx(20.35, abs=0.011)]
 
 
 def test_normalize():

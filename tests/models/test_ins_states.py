@@ -151,3 +151,15 @@ def test_one_point_fast_path_equals_the_general_path(states):
         np.testing.assert_allclose(fast.f(x, u, dt), slow.f(x, u, dt), atol=1e-14)
         np.testing.assert_allclose(fast.jacobian(x, u, dt), slow.jacobian(x, u, dt), atol=1e-14)
         np.testing.assert_allclose(fast.Q(x, u, dt), slow.Q(x, u, dt), atol=1e-18)
+
+
+@pytest.mark.parametrize("states", [10, 22])
+def test_state_sets_report_the_eta_clamp_as_the_16_state_model(states):
+    """The 10/22-state models delegate step_events to the 16-state core: the same clamps, counted by the run."""
+    from fusion.api import ReportsStepEvents, has
+
+    m = make(states=states, eta=50.0)
+    assert has(m, ReportsStepEvents)
+    dts = np.array([0.01, 0.05, 0.01, 0.02])                    # eta dt: 0.5, 2.5, 0.5, 1.0
+    assert [e.kind for e in m.step_events(1.0, dts)] == [e.kind for e in make(eta=50.0).step_events(1.0, dts)]
+    assert len(m.step_events(1.0, dts)) == 2 and make(states=states).step_events(1.0, dts) == ()

@@ -129,7 +129,7 @@ def test_small_terminal_gets_tabs_and_nothing_is_cut():
             assert app.wide is False
             table = app.query_one(StateTable)
             n_rows = len(table.cells)
-            assert n_rows == 15  # p v (3 + 3), roll pitch yaw, ba bw (3 + 3)
+            assert n_rows == 16  # p v (3 + 3), roll pitch yaw, ba bw (3 + 3), hz (the fix height error)
             assert table.outer_size.height == n_rows + 3  # header and borders: every row laid out
             for key, tab in (("2", "tab-sensors"), ("3", "tab-track"), ("4", "tab-plots"), ("5", "tab-events"),
                              ("6", "tab-states")):

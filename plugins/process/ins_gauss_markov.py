@@ -1,0 +1,142 @@
+"""First-order Gauss-Markov blocks appended to the ``ins`` state (``gauss_markov:`` in the ``ins`` params).
+
+A slowly varying error of a measurement (the height a 2-D fix assumes, while the floor dips along the
+route; a fix's slowly wandering offset) is not white: filters and, more so, smoothers average it as if it
+were, and end up confident of a value nobody measured. Modelled as a state, it is estimated with the
+rest and its uncertainty stays honest. Each element of a block follows
+
+.. math::
+    \\dot b = -b / \\tau + w, \\quad E[b^2] = sd^2 \\ \\text{(stationary)}
+
+discretised exactly over dt: ``b_{k+1} = exp(-dt / tau) b_k``, ``Q_b = sd^2 (1 - exp(-2 dt / tau))``
+(the variance of the stationary process that is not explained by b_k). Over a run of samples the same
+formulas hold with dt = sum dts (the block does not depend on the input). The INS part (16, 10 or 22
+states) is the ``ins`` model unchanged (``Ins`` or ``InsStates``): its f, F, Q, Q_inputs, f_inputs and
+alignment are used for the first elements, the blocks are appended after them in the order given, and
+the INS and the blocks are independent in F and Q (block diagonal). A measurement model reads a block
+by name (``position``'s ``offset_block``).
+"""
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+
+from fusion.api import Block, BuildContext, Event, Message, Params, ProcessModel, ReportsStepEvents, StateLayout, has
+
+from .ins_params import InsParams
+
+__all__ = ["InsGaussMarkov", "GaussMarkovBlock"]
+
+
+class GaussMarkovBlock(Block):
+    """A vector block whose one element is named by the block itself (``hz``, not ``hzx``)."""
+
+    def element_names(self) -> tuple[str, ...]:
+        return (self.name,) if self.size == 1 else super().element_names()
+
+
+class InsGaussMarkov(ProcessModel):
+    """The ``ins`` process with Gauss-Markov blocks appended (module docstring). State: the INS state
+    (``p v q ba bw`` for 16 states; see ``ins``) then each ``gauss_markov`` block. Input as ``ins``:
+    ``u = [ax ay az gx gy gz]`` (m/s^2, rad/s, FRD)."""
+
+    name: ClassVar[str] = "ins"
+    Params: ClassVar[type[Params]] = InsParams
+    input_dim: int = 6
+    linear: bool = False
+
+    def __init__(self, params: InsParams | None = None, context: BuildContext | None = None):
+        super().__init__(params, context)
+        from .ins import Ins
+
+        p: InsParams = self.params  # type: ignore[assignment]
+        self.core = Ins(p.model_copy(update={"gauss_markov": []}), context)   # Ins or InsStates
+        self.m = self.core.layout.n                          # INS part: the first m elements
+        self.layout = StateLayout(self.core.layout.blocks + tuple(GaussMarkovBlock(b.name, b.size) for b in p.gauss_markov))
+        self.g, self.g_n = self.core.g, self.core.g_n
+        self._tau = np.concatenate([np.full(b.size, b.tau) for b in p.gauss_markov])   # s, (k,)
+        self._var = np.concatenate([np.full(b.size, b.sd * b.sd) for b in p.gauss_markov])
+
+    # ------------------------------------------------------------------ the blocks alone
+    def decay(self, T: float) -> np.ndarray:
+        """exp(-T / tau) (k,): the factor of the blocks' mean over T (s)."""
+        return np.exp(-T / self._tau)
+
+    def block_noise(self, T: float) -> np.ndarray:
+        """sd^2 (1 - exp(-2 T / tau)) (k,): the blocks' process-noise variances over T (s)."""
+        return self._var * -np.expm1(-2.0 * T / self._tau)
+
+    def _join(self, x: np.ndarray, y_ins: np.ndarray, T: float) -> np.ndarray:
+        """States (..., n): the INS part y_ins (..., m) and the blocks of x (..., n) decayed over T."""
+        out = np.empty(y_ins.shape[:-1] + (self.layout.n,))
+        out[..., :self.m] = y_ins
+        out[..., self.m:] = np.asarray(x, dtype=float)[..., self.m:] * self.decay(T)
+        return out
+
+    def _embed(self, Q_ins: np.ndarray, T: float) -> np.ndarray:
+        n, m = self.layout.n, self.m
+        Q = np.zeros((n, n))
+        Q[:m, :m] = Q_ins
+        Q[range(m, n), range(m, n)] = self.block_noise(T)
+        return Q
+
+    # ------------------------------------------------------------------ process model
+    def f(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        """Propagate states x (..., n) over dt (s) with the IMU sample u (6,) or (..., 6): the INS part by
+        ``ins``, the blocks by exp(-dt / tau) (vectorised over sigma points)."""
+        x = np.asarray(x, dtype=float)
+        return self._join(x, self.core.f(x[..., :self.m], u, dt), dt)
+
+    def f_inputs(self, x: np.ndarray, us: np.ndarray, dts: np.ndarray) -> np.ndarray:
+        """States (..., n) after the samples ``us`` (k, 6) held over ``dts`` (k,) (s): ``ins.f_inputs`` for
+        the INS part, exp(-sum dts / tau) for the blocks (the same as k calls of :meth:`f`)."""
+        x = np.asarray(x, dtype=float)
+        return self._join(x, self.core.f_inputs(x[..., :self.m], us, dts), float(np.sum(dts)))
+
+    def jacobian(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        """F (n, n) at x (n,): the INS F and diag(exp(-dt / tau)), block diagonal."""
+        x = np.asarray(x, dtype=float)
+        n, m = self.layout.n, self.m
+        F = np.zeros((n, n))
+        F[:m, :m] = self.core.jacobian(x[:m], u, dt)
+        F[range(m, n), range(m, n)] = self.decay(dt)
+        return F
+
+    def Q(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        """Q (n, n) over dt (s): the INS Q and sd^2 (1 - exp(-2 dt / tau)), block diagonal."""
+        return self._embed(self.core.Q(np.asarray(x, dtype=float)[:self.m], u, dt), dt)
+
+    def Q_batch(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        """:meth:`Q` for states x (N, n) at once (N, n, n) (the batched filters, fusion.batch): the INS's own
+        ``Q_batch`` when it has one, the blocks' variances on the diagonal."""
+        x = np.asarray(x, dtype=float)
+        core_batch = getattr(self.core, "Q_batch", None)
+        if core_batch is None:
+            return np.stack([self.Q(xi, u if u is None or np.ndim(u) == 1 else u[i], dt) for i, xi in enumerate(x)])
+        n, m = self.layout.n, self.m
+        out = np.zeros((x.shape[0], n, n))
+        out[:, :m, :m] = core_batch(x[:, :m], u, dt)
+        out[:, range(m, n), range(m, n)] = self.block_noise(dt)
+        return out
+
+    def Q_inputs(self, x0: np.ndarray, x1: np.ndarray, us: np.ndarray, dts: np.ndarray) -> np.ndarray:
+        """Q (n, n) of a run of samples: ``ins.Q_inputs`` and the blocks' noise over T = sum dts."""
+        m = self.m
+        Qi = self.core.Q_inputs(np.asarray(x0, float)[:m], np.asarray(x1, float)[:m], us, dts)
+        return self._embed(Qi, float(np.sum(dts)))
+
+    def step_events(self, t: float, dts: np.ndarray) -> tuple[Event, ...]:
+        """The INS part's (fusion.api.ReportsStepEvents: ``ins``'s eta clamps); the blocks report nothing."""
+        return self.core.step_events(t, dts) if has(self.core, ReportsStepEvents) else ()
+
+    def input_from(self, message: Message) -> np.ndarray:
+        return self.core.input_from(message)
+
+    def align(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``ins``'s levelling (and gyro bias) on the INS part; the blocks and P0 unchanged."""
+        x0 = np.array(x0, dtype=float, copy=True)
+        m = self.m
+        y, _ = self.core.align(x0[:m], np.asarray(P0, float)[:m, :m], u_mean)
+        x0[:m] = y
+        return x0, np.array(P0, dtype=float, copy=True)
