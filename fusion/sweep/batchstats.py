@@ -148,6 +148,8 @@ class BatchStats:
         self.nees_inside = np.zeros(N, np.int64)
         self.nees_total = np.zeros(N)
         self.acc = {k: (np.zeros(N), np.zeros(N)) for k in ("position", "velocity")}   # (sum sq, max)
+        self.pos = self.vel = None
+        self.dof = 0
         if not self.truth:
             return
         self.tt = np.asarray(truth_t, float)

@@ -45,9 +45,9 @@ def round_text(a: np.ndarray, decimals: int) -> np.ndarray:
     if decimals > 22:                                # 10^d no longer exact: format everything
         return _by_text(a, decimals, np.ones(a.shape, bool))
     scale = 10.0 ** decimals
-    s = a * scale
-    k = np.rint(s)
-    with np.errstate(invalid="ignore"):
+    with np.errstate(over="ignore", invalid="ignore"):
+        s = a * scale
+        k = np.rint(s)
         risky = ~(np.abs(s) < 2.0 ** 51) | (np.abs(np.abs(s - k) - 0.5) <= 4.0 * np.spacing(np.abs(s)) + 1e-300)
     out = k / scale
     out = np.where(k == 0.0, np.copysign(0.0, a), out)   # "-0.00" parses to -0.0
