@@ -61,16 +61,16 @@ def unsupported(system: Any, trial: Trial) -> str | None:
 
 def run_batch(trials: list[Trial], timings: dict[str, float] | None = None) -> list[dict[str, Any]]:
     """Rows of the trials (one variant, different seeds) in the order given. Raises NotLockstep.
-    ``timings`` (optional) gets the seconds spent wiring, simulating and parsing (one step here: the
-    recordings as arrays, fusion.sweep.lockstep), in the filter math and in the statistics (summed over
-    the trials)."""
+    ``timings`` (optional) gets the seconds spent wiring, making the recordings (simulating them and
+    reading them as arrays, fusion.sweep.lockstep), in the filter math and in the statistics (summed
+    over the trials)."""
     from fusion.batch import make_batch_filter
 
     t0 = time.perf_counter()
     system = system_of(trials[0])                                # one variant: wired once
     t1 = time.perf_counter()
     ls = from_simulation(system, trials)
-    t2 = t3 = time.perf_counter()
+    t3 = time.perf_counter()
     N = len(trials)
     first = ls.truth_v[:, 0] if (ls.truth_ok and ls.truth_t.size) else [None] * N
     if any(tr.initial == "drawn" for tr in trials) and not ls.truth_ok and ls.truth_t.size:
@@ -146,7 +146,7 @@ def run_batch(trials: list[Trial], timings: dict[str, float] | None = None) -> l
         rows.append(row)
     if timings is not None:
         t4 = time.perf_counter()
-        for key, v in (("wire", t1 - t0), ("simulate", t2 - t1), ("parse", t3 - t2), ("filter_math", math_s),
+        for key, v in (("wire", t1 - t0), ("recordings", t3 - t1), ("filter_math", math_s),
                        ("statistics", t4 - t3 - math_s)):
             timings[key] = timings.get(key, 0.0) + v
     return rows
