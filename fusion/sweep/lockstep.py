@@ -8,8 +8,8 @@ trajectory built once for all seeds (it does not depend on the seed), each seed'
 own generators as ``fusion simulate`` draws it, times and values rounded exactly as the text's fixed
 decimals round them (:func:`round_text`), the messages merged in the text's order (time, then stream) and
 every distinct line shape checked against the real parser. Observations of a ``range`` model read by the
-``line`` decoder are vectorised (:func:`_range_observations`, checked against the model's own ``observe``
-for each beacon pattern); any other model is observed message by message. Whatever this fast path does not
+``line`` decoder are vectorised (fusion.sweep.observe, checked against the model's own ``observe`` for
+each beacon pattern); any other model is observed message by message. Whatever this fast path does not
 cover (a value that is neither a number nor a label, mixed columns, non-finite numbers) is rendered and
 parsed as text (:func:`from_texts`), the engine's original path; both give identical arrays
 (tests/sweep/test_lockstep.py).
@@ -23,7 +23,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from fusion.api import MAX_MAGNITUDE, MalformedMessage, Message
+from fusion.api import MalformedMessage, Message
 
 __all__ = ["Lockstep", "NotLockstep", "round_text", "from_simulation", "from_texts"]
 
@@ -208,7 +208,8 @@ def _stream(st: Any) -> _Stream:
     t_raw = np.asarray(st.t, float).reshape(-1)
     K = t_raw.size
     if st.table:
-        arr = np.asarray(st.values, float).reshape(K, -1)
+        arr = np.asarray(st.values, float)
+        arr = arr if arr.ndim == 2 else arr.reshape(K, -1)
         width, labels, numeric, num = arr.shape[1], {}, list(range(arr.shape[1])), arr
     else:
         vals = st.values
@@ -278,6 +279,8 @@ def _header(lines: Sequence[str]):
 def _from_parts(system: Any, parts: list) -> Lockstep:
     from fusion.logformat import ParsedStream, format_line, iter_messages
 
+    from .observe import observations
+
     headers = [_header(p.header) for p in parts]
     h0 = headers[0]
     if any(h.fields != h0.fields or h.repeating != h0.repeating for h in headers[1:]):
@@ -324,7 +327,7 @@ def _from_parts(system: Any, parts: list) -> Lockstep:
         if sensor is None:
             raise NotLockstep(f"a sensor not in the config ({s.name})")
         lines = rank[offsets[i]:offsets[i + 1]] + nhead + 1      # the text's line numbers
-        obs[i] = _observations(sensor, [ss[i] for ss in per], lines)
+        obs[i] = observations(sensor, [ss[i] for ss in per], lines)
     truth_i = next((i for i, s in enumerate(s0) if s.name == "truth"), None)
     names = h0.fields.get("truth")
     events: list[tuple] = []
@@ -348,78 +351,3 @@ def _from_parts(system: Any, parts: list) -> Lockstep:
         tv = np.stack([ss[truth_i].V for ss in per])
         ok = bool(names) and tv.shape[2] == len(names) and not s0[truth_i].labels
     return Lockstep(headers, events, tuple(names) if names else None, tt, tv, np.array(tidx, np.int64), tlines, ok)
-
-
-def _observations(sensor: Any, streams: list[_Stream], lines: np.ndarray) -> tuple[list, list]:
-    """Per message of one sensor: its bound model (None: no observation) and z (N, m) of every recording."""
-    fast = _range_observations(sensor, streams, lines)
-    if fast is not None:
-        return fast
-    s0 = streams[0]
-    models: list = []
-    zs: list = []
-    for k in range(s0.t.size):
-        got = []
-        for s in streams:
-            msg = Message(float(s.t[k]), s.name, _values(s, k, s.V[k]), int(lines[k]))
-            try:
-                dec = sensor.decoder.decode(msg)
-                o = None if dec is None else sensor.model.observe(dec)
-            except MalformedMessage:
-                raise NotLockstep("a malformed message") from None
-            if o is not None and o.R is not None:
-                raise NotLockstep("an observation with its own R")
-            got.append(o)
-        if got[0] is None:
-            if any(o is not None for o in got):
-                raise NotLockstep("the seeds' recordings differ in timing or content")
-            models.append(None)
-            zs.append(None)
-            continue
-        sig = (got[0].t, getattr(got[0].model, "bound", id(type(got[0].model))), got[0].z.shape)
-        if any(o is None or (o.t, getattr(o.model, "bound", id(type(o.model))), o.z.shape) != sig for o in got):
-            raise NotLockstep("the seeds' recordings differ in timing or content")
-        models.append(got[0].model)
-        zs.append(np.stack([o.z for o in got]))
-    return models, zs
-
-
-def _range_observations(sensor: Any, streams: list[_Stream], lines: np.ndarray) -> tuple[list, list] | None:
-    """The ``range`` model's observations read by the ``line`` decoder, vectorised over messages and
-    seeds (None when the sensor is something else): z is the ranges of ``beacon range ...`` pairs, with
-    ``RangeModel.observe``'s checks of the numbers (>= 0, max_range, MAX_MAGNITUDE) over the whole array;
-    the model's own ``observe`` binds each distinct beacon pattern and must give the same z there."""
-    try:
-        from fusion_plugins.decoders.line import LineDecoder
-        from fusion_plugins.measurement.range import RangeModel
-    except ImportError:                              # pragma: no cover
-        return None
-    model, dec = sensor.model, sensor.decoder
-    if type(model) is not RangeModel or type(dec) is not LineDecoder or dec.params.numeric:
-        return None
-    s0 = streams[0]
-    w = s0.width
-    if w < 2 or w % 2 or sorted(s0.labels) != list(range(0, w, 2)) or s0.numeric != list(range(1, w, 2)):
-        return None
-    if dec.params.count is not None and dec.params.count != w:
-        raise NotLockstep("a malformed message")
-    Z = np.stack([s.V for s in streams])            # (N, K, m)
-    mx = model.params.max_range
-    if (Z < 0).any() or (mx is not None and (Z > mx).any()) or (Z > MAX_MAGNITUDE).any():
-        raise NotLockstep("a malformed message")
-    bound: dict[tuple, Any] = {}
-    models: list = []
-    lab_rows = list(zip(*(s0.labels[c] for c in range(0, w, 2))))
-    for k, lab in enumerate(lab_rows):
-        m = bound.get(lab)
-        if m is None:
-            msg = Message(float(s0.t[k]), s0.name, _values(s0, k, s0.V[k]), int(lines[k]))
-            try:
-                o = model.observe(dec.decode(msg))
-            except MalformedMessage:
-                raise NotLockstep("a malformed message") from None
-            if o is None or o.R is not None or o.t != msg.t or not np.array_equal(o.z, s0.V[k]):
-                return None                          # not the model this kernel knows: message by message
-            m = bound[lab] = o.model
-        models.append(m)
-    return models, [Z[:, k] for k in range(Z.shape[1])]
