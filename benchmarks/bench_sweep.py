@@ -5,8 +5,9 @@ against the hand-rolled path it replaces (experiments/uwb_cases.run_pair), measu
     python benchmarks/bench_sweep.py --seeds 50       # the page's 50 seeds (long)
 
 1. Per trial of the batched engine (configs/uwb_pv_ukf.yaml on scenarios/uwb_route1.yaml, 68 s, 1357
-   ranges): wiring, simulating, parsing the recording, the filter math, the statistics (the pipeline's
-   RunStats: truth interpolation, errors, NEES, NIS); "overhead" is everything but the filter math.
+   ranges), at 8 seeds and at the --seeds given: wiring, the recordings (simulated and read as arrays,
+   fusion.sweep.lockstep), the filter math, the statistics (fusion.sweep.batchstats: truth
+   interpolation, errors, NEES, NIS); "overhead" is everything but the filter math.
 2. The four cases of docs/results/uwb.md (routes 1, 2 x optimal, collinear beacons), UKF and EKF, the
    same seeds: the old path (one simulation per seed, both filters through fusion.pipeline.run, its own
    errors and NEES), then ``fusion.sweep.sweep`` with the default engine (batched), both on one core; the
@@ -46,19 +47,19 @@ def per_trial(seeds: int) -> dict[str, float]:
     return {k: 1e3 * v / seeds for k, v in tm.items()}
 
 
-def old_path(seeds: int) -> float:
-    """Seconds for the four cases x seeds through experiments/uwb_cases.run_pair (both filters)."""
+def old_path(seeds: int) -> tuple[float, float]:
+    """(wall, CPU) seconds for the four cases x seeds through experiments/uwb_cases.run_pair (both filters)."""
     from uwb_cases import Case, run_pair
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for r, lay in CASES:
         case = Case(f"{r}_{lay}", r, lay)
         for s in range(seeds):
             run_pair(case, s)
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, time.process_time() - c0
 
 
-def new_path(seeds: int) -> float:
+def new_path(seeds: int) -> tuple[float, float]:
     from fusion.sweep.grid import sweep, trials_of
     from uwb_cases import CONFIG, SCENARIO
 
@@ -66,9 +67,9 @@ def new_path(seeds: int) -> float:
     for r, lay in CASES:
         ts += trials_of(str(ROOT / CONFIG[lay]), str(ROOT / SCENARIO[r, lay]), range(seeds), ["ukf", "ekf"], [])
     with tempfile.TemporaryDirectory() as d:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         sweep(ts, Path(d) / "r.csv", engine="batch")
-        return time.perf_counter() - t0
+        return time.perf_counter() - t0, time.process_time() - c0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -76,16 +77,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=8)
     args = ap.parse_args(argv)
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores\n")
-    tm = per_trial(max(args.seeds, 8))
-    print("| per trial (batched engine, ms) | " + " | ".join(tm) + " | overhead (all but filter math) |")
-    print("|---|" + "---:|" * (len(tm) + 1))
-    print("| route 1, ukf | " + " | ".join(f"{v:.1f}" for v in tm.values()) +
-          f" | {tm['total'] - tm['filter_math']:.1f} |\n", flush=True)
-    new = new_path(args.seeds)
-    old = old_path(args.seeds)
+    for i, n in enumerate(sorted({8, max(args.seeds, 8)})):
+        tm = per_trial(n)
+        if i == 0:
+            print("| per trial (batched engine, ms) | seeds | " + " | ".join(tm) + " | overhead (all but filter math) |")
+            print("|---|---:|" + "---:|" * (len(tm) + 1))
+        print(f"| route 1, ukf | {n} | " + " | ".join(f"{v:.1f}" for v in tm.values()) +
+              f" | {tm['total'] - tm['filter_math']:.1f} |", flush=True)
+    print()
+    (new, new_c), (old, old_c) = new_path(args.seeds), old_path(args.seeds)
     n = len(CASES) * args.seeds
-    print(f"four cases x {args.seeds} seeds x (ukf, ekf): old path {old:.1f} s ({1e3 * old / n:.0f} ms a seed), "
-          f"fusion sweep {new:.1f} s ({1e3 * new / n:.0f} ms a seed): {old / new:.1f}x")
+    print(f"four cases x {args.seeds} seeds x (ukf, ekf): old path {old:.1f} s wall, {old_c:.1f} s CPU "
+          f"({1e3 * old / n:.0f} ms a seed), fusion sweep {new:.1f} s wall, {new_c:.1f} s CPU "
+          f"({1e3 * new / n:.0f} ms a seed): {old / new:.1f}x wall, {old_c / new_c:.1f}x CPU")
     return 0
 
 

@@ -17,8 +17,10 @@ import numpy as np
 from fusion.api import ConfigError, Gate
 
 from .belief import BatchBelief, BatchUpdate
-from .linalg import T, cholesky, mm, psd_sqrt_rows, qr_lower, recover_factors, sigma_deviations, sigma_points, solve_spd, sym
-from .models import batch_F, batch_H, batch_Q, batch_R
+from .heap import keep_heap
+from .linalg import (T, cholesky, mm, psd_sqrt_rows, qr_lower, recover_factors, sigma_deviations, sigma_points,
+                     sigma_points_cf, solve_spd, sym)
+from .models import batch_F, batch_H, batch_Q, batch_R, propagate_cf
 
 __all__ = ["BatchFilter", "BatchKF", "BatchEKF", "BatchUKF", "BatchSRUKF", "make_batch_filter", "batch_capable"]
 
@@ -120,23 +122,6 @@ def _per_point(u, x: np.ndarray):
     return u
 
 
-#: Largest block of sigma-point elements (points x n) given to a process model at once: a model's temporaries
-#: then stay in cache (16-state ins: 1.7x faster over 1000 filters in blocks of ~60 filters than in one call).
-F_BLOCK = 32768
-
-
-def _propagate(process: Any, X: np.ndarray, u, dt: float) -> np.ndarray:
-    """``process.f`` on the sigma points X (N, 2n+1, n) in blocks of filters (a loop over blocks of
-    ~F_BLOCK elements, not over filters); the same numbers as one call (f is evaluated point by point)."""
-    N = X.shape[0]
-    per = max(1, F_BLOCK // (X.shape[1] * X.shape[2]))
-    up = _per_point(u, X)
-    if N <= per:
-        return process.f(X, up, dt)
-    shared = up is None or np.ndim(up) < 3
-    return np.concatenate([process.f(X[i:i + per], up if shared else up[i:i + per], dt) for i in range(0, N, per)])
-
-
 def _residual(model: Any):
     from fusion_plugins.filters.base import residual_of
     return residual_of(model)
@@ -217,13 +202,12 @@ class BatchUKF(BatchFilter):
         sp = self.sp(x.shape[1])
         Q = batch_Q(process, x, u, dt)                       # at the prior mean, as the ukf
         L, _ = self.factor(b.cov)
-        X = sigma_points(x, sp.eta, L)                       # 000 eq. 3 (N, 2n+1, n)
-        Y = _propagate(process, X, u, dt)                    # 000 eq. 4, in blocks of filters
-        xm = sp.Wm @ Y                                       # 000 eq. 5
-        D = Y - xm[:, None, :]
-        xm = process.normalize(xm)
-        P1 = T(D * sp.Wc[:, None]) @ D + Q                   # 000 eqs. 6-7 unsquared
-        return BatchBelief(b.t + dt, xm, P=sym(P1))
+        # 000 eqs. 3-4 with the points stored component-first (n, N, 2n+1) (fusion/batch/models.py)
+        Y = propagate_cf(process, sigma_points_cf(x, sp.eta, L), u, dt)
+        xm = Y @ sp.Wm                                       # 000 eq. 5 (n, N)
+        D = Y - xm[:, :, None]
+        P1 = np.matmul((D * sp.Wc).transpose(1, 0, 2), D.transpose(1, 2, 0)) + Q   # 000 eqs. 6-7 unsquared
+        return BatchBelief(b.t + dt, process.normalize(np.ascontiguousarray(xm.T)), P=sym(P1))
 
     def update(self, b: BatchBelief, model: Any, z, R, gate: Gate | None = None) -> BatchUpdate:
         x = b.x
@@ -326,8 +310,7 @@ class BatchSRUKF(BatchUKF):
             S1 = qr_lower(np.concatenate((T(F @ S), BQ), axis=1))       # sqrt(F P F^T + Q)
             return BatchBelief(b.t + dt, process.normalize(process.f(x, _per_point(u, x), dt)), S=S1)
         sp = self.sp(n)
-        X = sigma_points(x, sp.eta, S)                                   # eq. 3
-        Y = _propagate(process, X, u, dt)                                # eq. 4
+        Y = propagate_cf(process, sigma_points_cf(x, sp.eta, S), u, dt).transpose(1, 2, 0)   # eqs. 3-4
         Y0 = Y[:, 0]
         D1 = Y[:, 1:] - Y0[:, None, :]
         v0 = np.einsum("i,kin->kn", sp.W1, D1)                           # eq. 5 (recentred)
@@ -386,4 +369,5 @@ def make_batch_filter(flt: Any) -> BatchFilter:
     cls = _CLASSES.get(getattr(flt, "name", None))
     if cls is None:
         raise ConfigError(f"filter {getattr(flt, 'name', flt)!r} has no batched version (kf, ekf, ukf, srukf have)")
+    keep_heap()                            # MB-sized temporaries every step: no page faults (fusion/batch/heap.py)
     return cls(flt)

@@ -13,7 +13,7 @@ import numpy as np
 from fusion_plugins.filters.linalg import cholesky_lower
 
 __all__ = ["sym", "T", "cholesky", "recover_factors", "qr_lower", "psd_sqrt_rows", "solve_spd", "mm",
-           "sigma_points", "sigma_deviations"]
+           "sigma_points", "sigma_points_cf", "sigma_deviations"]
 
 
 def T(A: np.ndarray) -> np.ndarray:
@@ -126,4 +126,18 @@ def sigma_points(x: np.ndarray, eta: float, L: np.ndarray) -> np.ndarray:
     D = np.multiply(np.swapaxes(L, -1, -2), eta)
     np.add(x[:, None, :], D, out=X[:, 1:n + 1])
     np.subtract(x[:, None, :], D, out=X[:, n + 1:])
+    return X
+
+
+def sigma_points_cf(x: np.ndarray, eta: float, L: np.ndarray) -> np.ndarray:
+    """The sigma points of :func:`sigma_points` stored component-first, (n, N, 2n+1): element a of point i
+    of filter k at [a, k, i] (the same numbers). A process model then sees each state element of all the
+    points as one contiguous row (fusion.batch.models.propagate_cf)."""
+    N, n = x.shape
+    X = np.empty((n, N, 2 * n + 1))
+    xt = x.T
+    X[:, :, 0] = xt
+    D = np.multiply(L.transpose(1, 0, 2), eta)          # D[a, k, i] = eta L[k, a, i]
+    np.add(xt[:, :, None], D, out=X[:, :, 1:n + 1])
+    np.subtract(xt[:, :, None], D, out=X[:, :, n + 1:])
     return X

@@ -19,7 +19,7 @@ import numpy as np
 from fusion_plugins.filters.base import as_covariance
 from fusion_plugins.filters.jacobian import _REL_STEP
 
-__all__ = ["batch_Q", "batch_F", "batch_H", "batch_R", "numerical_jacobian_batch", "u_of"]
+__all__ = ["batch_Q", "batch_F", "batch_H", "batch_R", "numerical_jacobian_batch", "u_of", "propagate_cf", "CF_BLOCK"]
 
 
 def u_of(u: np.ndarray | None, i: int) -> np.ndarray | None:
@@ -96,3 +96,35 @@ def batch_H_rows(fn, x: np.ndarray) -> np.ndarray:
     """``fn(x_i)`` for each row of x (N, n), stacked: the per-filter fallback of a model's batched method
     for a rarely used part (e.g. a range lever arm)."""
     return np.stack([fn(xi) for xi in x])
+
+
+#: Elements (points x n) of one block of :func:`propagate_cf`: a model's temporaries then stay in cache.
+#: Measured on the 16-state ins over 1000 filters x 33 points (CPU ms a call of all blocks): 1024 points
+#: 6.5, 2048 6.0, 4096 5.3, 8192 9.2, one block 16.6; the points-first blocks it replaced took 14.5.
+CF_BLOCK = 65536
+
+
+def propagate_cf(process: Any, X: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+    """``process.f`` on sigma points stored component-first, X (n, N, p) (fusion.batch.linalg
+    ``sigma_points_cf``), with ``u`` None, (m,) shared or (N, m) per filter; returns (n, N, p).
+
+    Why component-first: a vectorised model (ins) reads its state as rows, ``x.reshape(-1, n).T``; given
+    points-first states (N, p, n) those rows are strided and its output is transposed back by a copy. Here
+    each block is passed as the transpose of contiguous rows, so the model's rows are contiguous and its
+    (M, n) result is a view of its own (n, M) array: 2.7x less time for the ins (CF_BLOCK), the same
+    numbers (f is evaluated point by point). No change to the model itself."""
+    n, N, p = X.shape
+    M = N * p
+    Xf = X.reshape(n, M)
+    U = None
+    if u is not None:
+        u = np.asarray(u, dtype=float)
+        if u.ndim == 2:
+            U = np.repeat(u.T, p, axis=1)                 # (m, M): each filter's input at its points
+    Y = np.empty((n, M))
+    step = max(1, CF_BLOCK // n)
+    for a in range(0, M, step):
+        b = min(M, a + step)
+        ub = u if U is None else U[:, a:b].T
+        Y[:, a:b] = np.asarray(process.f(Xf[:, a:b].T, ub, dt)).T
+    return Y.reshape(n, N, p)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import zlib
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -61,15 +62,42 @@ def build_simulators(sc: Scenario, registry=None, where: str = "<scenario>", tex
     return out
 
 
-def simulate(sc: Scenario, seed: int | None = None, noise: bool = True, registry=None,
-             where: str = "<scenario>", text: str | None = None) -> str:
-    """The whole log text of a scenario (see the module docstring)."""
+@dataclass
+class SimStream:
+    """The messages of one stream of a simulated recording before they become text: ``name`` (a sensor,
+    or ``truth``), ``order`` (its rank among the streams: ties in time go by it), times ``t`` (N,) s,
+    ``values`` (one tuple of floats or labels a message, or an array: ``table``) and the decimals of the
+    values (``precision``)."""
+
+    name: str
+    order: int
+    t: np.ndarray
+    values: Any
+    precision: int
+    table: bool = False   # values an (N, m) array (the truth), formatted row by row from ``tolist()``
+
+
+@dataclass
+class SimParts:
+    """A simulated recording as data: the ``#`` lines (without ``# ``: header, then one ``fields`` line
+    per stream) and the streams; :func:`render` makes the text of :func:`simulate` from them."""
+
+    header: list[str]
+    streams: list[SimStream]
+
+
+def simulate_parts(sc: Scenario, seed: int | None = None, noise: bool = True, registry=None,
+                   where: str = "<scenario>", text: str | None = None, trajectory: Any = None) -> SimParts:
+    """The recording of :func:`simulate` as data (before formatting). ``trajectory``: an already built
+    trajectory of this scenario (it does not depend on the seed: a sweep builds it once for all seeds)."""
     seed = sc.seed if seed is None else int(seed)
     sims = build_simulators(sc, registry, where, text)
-    try:
-        traj = build_trajectory(sc.trajectory, sc.dim, sc.duration)
-    except TrajectoryError as exc:
-        raise _located(where, text, str(exc)) from None
+    if trajectory is None:
+        try:
+            trajectory = build_trajectory(sc.trajectory, sc.dim, sc.duration)
+        except TrajectoryError as exc:
+            raise _located(where, text, str(exc)) from None
+    traj = trajectory
     duration = float(sc.duration if sc.duration is not None else traj.duration)
     beacons = {k: np.array(v + [0.0] * (3 - len(v)), float) for k, v in sc.beacons.items()}
     origin = (sc.origin.lat_deg, sc.origin.lon_deg, sc.origin.alt_m) if sc.origin else None
@@ -89,7 +117,7 @@ def simulate(sc: Scenario, seed: int | None = None, noise: bool = True, registry
     for k, b in beacons.items():
         header.append(f"beacon {k}: {b[0]:g} {b[1]:g} {b[2]:g}")
 
-    rows: list[tuple[int, int, str]] = []
+    streams: list[SimStream] = []
     field_lines: list[str] = []
     for order, (name, sim) in enumerate(sims.items()):
         ctx = SimContext(traj, beacons, sc.dim, sc.gravity, duration, noise, sensor_rng(seed, name),
@@ -101,8 +129,7 @@ def simulate(sc: Scenario, seed: int | None = None, noise: bool = True, registry
         except ConfigError as exc:
             raise _located(where, text, str(exc)) from None
         prec = sim.params.precision or sc.precision
-        for t, vals in zip(out.t, out.values):
-            rows.append((int(round(float(t) * 1e6)), order, format_line(float(t), name, vals, precision=prec)))
+        streams.append(SimStream(name, order, np.asarray(out.t), out.values, prec))
 
     # truth at the highest sensor rate
     rate = sc.truth.rate_hz or max((s.rate_hz() for s in sims.values()), default=10.0) or 10.0
@@ -120,14 +147,31 @@ def simulate(sc: Scenario, seed: int | None = None, noise: bool = True, registry
             names += list(extra)
             cols.append(np.asarray(sim.truth(tt), float).reshape(len(tt), len(extra)))
     field_lines.append("fields truth " + " ".join(names))
-    T = np.column_stack(cols)
-    order = len(sims)
-    for t, row in zip(tt, T):
-        rows.append((int(round(float(t) * 1e6)), order, format_line(float(t), "truth", row.tolist(),
-                                                                    precision=sc.truth.precision)))
+    streams.append(SimStream("truth", len(sims), tt, np.column_stack(cols), sc.truth.precision, True))
+    return SimParts(header + field_lines, streams)
+
+
+def render(parts: SimParts) -> str:
+    """The log text of a simulated recording (see the module docstring)."""
+    rows: list[tuple[int, int, str]] = []
+    for st in parts.streams:
+        name, order, prec = st.name, st.order, st.precision
+        if st.table:
+            for t, row in zip(st.t, st.values):
+                rows.append((int(round(float(t) * 1e6)), order, format_line(float(t), name, row.tolist(),
+                                                                            precision=prec)))
+        else:
+            for t, vals in zip(st.t, st.values):
+                rows.append((int(round(float(t) * 1e6)), order, format_line(float(t), name, vals, precision=prec)))
     rows.sort(key=lambda r: (r[0], r[1]))
-    lines = ["# " + h for h in header + field_lines] + [r[2] for r in rows]
+    lines = ["# " + h for h in parts.header] + [r[2] for r in rows]
     return "\n".join(lines) + "\n"
+
+
+def simulate(sc: Scenario, seed: int | None = None, noise: bool = True, registry=None,
+             where: str = "<scenario>", text: str | None = None) -> str:
+    """The whole log text of a scenario (see the module docstring)."""
+    return render(simulate_parts(sc, seed, noise, registry, where, text))
 
 
 def simulate_file(path: str, seed: int | None = None, noise: bool = True, registry: Any = None) -> str:

@@ -19,7 +19,8 @@ from typing import Any
 
 from fusion.api import ConfigError
 
-__all__ = ["Trial", "row_of", "run_trial", "system_of", "scenario_of", "recording_of", "METRICS"]
+__all__ = ["Trial", "row_of", "run_trial", "system_of", "scenario_of", "recording_of", "drawn_mean", "drawn_from_truth",
+           "with_initial", "METRICS"]
 
 #: The metric columns of a row, in order (``nis_mean_<sensor>`` columns follow, one per sensor).
 METRICS = ("position_rmse_m", "position_max_m", "velocity_rmse_mps", "attitude_rmse_deg", "nees_mean",
@@ -149,8 +150,6 @@ def drawn_mean(system, lines: list[str], seed: int):
     draw of N(0, P0) on the elements truth gives (other elements, and quaternion blocks, keep the
     config's mean), from ``numpy.random.default_rng([seed, INITIAL_STREAM])``. ConfigError when the
     recording has no truth to draw around."""
-    import numpy as np
-
     from fusion.logformat import ParsedStream, iter_messages
     from fusion.api import Message
 
@@ -163,13 +162,20 @@ def drawn_mean(system, lines: list[str], seed: int):
     names = st.header.fields.get("truth")
     if first is None or not names:
         raise ConfigError("initial: drawn needs truth in the recording ('# fields truth ...' and a truth line)")
+    return drawn_from_truth(system, names, first.values, seed)
+
+
+def drawn_from_truth(system, names, first_values, seed: int):
+    """:func:`drawn_mean` given the recording's truth field ``names`` and its first truth line's values."""
+    import numpy as np
+
     layout = system.layout
     quat = {n for b in layout.blocks if b.kind == "quaternion" for n in b.element_names()}
     idx = [(layout.element_index(n), names.index(n)) for n in layout.names if n in names and n not in quat]
     if not idx:
         raise ConfigError("initial: drawn: no state element is named in the recording's truth fields")
     xi = np.array([i for i, _ in idx])
-    truth = np.array([float(first.values[j]) for _, j in idx])
+    truth = np.array([float(first_values[j]) for _, j in idx])
     L = np.linalg.cholesky(system.P0[np.ix_(xi, xi)])
     z = np.random.default_rng([int(seed), INITIAL_STREAM]).standard_normal(len(xi))
     x0 = np.array(system.x0, dtype=float)
@@ -177,14 +183,21 @@ def drawn_mean(system, lines: list[str], seed: int):
     return x0
 
 
-def with_initial(system, trial: Trial, lines: list[str]):
-    """``system`` with the trial's initial mean (itself unless ``initial`` is ``drawn``)."""
+def with_initial(system, trial: Trial, lines: list[str] | None = None, truth: tuple | None = None):
+    """``system`` with the trial's initial mean (itself unless ``initial`` is ``drawn``), drawn around the
+    first truth line of the recording ``lines``, or of ``truth`` = (field names or None, first values or
+    None) when the recording is already parsed."""
     if trial.initial == "config":
         return system
     if trial.initial != "drawn":
         raise ConfigError(f"initial {trial.initial!r}: expected 'config' or 'drawn'")
     import dataclasses
 
+    if truth is not None:
+        names, first = truth
+        if first is None or not names:
+            raise ConfigError("initial: drawn needs truth in the recording ('# fields truth ...' and a truth line)")
+        return dataclasses.replace(system, x0=drawn_from_truth(system, names, first, trial.seed))
     return dataclasses.replace(system, x0=drawn_mean(system, lines, trial.seed))
 
 

@@ -59,15 +59,15 @@ def test_uwb_batch_equals_single_filters(uwb, name):
     assert batch.counters["updates"].sum() == 200 * N - rejected.sum()
 
 
-@pytest.mark.parametrize("block", [None, 3 * 33 * 16])
+@pytest.mark.parametrize("block", [None, 100 * 16])
 @pytest.mark.parametrize("name", ["ekf", "ukf", "srukf"])
 def test_ins_batch_equals_single_filters(ranges3d, name, block, monkeypatch):
     """16-state INS (trapezoidal, renormalised quaternion), 8 filters with their own IMU samples and
     initial errors; 10 predictions at 100 Hz then a 3-range update, 30 cycles; also with the process
-    model evaluated in blocks of 3 filters (F_BLOCK)."""
+    model evaluated in blocks of 100 sigma points (CF_BLOCK: blocks that cut filters apart)."""
     if block is not None:
-        import fusion.batch.filters as bfm
-        monkeypatch.setattr(bfm, "F_BLOCK", block)
+        import fusion.batch.models as bmm
+        monkeypatch.setattr(bmm, "CF_BLOCK", block)
     rng = np.random.default_rng(11)
     N = 8
     proc = testing.build("process", "ins", {"integration": "trapezoidal"})

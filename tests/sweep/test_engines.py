@@ -76,20 +76,23 @@ def test_unbatchable_variants_are_named(trials):
 
 def test_not_lockstep_falls_back_on_the_pipeline(trials, monkeypatch):
     """Seeds whose recordings differ in timing are run one by one through the pipeline, same rows."""
+    from fusion.simulate import engine
     from fusion.sweep import batched
 
     ts = trials(seeds=range(2), filters=("ukf",))
-    real = batched.recording_of
+    real = engine.simulate_parts
 
-    def shifted(trial):
-        lines = real(trial)
-        if trial.seed == 1:   # drop one range: the two recordings are no longer in lockstep
-            i = next(i for i, line in enumerate(lines) if ",uwb," in line)
-            lines = lines[:i] + lines[i + 1:]
-        return lines
+    def shifted(sc, seed=None, *args, **kw):
+        parts = real(sc, seed, *args, **kw)
+        if seed == 1:   # drop one range: the two recordings are no longer in lockstep
+            st = next(s for s in parts.streams if s.name == "uwb")
+            st.t, st.values = st.t[1:], st.values[1:]
+        return parts
 
-    monkeypatch.setattr(batched, "recording_of", shifted)
+    monkeypatch.setattr(engine, "simulate_parts", shifted)
     with pytest.raises(batched.NotLockstep):
         batched.run_batch(ts)
     rows = rows_by_key(engines.run_batched([ts]))
     assert {r["engine"] for r in rows.values()} == {"pipeline"}
+    for t in ts:
+        assert_rows_equal(rows[t.key()], run_trial(t))
