@@ -19,7 +19,7 @@ from rich.text import Text
 from textual.widget import Widget
 
 from fusion.tui.canvas import BrailleCanvas
-from fusion.tui.feed import FeedSnapshot
+from fusion.tui.snapshot import FeedSnapshot
 
 EST, TRUTH, BEACON, NOW, ELLIPSE = "bold cyan", "#a0a0a0", "bold red", "bold yellow", "yellow"
 SMOOTHED = "bold magenta"
