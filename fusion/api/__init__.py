@@ -20,8 +20,8 @@ from fusion.kinds import KINDS
 from .capabilities import (CAPABILITIES, Aligns, AlignsState, CapabilityWarning, ChecksGeometry, Closes,
                            HasThreshold, InputRunNoise, IntegratesInputRuns, KeepsGateState,
                            NonAdditiveMeasurementNoise, NonAdditiveProcessNoise, Opens, PositionFromFix, PredictsInputRuns, PseudoMeasurement,
-                           ReadsBelief, ReportsIdle, ReportsInfo, ReportsStatus, UsesInput, capabilities_of, has,
-                           near_misses)
+                           ReadsBelief, ReceivesEvents, ReportsIdle, ReportsInfo, ReportsStatus, UsesInput,
+                           capabilities_of, has, near_misses)
 from .components import (BuildContext, Component, Decoder, Filter, Gate, MeasurementModel, Params,
                          ProcessModel, Simulator, Sink, Solver, Source)
 from .gates import GateDecision, GateRun
@@ -51,7 +51,7 @@ __all__ = [
     # optional capabilities (fusion.api.capabilities)
     "Aligns", "IntegratesInputRuns", "InputRunNoise", "NonAdditiveProcessNoise", "ChecksGeometry",
     "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState", "UsesInput", "PseudoMeasurement",
-    "PredictsInputRuns", "HasThreshold", "KeepsGateState", "ReadsBelief", "ReportsInfo", "Opens", "Closes", "ReportsIdle",
-    "ReportsStatus", "CAPABILITIES", "CapabilityWarning", "has", "capabilities_of", "near_misses",
+    "PredictsInputRuns", "HasThreshold", "KeepsGateState", "ReadsBelief", "ReportsInfo", "Opens", "Closes",
+    "ReportsIdle", "ReportsStatus", "ReceivesEvents", "CAPABILITIES", "CapabilityWarning", "has", "capabilities_of", "near_misses",
     *_SIMULATION,
 ]
