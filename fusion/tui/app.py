@@ -166,7 +166,7 @@ class FusionApp(App):
 
     def _keep_view(self) -> None:
         track, plots = self._main.query_one(TrackPlot), self._main.query_one(InnovationPanel)
-        self._view = dict(zoom=track.zoom, follow=track.follow, hide=(track._hide_track, track._hide_truth),
+        self._view = dict(zoom=track.zoom, follow=track.follow, hide=track.hidden,
                           sensor=plots.sensor, element=plots.element,
                           state=self._main.query_one(StatePlot).element)
 
@@ -175,7 +175,7 @@ class FusionApp(App):
         if v:
             track, plots = self._main.query_one(TrackPlot), self._main.query_one(InnovationPanel)
             track.zoom, track.follow = v["zoom"], v["follow"]
-            track._hide_track, track._hide_truth = v["hide"]
+            track.hidden = v["hide"]
             plots.sensor, plots.element = v["sensor"], v["element"]
             self._main.query_one(StatePlot).element = v["state"]
         if self.latest is not None:
@@ -189,7 +189,7 @@ class FusionApp(App):
         self.updates += 1
         if self.feed.paused and not self.paused:  # the feed held itself (pause_at)
             self.paused = True
-        only_status = not (not self.paused or self.feed._stepping or message.snapshot.state not in ("running", "waiting"))
+        only_status = not (not self.paused or self.feed.stepping or message.snapshot.state not in ("running", "waiting"))
         try:
             self._render(message.snapshot, only_status=only_status)
         except NoMatches:  # an update from the feed's thread racing the screen's mount or teardown: nothing to draw

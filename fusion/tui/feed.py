@@ -124,6 +124,11 @@ class LiveFeed:
     def paused(self) -> bool:
         return not self._running.is_set()
 
+    @property
+    def stepping(self) -> bool:
+        """A single step of a paused replay is under way (its estimate not shown yet)."""
+        return self._stepping
+
     def step(self) -> None:
         """While a replay is paused: read on to the next estimate, then hold again."""
         self._step.set()

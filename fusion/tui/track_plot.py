@@ -79,6 +79,15 @@ class TrackPlot(Widget):
         self.current = current
         self.refresh()
 
+    @property
+    def hidden(self) -> tuple[int, int]:
+        """The reset marks (points of the track and of truth hidden before them), kept across a relayout."""
+        return self._hide_track, self._hide_truth
+
+    @hidden.setter
+    def hidden(self, marks: tuple[int, int]) -> None:
+        self._hide_track, self._hide_truth = marks
+
     def reset(self) -> None:
         """Forget the trail so far (the view refits to the points that follow)."""
         self._hide_track, self._hide_truth, self._hide_smoothed = self._totals
