@@ -153,6 +153,8 @@ class FusionApp(App):
         self.set_interval(0.5, self._tick)
 
     async def _tick(self) -> None:
+        if not self.screen_stack:  # a timer firing during teardown: no screen left to draw on
+            return
         for line in self._main.query(StatusLine):
             line.tick()
         await self._relayout()
@@ -190,6 +192,8 @@ class FusionApp(App):
         if self.feed.paused and not self.paused:  # the feed held itself (pause_at)
             self.paused = True
         only_status = not (not self.paused or self.feed.stepping or message.snapshot.state not in ("running", "waiting"))
+        if not self.screen_stack:  # before the first screen or after the last: nothing to draw
+            return
         try:
             self._render(message.snapshot, only_status=only_status)
         except NoMatches:  # an update from the feed's thread racing the screen's mount or teardown: nothing to draw
