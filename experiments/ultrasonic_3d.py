@@ -36,7 +36,6 @@ def static_row(row, seed: int, tmpdir: str) -> dict:
     """One seed of one static position: geometric fixes and the stationary IEKF (Tables I-II)."""
     from fusion import testing
     from fusion.api import BuildContext, Message
-    from fusion_plugins.solvers.ols_trilateration import unpack_fix
     from fusion_plugins.solvers.tdoa_geometric import stationary_bound
 
     (pos_mm, cycles, _, _) = row
@@ -51,7 +50,7 @@ def static_row(row, seed: int, tmpdir: str) -> dict:
         fixes = []
         for j in range(len(log.t)):
             for m in solver.feed(Message(log.t[j], "us", (log.beacon[j], log.arrival[j], float(log.receiver[j])))):
-                fixes.append(unpack_fix(m.values)[0])
+                fixes.append(m.value)          # a typed fusion.api.Fix
         fixes = np.array(fixes)
         # the paper's filter: the robot stationary (no position random walk)
         # the paper's filter: the robot stationary (no position random walk), and its initialiser told so

@@ -157,7 +157,7 @@ def geometric_orientation(log: Log, beacons: dict[str, np.ndarray], true_positio
                           c: float = 340.0) -> tuple[np.ndarray, np.ndarray]:
     """Sec. 5.1 at every firing from the last four (one per beacon): C_b^n (k, 3, 3) and valid (k,). The
     position is the truth (the paper's Monte Carlo: discretisation only) or the TDOA fix of the same four."""
-    from fusion_plugins.measurement.direction import _normals
+    from fusion_plugins.measurement.direction import receiver_normals as _normals
     from fusion_plugins.solvers.orientation_geometric import orientation_fix
     from fusion_plugins.solvers.tdoa_geometric import NoFix, tdoa_fix
 

@@ -254,7 +254,7 @@ def build_component(registry: Registry, kind: str, spec: ComponentSpec, ctx: Bui
         raise ConfigError(f"{where}: {kind} {name!r}: {exc}") from None
 
 
-from fusion.config_values import _initial, _noise_matrix  # noqa: E402,F811 (the numbers of a config, split out)
+from fusion.config_values import initial_belief_values, noise_matrix  # noqa: E402 (the numbers of a config, split out)
 
 
 def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = None,
@@ -292,7 +292,7 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
             if s.model is None:
                 raise ConfigError(f"{where}: a measurement sensor needs 'model: NAME'")
             model = build_component(reg, "measurement", s.model, sctx, doc, [*loc, "model"])
-            R = _noise_matrix(s.noise, model.dim, doc.where([*loc, "noise"]) if doc else f"{where}.noise")
+            R = noise_matrix(s.noise, model.dim, doc.where([*loc, "noise"]) if doc else f"{where}.noise")
             if R is None and model.carries_R is False:
                 raise ConfigError(f"{where}: a measurement sensor needs 'noise:' (sd or R): its model "
                                   f"{model.name!r} takes no covariance from its messages")
@@ -333,7 +333,7 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
         if name not in layout.names:
             raise ConfigError(f"{doc.where(['evaluation', 'position', i]) if doc else 'evaluation.position'}: "
                               f"state has no element {name!r}; elements are {list(layout.names)}")
-    x0, P0 = _initial(spec, process, doc)
+    x0, P0 = initial_belief_values(spec, process, doc)
     return System(spec, path, process, filt, sensors, x0, P0, beacons, reg)  # type: ignore[arg-type]
 
 

@@ -1,4 +1,8 @@
-"""YAML loading that remembers where each value came from, so errors can name the file and line."""
+"""YAML loading that remembers where each value came from, so errors can name the file and line.
+
+The one locator (:meth:`LocatedYAML.line_of`, :meth:`LocatedYAML.where`) and the one pydantic error
+formatter (:func:`pydantic_errors`) of the project: system configs (fusion.config) and scenarios
+(fusion.simulate) both report ``file:line: field.path: problem``."""
 from __future__ import annotations
 
 import re
@@ -119,10 +123,21 @@ def yaml_problem(exc: yaml.YAMLError) -> tuple[int | None, str]:
 class LocatedYAML:
     """A parsed YAML document plus the node tree, to map a field path to its line number."""
 
-    def __init__(self, path: Path, data: Any, root: yaml.Node | None):
+    def __init__(self, path: Path | str, data: Any, root: yaml.Node | None):
         self.path = path
         self.data = data
         self.root = root
+
+    @classmethod
+    def from_text(cls, text: str, where: str = "<yaml>") -> "LocatedYAML":
+        """The document of YAML ``text`` (``where``: its file, for messages); ConfigError ``where:line:
+        invalid YAML: ...`` for a syntax error, a duplicate key, an alias bomb (fusion.yamlsource limits)."""
+        try:
+            data, root = parse_yaml(text)
+        except yaml.YAMLError as exc:
+            line, problem = yaml_problem(exc)
+            raise ConfigError(f"{where}{f':{line}' if line else ''}: invalid YAML: {problem}") from None
+        return cls(where, data, root)
 
     def line_of(self, loc: Sequence[Any]) -> int | None:
         """1-based line of the value at ``loc`` (keys and list indices); the deepest existing node."""
@@ -151,6 +166,19 @@ class LocatedYAML:
         at = f"{self.path}:{line}" if line else str(self.path)
         return f"{at}: {dotted}" if dotted else at
 
+    def error(self, msg: str) -> ConfigError:
+        """ConfigError of a message about this document: one that starts with a field path (``a.b.2.c:
+        ...``) gets the file and that field's line (``file:line: a.b.2.c: ...``), another the file; one
+        that already names the file is kept."""
+        where = str(self.path)
+        if msg.startswith(where):
+            return ConfigError(msg)
+        head, sep, rest = msg.partition(": ")
+        if sep and head and " " not in head:
+            loc = [int(x) if x.isdigit() else x for x in head.split(".")]
+            return ConfigError(f"{self.where(loc)}: {rest}")
+        return ConfigError(f"{where}: {msg}")
+
 
 def load_yaml(path: str | Path) -> LocatedYAML:
     """Read a YAML file; ConfigError with file and line for a missing file or a syntax error."""
@@ -163,14 +191,11 @@ def load_yaml(path: str | Path) -> LocatedYAML:
         raise ConfigError(f"{p}: is a directory, expected a YAML file") from None
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{p}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    try:
-        data, root = parse_yaml(text)
-    except yaml.YAMLError as exc:
-        line, problem = yaml_problem(exc)
-        raise ConfigError(f"{p}{f':{line}' if line else ''}: invalid YAML: {problem}") from None
-    if not isinstance(data, dict):
-        raise ConfigError(f"{p}: expected a mapping of keys at the top level, got {type(data).__name__}")
-    return LocatedYAML(p, data, root)
+    doc = LocatedYAML.from_text(text, str(p))
+    if not isinstance(doc.data, dict):
+        raise ConfigError(f"{p}: expected a mapping of keys at the top level, got {type(doc.data).__name__}")
+    doc.path = p
+    return doc
 
 
 _TYPE_TAG = re.compile(r"^(float|int|str|bool|none|list|dict|tuple|set|literal|union|nullable)(\[.*\])?$|^function-")
@@ -181,8 +206,12 @@ def _field_path(data: Any, loc: Sequence[Any]) -> list[Any]:
     union (``float``, ``list[float]``) and its validators (``function-after[...]``), unless the data has
     such a key there."""
     out: list[Any] = []
+    tagged = None   # the mapping whose union tag was skipped (once per level)
     for part in loc:
         if isinstance(part, str) and _TYPE_TAG.match(part) and not (isinstance(data, dict) and part in data):
+            continue
+        if isinstance(data, dict) and data is not tagged and isinstance(part, str) and data.get("type") == part:
+            tagged = data  # the tag of a union discriminated by its ``type`` key (a scenario's trajectory)
             continue
         out.append(part)
         if isinstance(data, dict):

@@ -81,3 +81,37 @@ def test_rejected_update_leaves_belief_untouched(name):
     assert res.nis > gate.gate.threshold(2) == gate.last.threshold
     np.testing.assert_allclose(res.innovation, [5.0, 0.0], atol=0.2)
     assert gate.counters == {"rejected": 1, "checked": 2}   # counted in the run's GateRun; the filter keeps none
+
+
+@pytest.mark.parametrize("name,params", [("chi2", {}), ("chi2", {"n_sigma": 3.0}), ("reopening", {}),
+                                         ("reopening", {"window": 5, "start_open": True})])
+def test_built_in_gates_pass_the_gate_contract(name, params):
+    counts = testing.check_gate(testing.registry_class("gate", name), params)
+    assert counts["checked"] == 400 and 0 < counts["rejected"] < 400
+
+
+def test_the_gate_contract_catches_a_gate_that_counts_inside_itself():
+    from fusion.api import Gate
+
+    class Counting(Gate):
+        """Counts its calls on itself (what a gate must not do)."""
+
+        name = "counting"
+
+        def check(self, nis, dim, state=None):
+            self.calls = getattr(self, "calls", 0) + 1
+            return GateDecision(bool(nis <= 9.0), 9.0), None
+
+    with pytest.raises(AssertionError, match="immutable"):
+        testing.check_gate(Counting)
+
+    class NanPasses(Gate):
+        """Accepts everything, NaN too."""
+
+        name = "nan_passes"
+
+        def check(self, nis, dim, state=None):
+            return GateDecision(True, 9.0), None
+
+    with pytest.raises(AssertionError, match="NaN"):
+        testing.check_gate(NanPasses)

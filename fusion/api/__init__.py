@@ -20,8 +20,8 @@ from fusion.kinds import KINDS
 from .capabilities import (CAPABILITIES, Aligns, AlignsState, CapabilityWarning, ChecksGeometry, Closes,
                            HasThreshold, InputRunNoise, IntegratesInputRuns, KeepsGateState, LinearisesInputRuns,
                            NonAdditiveMeasurementNoise, NonAdditiveProcessNoise, Opens, PositionFromFix,
-                           PredictsInputRuns, PseudoMeasurement, ReadsBelief, ReportsIdle, ReportsInfo, ReportsStatus,
-                           ReportsStepEvents, UsesInput, capabilities_of, has,
+                           PredictsInputRuns, PseudoMeasurement, ReadsBelief, ReceivesEvents, ReportsIdle,
+                           ReportsInfo, ReportsStatus, ReportsStepEvents, UsesInput, capabilities_of, has,
                            near_misses)
 from .components import (BuildContext, Component, Decoder, Filter, Gate, MeasurementModel, Params,
                          ProcessModel, Simulator, Sink, Solver, Source)
@@ -53,7 +53,7 @@ __all__ = [
     "Aligns", "IntegratesInputRuns", "InputRunNoise", "LinearisesInputRuns", "NonAdditiveProcessNoise",
     "ReportsStepEvents", "ChecksGeometry", "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState",
     "UsesInput", "PseudoMeasurement", "PredictsInputRuns", "HasThreshold", "KeepsGateState", "ReadsBelief",
-    "ReportsInfo", "Opens", "Closes", "ReportsIdle", "ReportsStatus", "CAPABILITIES", "CapabilityWarning", "has",
-    "capabilities_of", "near_misses",
+    "ReportsInfo", "Opens", "Closes", "ReportsIdle", "ReportsStatus", "ReceivesEvents", "CAPABILITIES",
+    "CapabilityWarning", "has", "capabilities_of", "near_misses",
     *_SIMULATION,
 ]

@@ -33,8 +33,8 @@ __all__ = [
     "HasThreshold", "KeepsGateState",
     # solvers, decoders, models
     "ReadsBelief", "ReportsInfo",
-    # sources
-    "Opens", "Closes", "ReportsIdle", "ReportsStatus",
+    # sources, sinks
+    "Opens", "Closes", "ReportsIdle", "ReportsStatus", "ReceivesEvents",
     "CAPABILITIES", "CapabilityWarning", "has", "capabilities_of", "near_misses",
 ]
 
@@ -269,13 +269,22 @@ class ReportsStatus(Protocol):
     on_status: Callable[[str, int, str], Any] | None
 
 
+# --------------------------------------------------------------------------- sinks
+@runtime_checkable
+class ReceivesEvents(Protocol):
+    """A sink (or any object given to a run as a sink) that takes the run's events too: ``on_event(event)``
+    for every event, in the order they are released among the estimates (the ``Collect`` sink; a log)."""
+
+    def on_event(self, event: Event) -> None: ...
+
+
 # --------------------------------------------------------------------------- detection
 #: Every capability protocol, by the member names it is detected by.
 CAPABILITIES: tuple[type, ...] = (
     Aligns, IntegratesInputRuns, InputRunNoise, LinearisesInputRuns, NonAdditiveProcessNoise, ReportsStepEvents,
     ChecksGeometry, PositionFromFix, NonAdditiveMeasurementNoise, AlignsState, UsesInput, PseudoMeasurement,
     PredictsInputRuns, HasThreshold, KeepsGateState, ReportsInfo, ReadsBelief, Opens, Closes, ReportsIdle,
-    ReportsStatus,
+    ReportsStatus, ReceivesEvents,
 )
 
 _METHODS: dict[type, tuple[str, ...]] = {

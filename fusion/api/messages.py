@@ -1,7 +1,7 @@
 """What components exchange during a run: messages, observations, fixes, update results, events, estimates."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
@@ -53,26 +53,36 @@ class Observation:
     R: np.ndarray | None = None
 
 
+def _empty() -> np.ndarray:
+    return np.zeros(0)
+
+
 @dataclass(frozen=True)
 class Fix:
-    """A solver's single-shot estimate (a trilateration's position, a TRIAD attitude), as it travels from a
-    sensor's preprocessor to the sensor's measurement model (``observe(fix)``): typed, no float-array
-    wire protocol between plugins.
+    """A solver's single-shot estimate (a trilateration's position, a TRIAD attitude, a geometric
+    initialiser's state), as it travels from a sensor's preprocessor to the sensor's measurement model
+    (``observe(fix)``): typed, no float-array wire protocol between plugins.
 
     ``t`` (s): the sensor time it is stamped at (the message that closed the solver's cycle);
-    ``value`` (m,): what was solved for, in the model's units and frame (a position: m, NED);
+    ``value`` (m,): what was solved for, in the model's units and frame (a position: m, NED; the paper 003
+    initialiser's ``[x y z t]``: m and the firing time, s); empty for an attitude-only fix;
     ``cov`` (m, m): its covariance, or None (the sensor's configured noise applies);
     ``age`` (s, >= 0): the value is of ``age`` seconds before ``t`` (a cycle's mean range time);
     ``used``: the beacons (or other sources) it was solved from; ``sensor`` and ``line``: the sensor and
-    source line of the closing message, for events and error messages."""
+    source line of the closing message, for events and error messages;
+    ``attitude`` (4,): an attitude solved for, the unit quaternion C_b^n (Hamilton, scalar first), or None;
+    ``attitude_cov`` (3, 3): the covariance (rad^2) of its error as a navigation-frame rotation vector
+    ``d theta`` (``q_fix = exp(d theta / 2) (x) q_true``), or None; uncorrelated with ``value``."""
 
     t: float
-    value: np.ndarray
+    value: np.ndarray = field(default_factory=_empty)
     cov: np.ndarray | None = None
     age: float = 0.0
     used: tuple[str, ...] = ()
     sensor: str = ""
     line: int | None = None
+    attitude: np.ndarray | None = None
+    attitude_cov: np.ndarray | None = None
 
 
 @dataclass(frozen=True, init=False)

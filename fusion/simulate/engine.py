@@ -19,8 +19,9 @@ from pydantic import ValidationError
 from fusion.api import BuildContext, ConfigError
 from fusion.logformat import format_line
 from fusion.simulate.base import SensorSimulator, SimContext, sample_times
-from fusion.simulate.scenario import Scenario, format_validation_error, yaml_line
+from fusion.simulate.scenario import Scenario
 from fusion.simulate.trajectory import TrajectoryError, build_trajectory
+from fusion.yamlsource import LocatedYAML, pydantic_errors
 
 LOG_VERSION = "1"
 
@@ -30,17 +31,15 @@ def sensor_rng(seed: int, sensor: str) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([int(seed), zlib.crc32(sensor.encode("utf-8"))]))
 
 
-def _located(where: str, text: str | None, msg: str) -> ConfigError:
-    """ConfigError ``file: a.b.c (line N): ...`` from a message that starts with a field path ``a.b.c: ...``."""
-    if msg.startswith(where):
-        return ConfigError(msg)
-    head, sep, rest = msg.partition(": ")
-    if sep and " " not in head and text:
-        loc = tuple(int(x) if x.isdigit() else x for x in head.split("."))
-        line = yaml_line(text, loc)
-        if line:
-            return ConfigError(f"{where}: {head} (line {line}): {rest}")
-    return ConfigError(f"{where}: {msg}")
+def _document(sc: Scenario, where: str, text: str | None) -> LocatedYAML:
+    """The scenario's YAML document, to locate an error (fusion.yamlsource, as a config's): from its text,
+    else its sensors without lines."""
+    if text:
+        try:
+            return LocatedYAML.from_text(text, where)
+        except ConfigError:
+            pass
+    return LocatedYAML(where, {"sensors": dict(sc.sensors)}, None)
 
 
 def build_simulators(sc: Scenario, registry=None, where: str = "<scenario>", text: str | None = None
@@ -56,7 +55,7 @@ def build_simulators(sc: Scenario, registry=None, where: str = "<scenario>", tex
         try:
             params = cls.Params.model_validate(spec)
         except ValidationError as exc:
-            raise ConfigError(format_validation_error(exc, where, text, prefix=("sensors", name))) from None
+            raise pydantic_errors(_document(sc, where, text), exc, prefix=("sensors", name)) from None
         ctx = BuildContext(beacons=beacons, sensor=name, extra={"dim": sc.dim, "gravity": sc.gravity})
         out[name] = cls(params, ctx)
     return out
@@ -96,7 +95,7 @@ def simulate_parts(sc: Scenario, seed: int | None = None, noise: bool = True, re
         try:
             trajectory = build_trajectory(sc.trajectory, sc.dim, sc.duration)
         except TrajectoryError as exc:
-            raise _located(where, text, str(exc)) from None
+            raise _document(sc, where, text).error(str(exc)) from None
     traj = trajectory
     duration = float(sc.duration if sc.duration is not None else traj.duration)
     beacons = {k: np.array(v + [0.0] * (3 - len(v)), float) for k, v in sc.beacons.items()}
@@ -127,7 +126,7 @@ def simulate_parts(sc: Scenario, seed: int | None = None, noise: bool = True, re
             header += sim.header(ctx)
             field_lines.append(f"fields {name} " + " ".join(sim.fields(ctx)))
         except ConfigError as exc:
-            raise _located(where, text, str(exc)) from None
+            raise _document(sc, where, text).error(str(exc)) from None
         prec = sim.params.precision or sc.precision
         streams.append(SimStream(name, order, np.asarray(out.t), out.values, prec))
 

@@ -2,7 +2,8 @@
 
 A scenario names a trajectory, beacons (name -> position), an optional geodetic origin (for GPS) and the
 sensors, each selected by registry name (``type: imu``) with the simulator's own ``Params``. Errors name
-the file, the field path and its YAML line: ``scenarios/x.yaml: sensors.uwb.noise_sd (line 12): ...``.
+the file, its YAML line and the field path, as a system config's do (fusion.yamlsource, the one locator
+and formatter of both): ``scenarios/x.yaml:12: sensors.uwb.noise_sd: ...``.
 """
 from __future__ import annotations
 
@@ -10,11 +11,10 @@ import re
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from fusion.api import ConfigError
-from fusion.yamlsource import parse_yaml
+from fusion.yamlsource import LocatedYAML, pydantic_errors
 
 _LABEL = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 _SENSOR = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
@@ -144,56 +144,6 @@ class Scenario(_Model):
 
 
 # --------------------------------------------------------------------------- loading and errors
-def yaml_line(text: str, loc: tuple[Any, ...]) -> int | None:
-    """1-based line of the YAML node at the field path ``loc`` (the deepest node that exists)."""
-    try:
-        node = yaml.compose(text)
-    except yaml.YAMLError:
-        return None
-    line = None
-    for key in loc:
-        if node is None:
-            break
-        line = node.start_mark.line + 1
-        if isinstance(node, yaml.MappingNode):
-            nxt = None
-            for k, val in node.value:
-                if k.value == str(key):
-                    nxt = val
-                    line = k.start_mark.line + 1
-                    break
-            node = nxt
-        elif isinstance(node, yaml.SequenceNode) and isinstance(key, int) and key < len(node.value):
-            node = node.value[key]
-        else:
-            break
-    else:
-        if node is not None:
-            line = node.start_mark.line + 1
-    return line
-
-
-def format_validation_error(exc: ValidationError, where: str, text: str | None, prefix: tuple = ()) -> str:
-    """One line per problem: ``file: a.b.c (line N): message``."""
-    out = []
-    for err in exc.errors():
-        raw = tuple(x for x in err["loc"] if not (isinstance(x, str) and "[" in x))  # validator wrappers
-        if len(raw) > 1 and raw[0] == "trajectory" and raw[1] in _TRAJECTORY_TAGS:
-            raw = raw[:1] + raw[2:]  # the discriminated union's tag
-        loc = prefix + raw
-        path = ".".join(str(x) for x in loc) or "(top level)"
-        line = yaml_line(text, loc) if text else None
-        at = f" (line {line})" if line else ""
-        msg = err["msg"]
-        if err["type"] == "extra_forbidden":
-            msg = "unknown field"
-        out.append(f"{where}: {path}{at}: {msg}")
-    return "; ".join(out)
-
-
-_TRAJECTORY_TAGS = {"waypoints", "random_walk"}
-
-
 def load_scenario(path: str | Path) -> tuple[Scenario, str]:
     """Read and validate a scenario file; returns (scenario, its YAML text). Raises ConfigError."""
     p = Path(path)
@@ -208,18 +158,13 @@ def load_scenario(path: str | Path) -> tuple[Scenario, str]:
 
 def parse_scenario(text: str, where: str = "<scenario>") -> Scenario:
     """Validate scenario YAML text (the name defaults to the file stem)."""
-    try:
-        data, _ = parse_yaml(text)   # duplicate keys, nesting and alias bombs are errors with the line
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        at = f" (line {mark.line + 1})" if mark is not None else ""
-        raise ConfigError(f"{where}{at}: not valid YAML: {getattr(exc, 'problem', exc)}") from None
-    if not isinstance(data, dict):
+    doc = LocatedYAML.from_text(text, where)   # duplicate keys, nesting and alias bombs: errors with the line
+    if not isinstance(doc.data, dict):
         raise ConfigError(f"{where}: a scenario is a YAML mapping (name, trajectory, sensors, ...)")
     try:
-        sc = Scenario.model_validate(data)
+        sc = Scenario.model_validate(doc.data)
     except ValidationError as exc:
-        raise ConfigError(format_validation_error(exc, where, text)) from None
+        raise pydantic_errors(doc, exc) from None
     if sc.name is None:
         sc = sc.model_copy(update={"name": Path(where).stem})
     return sc

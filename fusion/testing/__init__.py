@@ -15,8 +15,8 @@ Run the checks the built-ins pass on your component, from your own test suite::
         testing.check_component(testing.registry_class("measurement", name))
 
 ``check_measurement(cls, params, layout, message=...)``, ``check_process(cls, params)``,
-``check_filter(cls, params)``: build the component as a config would (a build error is raised, never
-skipped) and check vectorisation over leading axes, the Jacobian against a numerical one (always, analytic
+``check_filter(cls, params)``, ``check_gate(cls, params)``: build the component as a config would (a build
+error is raised, never skipped) and check vectorisation over leading axes, the Jacobian against a numerical one (always, analytic
 or not), ``Params`` forbidding unknown keys, name, docstring and capability spelling
 (:func:`check_component`). Every ``check_*`` raises AssertionError with the worst mismatch, and returns
 it when it passes. Importing this module does not import pytest (only :func:`parametrize_registered`
@@ -29,6 +29,7 @@ independently of the plugins.
 from __future__ import annotations
 
 from .filters import check_filter_interface, check_filter_linear_exactness
+from .gates import check_gate
 from .models import (check_component, check_filter, check_measurement, check_measurement_jacobian,
                      check_measurement_vectorised, check_process, check_process_jacobian, check_process_vectorised)
 from .numeric import random_states, reference_jacobian
@@ -38,7 +39,7 @@ from .selection import build, parametrize_registered, registered, registry_class
 __all__ = [
     "ConstantVelocity", "PositionMeasurement", "RangeMeasurement", "RejectAll", "reference_kf",
     "registered", "registry_class", "build", "parametrize_registered", "random_states", "reference_jacobian",
-    "nees", "check_component", "check_measurement", "check_process", "check_filter",
+    "nees", "check_component", "check_measurement", "check_process", "check_filter", "check_gate",
     "check_filter_linear_exactness", "check_filter_interface", "check_process_vectorised",
     "check_process_jacobian", "check_measurement_vectorised", "check_measurement_jacobian",
 ]

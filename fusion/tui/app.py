@@ -18,13 +18,13 @@ from textual.css.query import NoMatches
 from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.widgets import ContentSwitcher, Footer, Header, TabbedContent, TabPane
 
-from fusion.api import ConfigError
+from fusion.api import Closes, ConfigError, Opens, ReportsIdle, ReportsStatus, Source, has
 from fusion.config import System, load_system
-from fusion.api import Source
 from fusion.sources.select import open_source
 from fusion.tui.counters import SensorCounters
 from fusion.tui.event_log import EventLog
-from fusion.tui.feed import FeedSnapshot, LiveFeed
+from fusion.tui.feed import LiveFeed
+from fusion.tui.snapshot import FeedSnapshot
 from fusion.tui.health_panel import HealthPanel
 from fusion.tui.help_screen import HelpScreen
 from fusion.tui.innovation_plot import InnovationPanel
@@ -153,6 +153,8 @@ class FusionApp(App):
         self.set_interval(0.5, self._tick)
 
     async def _tick(self) -> None:
+        if not self.screen_stack:  # a timer firing during teardown: no screen left to draw on
+            return
         for line in self._main.query(StatusLine):
             line.tick()
         await self._relayout()
@@ -166,7 +168,7 @@ class FusionApp(App):
 
     def _keep_view(self) -> None:
         track, plots = self._main.query_one(TrackPlot), self._main.query_one(InnovationPanel)
-        self._view = dict(zoom=track.zoom, follow=track.follow, hide=(track._hide_track, track._hide_truth),
+        self._view = dict(zoom=track.zoom, follow=track.follow, hide=track.hidden,
                           sensor=plots.sensor, element=plots.element,
                           state=self._main.query_one(StatePlot).element)
 
@@ -175,7 +177,7 @@ class FusionApp(App):
         if v:
             track, plots = self._main.query_one(TrackPlot), self._main.query_one(InnovationPanel)
             track.zoom, track.follow = v["zoom"], v["follow"]
-            track._hide_track, track._hide_truth = v["hide"]
+            track.hidden = v["hide"]
             plots.sensor, plots.element = v["sensor"], v["element"]
             self._main.query_one(StatePlot).element = v["state"]
         if self.latest is not None:
@@ -189,7 +191,9 @@ class FusionApp(App):
         self.updates += 1
         if self.feed.paused and not self.paused:  # the feed held itself (pause_at)
             self.paused = True
-        only_status = not (not self.paused or self.feed._stepping or message.snapshot.state not in ("running", "waiting"))
+        only_status = not (not self.paused or self.feed.stepping or message.snapshot.state not in ("running", "waiting"))
+        if not self.screen_stack:  # before the first screen or after the last: nothing to draw
+            return
         try:
             self._render(message.snapshot, only_status=only_status)
         except NoMatches:  # an update from the feed's thread racing the screen's mount or teardown: nothing to draw
@@ -326,12 +330,12 @@ def make_app(config_path_or_system: str | Path | System, source: Any = None, *, 
         source = open_source(str(source), system.registry)
     if not isinstance(source, Source):
         raise ConfigError(f"source {source!r}: expected a path, a source URL or a fusion.api.Source")
-    if hasattr(source, "open"):
+    if has(source, Opens):
         source.open()
     live = bool(source.live)
     lines = source.lines() if live else _primed(iter(source.lines()))
     options: dict[str, Any] = dict(lines=lines, source=label or source.label, live=live,
-                                   close=getattr(source, "close", None))
+                                   close=source.close if has(source, Closes) else None)
     options.update(speed=speed, refresh_hz=refresh_hz, expected_rates=expected_rates, limits=limits,
                    pause_at=pause_at, smooth_lag=smooth_lag)
     _check_sensors(system, expected_rates, "--expect-rate")
@@ -343,9 +347,9 @@ def make_app(config_path_or_system: str | Path | System, source: Any = None, *, 
         options["sinks"] = [UdpStream(host, port, system.layout,
                                       {n: s.gate for n, s in system.sensors.items() if s.gate is not None})]
     app = FusionApp(system, options)
-    if hasattr(source, "on_idle"):
+    if has(source, ReportsIdle):
         source.on_idle = app.feed.idle  # a silent port still shows the last lines it sent
-    if hasattr(source, "on_status"):
+    if has(source, ReportsStatus):
         source.on_status = app.feed.source_status  # RECONNECTING (attempt N) while a lost port is retried
     return app
 

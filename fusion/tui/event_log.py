@@ -6,7 +6,7 @@ from collections import deque
 from rich.text import Text
 from textual.widgets import RichLog
 
-from fusion.tui.feed import LoggedEvent
+from fusion.tui.snapshot import LoggedEvent
 
 _STYLES = {"rejected": "yellow", "malformed": "magenta", "late": "cyan", "gap": "yellow", "source": "bold red",
            "error": "bold red", "not_positive_definite": "bold red", "warning": "yellow"}

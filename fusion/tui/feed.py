@@ -2,12 +2,13 @@
 
 ``LiveFeed.run()`` reads a source's lines (a recording paced by sensor time, or a live port), pushes the
 messages through the scheduler and, at most ``refresh_hz`` times a second, hands an immutable
-``FeedSnapshot`` to ``post`` (the app posts it as a Textual message). A snapshot is cumulative (latest
+``FeedSnapshot`` (fusion.tui.snapshot) to ``post`` (the app posts it as a Textual message). A snapshot is cumulative (latest
 estimate, counters, the last events and track points), so a newer one can always replace an older one:
 a 100-200 Hz estimate stream costs the UI 10-20 refreshes a second.
 
 Health (``fusion.tui.health``), the innovation histories (``fusion.tui.series``) and the state histories
-(``fusion.tui.state_series``) are accumulated here too and ride in each snapshot. A reconnecting serial source reports through ``source_status``.
+(``fusion.tui.state_series``) are accumulated here too and ride in each snapshot. A reconnecting serial
+source reports through ``source_status``.
 With ``smooth_lag`` (s) the filter is recorded and a fixed-lag smoother (``fusion.smoothing.live``) gives
 every estimate again ``smooth_lag`` s of sensor time later, smoothed on the measurements up to then: its
 track and state histories ride in the snapshot beside the live ones (``smoothed``, ``smoothed_states``).
@@ -20,7 +21,6 @@ import math
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from fusion.api import Estimate, Event, InputError, Message
@@ -28,63 +28,13 @@ from fusion.config import System
 from fusion.logformat import iter_messages
 from fusion.pipeline import COUNTERS, Run
 from fusion.tui.health import Health, HealthMonitor
-from fusion.tui.series import InnovationHistory, Sample
+from fusion.tui.series import InnovationHistory
 from fusion.tui.smoothed_trace import SmoothedTrace
-from fusion.tui.state_series import StateHistory, StateSample
+from fusion.tui.snapshot import FeedSnapshot, LoggedEvent
+from fusion.tui.state_series import StateHistory
 
 __all__ = ["LiveFeed", "FeedSnapshot", "LoggedEvent", "COUNTERS"]
 _SLICE = 0.05  # s: longest sleep between checks of pause/stop while pacing
-
-
-@dataclass(frozen=True)
-class LoggedEvent:
-    """An event with its sequence number (so a view appends only the ones it has not shown)."""
-
-    seq: int
-    t: float
-    kind: str
-    sensor: str | None
-    detail: str
-
-
-@dataclass(frozen=True)
-class FeedSnapshot:
-    """Everything the view shows, at one instant. ``track``/``truth`` are (north, east) points in m,
-    decimated to one per ``track_dt`` s of sensor time; ``track_total`` counts every point ever kept
-    (a view that was reset hides the ones before its mark). ``state``: waiting, running, finished,
-    reconnecting (a serial port being reopened: ``attempt``), lost (the source failed), stopped or error.
-    ``health``: sensor rates and limits and the overall OK/DEGRADED/LOST; ``series``: innovation samples
-    by sensor (fusion.tui.series); ``states``: estimate, 1-sigma and error against truth of the state
-    elements (fusion.tui.state_series); ``attempt``: the reopen attempt while reconnecting.
-    ``smooth_lag``: the fixed lag (s) of ``smoothed`` ((north, east) points in m, as ``track``) and
-    ``smoothed_states`` (as ``states``), None when the view does not smooth."""
-
-    source: str
-    live: bool
-    state: str
-    estimate: Estimate | None
-    counters: dict[str, dict[str, int]]
-    ignored: dict[str, int]
-    rates: dict[str, float]
-    events: tuple[LoggedEvent, ...]
-    track: tuple[tuple[float, float], ...]
-    track_total: int
-    truth: tuple[tuple[float, float], ...]
-    truth_total: int
-    lines: int
-    data_wall: float
-    sensor_t: float
-    speed_ratio: float
-    wall: float = field(default_factory=time.monotonic)
-    message: str = ""
-    health: Health | None = None
-    series: Mapping[str, tuple[Sample, ...]] = field(default_factory=dict)
-    states: tuple[StateSample, ...] = ()
-    attempt: int = 0
-    smooth_lag: float | None = None
-    smoothed: tuple[tuple[float, float], ...] = ()
-    smoothed_total: int = 0
-    smoothed_states: tuple[StateSample, ...] = ()
 
 
 class LiveFeed:
@@ -173,6 +123,11 @@ class LiveFeed:
     @property
     def paused(self) -> bool:
         return not self._running.is_set()
+
+    @property
+    def stepping(self) -> bool:
+        """A single step of a paused replay is under way (its estimate not shown yet)."""
+        return self._stepping
 
     def step(self) -> None:
         """While a replay is paused: read on to the next estimate, then hold again."""
@@ -396,7 +351,6 @@ class LiveFeed:
         self._emitted_lines = self.lines_read
         self._post(snap)
         return snap
-
 
     def _smoothed_fields(self) -> dict:
         if self.smoothed is None:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from textual.message import Message
 
-from fusion.tui.feed import FeedSnapshot
+from fusion.tui.snapshot import FeedSnapshot
 
 
 class FeedUpdate(Message):

@@ -8,7 +8,7 @@ import time
 from rich.text import Text
 from textual.widgets import Static
 
-from fusion.tui.feed import FeedSnapshot
+from fusion.tui.snapshot import FeedSnapshot
 from fusion.tui.health_panel import STATE_STYLE
 
 SILENT_S = 5.0  # s without a byte on a live port: LOST (as fusion.tui.health)

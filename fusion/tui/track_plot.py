@@ -19,7 +19,7 @@ from rich.text import Text
 from textual.widget import Widget
 
 from fusion.tui.canvas import BrailleCanvas
-from fusion.tui.feed import FeedSnapshot
+from fusion.tui.snapshot import FeedSnapshot
 
 EST, TRUTH, BEACON, NOW, ELLIPSE = "bold cyan", "#a0a0a0", "bold red", "bold yellow", "yellow"
 SMOOTHED = "bold magenta"
@@ -78,6 +78,15 @@ class TrackPlot(Widget):
             self.border_subtitle = self._legend()
         self.current = current
         self.refresh()
+
+    @property
+    def hidden(self) -> tuple[int, int]:
+        """The reset marks (points of the track and of truth hidden before them), kept across a relayout."""
+        return self._hide_track, self._hide_truth
+
+    @hidden.setter
+    def hidden(self, marks: tuple[int, int]) -> None:
+        self._hide_track, self._hide_truth = marks
 
     def reset(self) -> None:
         """Forget the trail so far (the view refits to the points that follow)."""

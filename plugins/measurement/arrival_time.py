@@ -14,9 +14,9 @@ from functools import lru_cache
 import numpy as np
 from pydantic import Field
 
-from fusion.api import ConfigError, MeasurementModel, Message, Observation, Params
+from fusion.api import ConfigError, Fix, MeasurementModel, Message, Observation, Params
 
-from fusion_plugins.solvers.initial_fix import SIZES, observe_initial
+from fusion_plugins.solvers.initial_fix import observe_initial
 from fusion_plugins.solvers.tdoa_geometric import parse_arrival
 
 
@@ -25,7 +25,7 @@ class ArrivalTime(MeasurementModel):
 
     Messages: ``beacon arrival [receiver]`` (the ``arrival_time`` simulator's fields); z = arrival (s).
     The state needs blocks ``p`` (3) and ``t`` (firing time, s). The initial state fix of ``tdoa_geometric``
-    (``output: initialise``: position and firing time with their covariance,
+    (``output: initialise``: a fusion.api.Fix of the position and firing time with their covariance,
     :mod:`fusion_plugins.solvers.initial_fix`) is observed as such, the filter's first update. Params: ``speed_of_sound`` c (m/s), ``beacons`` (default all)."""
 
     name = "arrival_time"
@@ -68,8 +68,8 @@ class ArrivalTime(MeasurementModel):
         H[0, self._t] = 1.0
         return H
 
-    def observe(self, message: Message) -> Observation | None:
-        if len(message.values) in SIZES:          # the initial state fix of tdoa_geometric (initialise)
+    def observe(self, message: Message | Fix) -> Observation | None:
+        if isinstance(message, Fix):              # the initial state fix of tdoa_geometric (initialise)
             return observe_initial(message, self.context)
         label, arrival = parse_arrival(message, self._known)
         return Observation(message.t, np.array([arrival]), self._bind(label))

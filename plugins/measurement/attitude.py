@@ -7,7 +7,7 @@ import numpy as np
 from pydantic import Field
 
 from fusion import quaternion as quat
-from fusion.api import BuildContext, ConfigError, MalformedMessage, MeasurementModel, Message, Observation, Params
+from fusion.api import BuildContext, ConfigError, Fix, MalformedMessage, MeasurementModel, Message, Observation, Params
 
 _SYM = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])        # the 6-value upper triangle, mirrored
 
@@ -33,8 +33,9 @@ class AttitudeParams(Params):
 
 
 class Attitude(MeasurementModel):
-    """Attitude fix ``q_m`` (Hamilton, scalar first, C_b^n) with the covariance of its navigation-frame error,
-    as the ``triad`` solver emits (``qw qx qy qz pxx pxy pxz pyy pyz pzz``).
+    """Attitude fix ``q_m`` (Hamilton, scalar first, C_b^n) with the covariance of its navigation-frame error:
+    a solver's :class:`fusion.api.Fix` (``attitude``, ``attitude_cov``: ``triad``, ``orientation_geometric``),
+    or a recording's message ``qw qx qy qz [pxx pxy pxz pyy pyz pzz]``.
 
     Measured as the rotation from the fix to the state, z = 0 and
     ``h(x) = 2 vec(q (x) q_m*) sign(w)`` with q = x_q / |x_q| (rad, navigation frame; the small-angle
@@ -44,7 +45,7 @@ class Attitude(MeasurementModel):
     """
 
     name: ClassVar[str] = "attitude"
-    carries_R = True    # a 10-value fix carries its covariance
+    carries_R = True    # a fix carries its covariance
     Params: ClassVar[type[Params]] = AttitudeParams
     dim: int = 3
 
@@ -66,16 +67,28 @@ class Attitude(MeasurementModel):
         d = quat.multiply(q, self.q_m_conj)
         return 2.0 * d[..., 1:] * np.where(d[..., :1] < 0.0, -1.0, 1.0)
 
-    def observe(self, message: Message) -> Observation | None:
-        """Observation of a fix ``qw qx qy qz`` + 6 covariance values (rad^2) (or 4 values: configured R)."""
-        v = message.floats()
-        if v.size not in (4, 10) or not np.all(np.isfinite(v)):
-            raise MalformedMessage(f"attitude expects qw qx qy qz [+ 6 covariance values], got {message.values!r}")
-        q = v[:4]
+    def observe(self, message: Message | Fix) -> Observation | None:
+        """Observation of a solver's Fix (its ``attitude`` and ``attitude_cov``, rad^2), or of a message
+        ``qw qx qy qz`` + 6 covariance values (rad^2, the upper triangle) (or 4 values: configured R)."""
+        if isinstance(message, Fix):
+            if message.attitude is None:
+                raise MalformedMessage("attitude: the fix carries no attitude")
+            q = np.asarray(message.attitude, dtype=float)
+            C = None if message.attitude_cov is None else np.asarray(message.attitude_cov, dtype=float)
+            if q.shape != (4,) or not np.all(np.isfinite(q)) or (C is not None and (
+                    C.shape != (3, 3) or not np.all(np.isfinite(C)))):
+                raise MalformedMessage(f"attitude: a fix needs a finite quaternion (4,) and covariance (3, 3), got "
+                                       f"{message.attitude!r}, {message.attitude_cov!r}")
+            cov = None if C is None else np.triu(C) + np.triu(C, 1).T
+        else:
+            v = message.floats()
+            if v.size not in (4, 10) or not np.all(np.isfinite(v)):
+                raise MalformedMessage(f"attitude expects qw qx qy qz [+ 6 covariance values], got {message.values!r}")
+            q, cov = v[:4], (v[4:][_SYM] if v.size == 10 else None)
         nq = float(np.linalg.norm(q))
         if not 0.5 < nq < 2.0:
             raise MalformedMessage(f"attitude: quaternion norm {nq:.3g} is not near 1")
-        R = v[4:][_SYM] if v.size == 10 and self.params.use_fix_covariance else None  # type: ignore[attr-defined]
+        R = cov if self.params.use_fix_covariance else None  # type: ignore[attr-defined]
         return Observation(message.t, np.zeros(3), Attitude(self.params, self.context, q / nq), R)  # type: ignore[arg-type]
 
     def align_state(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray,

@@ -29,16 +29,18 @@ import numpy as np
 from pydantic import Field
 
 from fusion import quaternion as quat
-from fusion.api import ConfigError, MalformedMessage, MeasurementModel, Message, Observation, Params
+from fusion.api import ConfigError, Fix, MalformedMessage, MeasurementModel, Message, Observation, Params
 
-from fusion_plugins.solvers.initial_fix import SIZES, observe_initial
+from fusion_plugins.solvers.initial_fix import observe_initial
 from fusion_plugins.solvers.tdoa_geometric import parse_arrival
 
 _FLIP = np.array([1.0, -1.0, -1.0, -1.0])
 
 
 @lru_cache(maxsize=4)
-def _normals(kind: str) -> np.ndarray:
+def receiver_normals(kind: str) -> np.ndarray:
+    """Unit normals (32, 3) (body frame FRD) of the receivers of array ``kind`` (``truncated_icosahedron``),
+    receiver r at row r - 1."""
     from fusion_plugins.simulators.arrival import truncated_icosahedron_normals
     return truncated_icosahedron_normals()
 
@@ -64,7 +66,7 @@ class Direction(MeasurementModel):
     The state needs the attitude block ``q``; the position comes from the block ``p`` when the state has
     one, else from ``position`` (m, a known or separately estimated position: :meth:`at` binds another).
     Messages: ``beacon arrival receiver``, or (with ``arrival: true``) the initial state fix of a geometric
-    solver (:mod:`fusion_plugins.solvers.initial_fix`). R is attached to each observation: ``sd_deg`` (rad^2 after
+    solver (a fusion.api.Fix, :mod:`fusion_plugins.solvers.initial_fix`). R is attached to each observation: ``sd_deg`` (rad^2 after
     conversion, default the receivers' discretisation) per direction component, ``arrival_sd`` (s) for the
     arrival time; a ``noise`` in the config is not used.
     """
@@ -111,7 +113,7 @@ class Direction(MeasurementModel):
                          else np.asarray(p.position, float) if p.position is not None else None)
         if self._p is None and self.position is None:
             raise ConfigError("direction: the state has no position block 'p'; give 'position: [x, y, z]'")
-        self.normals = (_normals(p.receivers) if isinstance(p.receivers, str)
+        self.normals = (receiver_normals(p.receivers) if isinstance(p.receivers, str)
                         else np.asarray(p.receivers, float) / np.linalg.norm(p.receivers, axis=1, keepdims=True))
         if self.normals.ndim != 2 or self.normals.shape[1] != 3 or len(self.normals) < 4:
             raise ConfigError("direction: receivers must be at least 4 normals of 3 values")
@@ -185,8 +187,10 @@ class Direction(MeasurementModel):
             H[0, self._t] = 1.0
         return H
 
-    def observe(self, message: Message) -> Observation | None:
-        if len(message.values) in SIZES and self._t is not None:     # a geometric initialiser's state fix
+    def observe(self, message: Message | Fix) -> Observation | None:
+        if isinstance(message, Fix):                                 # a geometric initialiser's state fix
+            if self._t is None:
+                raise MalformedMessage("direction: an initial state fix needs arrival: true (a state p T t q)")
             return observe_initial(message, self.context)
         vals = message.values
         if len(vals) != 3:
@@ -212,7 +216,7 @@ class Direction(MeasurementModel):
 
 @lru_cache(maxsize=4)
 def _cached_sd(kind: str) -> float:
-    return discretisation_sd(_normals(kind))
+    return discretisation_sd(receiver_normals(kind))
 
 
 def _default_sd(kind, normals: np.ndarray) -> float:

@@ -1,74 +1,119 @@
 """The initial state fix of the paper 003 filters: what the geometric solvers hand the IEKF to start from.
 
-``tdoa_geometric`` and ``orientation_geometric`` with ``output: initialise`` emit one message, then pass
-every arrival through. The message carries the position (eqs. 1-8), the firing time t of the cycle's last
-firing and, for the pose filter, the attitude (eqs. 12-17), with covariances::
-
-    x y z  cxx cxy cxz cyy cyz czz  t  cxt cyt czt ctt  [qw qx qy qz sd]      (14 or 19 values)
+``tdoa_geometric`` and ``orientation_geometric`` with ``output: initialise`` emit one typed
+:class:`fusion.api.Fix`, then pass every arrival through. The fix's ``value`` is ``[x y z t]``: the
+position (eqs. 1-8, m) and the firing time t of the cycle's last firing (s), ``cov`` their 4 x 4 covariance;
+for the pose filter ``attitude`` is the attitude (eqs. 12-17) and ``attitude_cov`` its covariance (rad^2,
+navigation-frame rotation vector).
 
 t = a_last - |p - b_last| / c (the last arrival less its flight time), so its covariance with the position
 is ``-C u / c`` and its variance ``u^T C u / c^2 + sigma_a^2`` (u the unit vector from that beacon to the
 robot, C the position covariance, sigma_a the arrival noise). The ``arrival_time`` and ``direction``
-models observe it as :class:`StateFix`, ``z = [p, t (, q)]``: a linear update that, from the wide initial
-belief of the config, puts the filter at the fix. Without t the first arrival would set t alone, and an
-echo there would leave the filter a few milliseconds off and every later arrival outside its gate.
+models observe it (:func:`observe_initial`) as :class:`StateFix`, ``z = [p, t (, q)]``: a linear update
+that, from the wide initial belief of the config, puts the filter at the fix. Without t the first arrival
+would set t alone, and an echo there would leave the filter a few milliseconds off and every later arrival
+outside its gate.
 """
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
 from fusion import quaternion as quat
-from fusion.api import MalformedMessage, MeasurementModel, Message, Observation
+from fusion.api import Fix, MalformedMessage, MeasurementModel, Message, Observation
 
-from .ols_trilateration import pack_fix, unpack_fix
+__all__ = ["initial_fix", "state_fix", "observe_initial", "quaternion_covariance", "StateFix"]
 
-SIZES = (14, 19)
+NORM_VAR = 1e-6   # variance along q itself in the quaternion block of R (no physical meaning: positive definite)
 
 
-def pack_initial(pos: np.ndarray, cov: np.ndarray, beacon: np.ndarray, arrival: float, c: float,
-                 sigma: float, q: np.ndarray | None = None, q_sd: float | None = None) -> tuple[float, ...]:
-    """Message values of an initial fix: position (3,) m, its covariance (3, 3), the last beacon (3,) and
-    its arrival time (s); c (m/s), sigma the arrival sd (s); optionally the attitude q (4,) and its sd per
-    axis (rad)."""
+def _symmetric(C: np.ndarray) -> np.ndarray:
+    """C's upper triangle mirrored (what the filter uses of a covariance)."""
+    C = np.asarray(C, dtype=float)
+    return np.triu(C) + np.triu(C, 1).T
+
+
+def state_fix(t: float, pos: np.ndarray, cov: np.ndarray, t_fire: float, cov_pt: np.ndarray, var_t: float,
+              q: np.ndarray | None = None, q_sd: float | None = None, *, sensor: str = "",
+              line: int | None = None, used: tuple[str, ...] = ()) -> Fix:
+    """The Fix stamped at ``t`` (s) of the state ``[p, t_fire]``: position (3,) m with covariance (3, 3) m^2,
+    firing time (s), their covariance ``cov_pt`` (3,) m s and ``var_t`` s^2; optionally the attitude q (4,)
+    with sd ``q_sd`` per axis (rad)."""
+    C = np.zeros((4, 4))
+    C[:3, :3] = _symmetric(cov)
+    C[:3, 3] = C[3, :3] = np.asarray(cov_pt, dtype=float)
+    C[3, 3] = float(var_t)
+    value = np.r_[np.asarray(pos, dtype=float), float(t_fire)]
+    attitude = attitude_cov = None
+    if q is not None:
+        attitude = quat.normalize(np.asarray(q, float))
+        attitude_cov = float(q_sd) ** 2 * np.eye(3)
+    return Fix(float(t), value, C, used=tuple(used), sensor=sensor, line=line, attitude=attitude,
+               attitude_cov=attitude_cov)
+
+
+def initial_fix(pos: np.ndarray, cov: np.ndarray, beacon: np.ndarray, arrival: float, c: float, sigma: float,
+                q: np.ndarray | None = None, q_sd: float | None = None, **where: Any) -> Fix:
+    """The initial fix from a position (3,) m, its covariance (3, 3), the last beacon (3,) and its arrival
+    time (s, also the fix's stamp); c (m/s), sigma the arrival sd (s); optionally the attitude q (4,) and
+    its sd per axis (rad). ``where``: ``sensor``, ``line``, ``used`` of the Fix."""
     d = pos - beacon
     u = d / max(float(np.linalg.norm(d)), 1e-12)
     t = arrival - float(np.linalg.norm(d)) / c
     cpt = -(cov @ u) / c
     ctt = float(u @ cov @ u) / c ** 2 + sigma ** 2
-    out = pack_fix(pos, cov) + (t,) + tuple(cpt.tolist()) + (ctt,)
-    if q is not None:
-        out += tuple(quat.normalize(np.asarray(q, float)).tolist()) + (float(q_sd),)
-    return out
+    return state_fix(arrival, pos, cov, t, cpt, ctt, q, q_sd, **where)
 
 
-def observe_initial(message: Message, context) -> Observation:
-    """The Observation of an initial-fix message (14 or 19 values) for a state with blocks p, t (and q)."""
+def quaternion_covariance(q: np.ndarray, attitude_cov: np.ndarray, norm_var: float = NORM_VAR) -> np.ndarray:
+    """Covariance (4, 4) of a quaternion block for an attitude error of covariance ``attitude_cov`` (3, 3)
+    (rad^2, navigation-frame rotation vector), plus ``norm_var`` along q. Isotropic errors are the same in
+    the body and navigation frames (fusion_plugins.process.static_orientation.attitude_noise)."""
+    from fusion_plugins.measurement.attitude import covariance_in_state
     from fusion_plugins.process.static_orientation import attitude_noise
 
-    vals = message.values
-    try:
-        v = np.array(vals, dtype=float)
-    except (TypeError, ValueError):
-        raise MalformedMessage(f"an initial fix needs {' or '.join(map(str, SIZES))} numbers, got {vals!r}") from None
-    if v.size not in SIZES or not np.all(np.isfinite(v)):
-        raise MalformedMessage(f"an initial fix needs {' or '.join(map(str, SIZES))} finite numbers, got {vals!r}")
-    pos, cov = unpack_fix(v[:9])
-    m = 4 if v.size == 14 else 8
-    R = np.zeros((m, m))
-    R[:3, :3] = cov
-    R[:3, 3] = R[3, :3] = v[10:13]
-    R[3, 3] = v[13]
-    z = np.r_[pos, v[9]]
-    if v.size == 19:
-        q = quat.normalize(v[14:18])
-        if v[18] <= 0:
-            raise MalformedMessage(f"an initial fix's attitude sd must be > 0, got {v[18]}")
-        R[4:, 4:] = attitude_noise(q, v[18] ** 2, 1e-6)
+    C = np.asarray(attitude_cov, dtype=float)
+    var = C[0, 0]
+    if np.array_equal(C, var * np.eye(3)):
+        return attitude_noise(q, var, norm_var)
+    return covariance_in_state(quat.normalize(np.asarray(q, float)), _symmetric(C), norm_var ** 0.5)
+
+
+def _bad(fix: Fix, why: str) -> MalformedMessage:
+    return MalformedMessage(f"an initial fix needs {why}, got value {np.asarray(fix.value).tolist()!r}")
+
+
+def observe_initial(fix: Fix | Message, context) -> Observation:
+    """The Observation of an initial state fix (``value`` [x y z t], ``cov`` 4 x 4, optionally an attitude)
+    for a state with blocks p, t (and q); MalformedMessage for anything else."""
+    if not isinstance(fix, Fix):
+        raise MalformedMessage(f"an initial fix is a solver's typed Fix, not a message of {len(fix.values)} values")
+    z = np.asarray(fix.value, dtype=float)
+    if z.shape != (4,) or not np.all(np.isfinite(z)):
+        raise _bad(fix, "4 finite values (x y z t)")
+    cov = None if fix.cov is None else np.asarray(fix.cov, dtype=float)
+    if cov is None or cov.shape != (4, 4) or not np.all(np.isfinite(cov)):
+        raise _bad(fix, "a finite 4 x 4 covariance")
+    with_attitude = fix.attitude is not None
+    R = cov
+    if with_attitude:
+        qv = np.asarray(fix.attitude, dtype=float)
+        C = None if fix.attitude_cov is None else np.asarray(fix.attitude_cov, dtype=float)
+        if qv.shape != (4,) or not np.all(np.isfinite(qv)) or not np.linalg.norm(qv) > 0:
+            raise _bad(fix, "a finite, non-zero attitude quaternion")
+        if C is None or C.shape != (3, 3) or not np.all(np.isfinite(C)) or not np.all(np.diag(C) > 0):
+            raise MalformedMessage(f"an initial fix's attitude covariance must be 3 x 3 with a positive diagonal, "
+                                   f"got {fix.attitude_cov!r}")
+        q = quat.normalize(qv)
+        R = np.zeros((8, 8))
+        R[:4, :4] = cov
+        R[4:, 4:] = quaternion_covariance(q, C)
         z = np.r_[z, q]
     lay = context.layout
-    if lay is None or "p" not in lay or "t" not in lay or (v.size == 19 and "q" not in lay):
+    if lay is None or "p" not in lay or "t" not in lay or (with_attitude and "q" not in lay):
         raise MalformedMessage("an initial fix needs a state with blocks p and t (and q for an attitude)")
-    return Observation(message.t, z, StateFix(context, with_attitude=v.size == 19), R)
+    return Observation(fix.t, z, StateFix(context, with_attitude=with_attitude), R)
 
 
 class StateFix(MeasurementModel):

@@ -22,7 +22,7 @@ import numpy as np
 from pydantic import Field
 
 from fusion import quaternion as quat
-from fusion.api import BuildContext, ConfigError, Event, MalformedMessage, Message, Params, Solver
+from fusion.api import BuildContext, ConfigError, Event, Fix, MalformedMessage, Message, Params, Solver
 
 from .tdoa_geometric import AgreeingFixes, NoFix, parse_arrival, tdoa_fix
 
@@ -94,8 +94,8 @@ class OrientationParams(Params):
     position: tuple[float, float, float] | None = Field(None, description="known robot position (m); "
                                                         "default: the geometric TDOA fix of the same cycle")
     arrival_sd: float = Field(2.0e-4, gt=0, description="arrival-time sd (s), for the position covariance")
-    attitude_sd_deg: float = Field(15.0, gt=0, description="sd per axis (deg) attached to an initialising "
-                                   "attitude fix (paper: mean error 15 deg)")
+    attitude_sd_deg: float = Field(15.0, gt=0, description="sd per axis (deg) attached to an attitude fix "
+                                   "(paper: mean error 15 deg)")
     output: Literal["fix", "initialise"] = Field("fix", description="fix: an attitude fix per cycle; "
                                                  "initialise: the first pose fix only (x y z, position "
                                                  "covariance, qw qx qy qz), then every arrival passed through")
@@ -109,8 +109,9 @@ class OrientationGeometric(Solver):
     Input: ``beacon arrival receiver`` messages. A cycle of one arrival per beacon (as ``tdoa_geometric``)
     gives the robot position (the TDOA fix of the cycle, or ``position``), the unit vectors to the beacons,
     and with the receivers' normals (truncated icosahedron, body frame) the attitude by
-    :func:`orientation_fix`. Output: ``Message(t, sensor, (qw, qx, qy, qz, x, y, z))``: the attitude
-    (quaternion body-to-navigation) and the position used (m), stamped at the cycle's last arrival. With
+    :func:`orientation_fix`. Output: a :class:`fusion.api.Fix` stamped at the cycle's last arrival, its
+    ``attitude`` the quaternion C_b^n with ``attitude_cov`` ``attitude_sd_deg``^2 per axis (rad^2), its
+    ``value`` the position used (m) with its covariance (the ``attitude`` model observes it). With
     ``output: initialise`` only one initial state fix is emitted, once ``initialise_agree`` consecutive TDOA fixes
     agree (their mean, the time of the last firing and the attitude of the last cycle:
     :mod:`fusion_plugins.solvers.initial_fix`), then each arrival is passed through unchanged; the
@@ -122,7 +123,7 @@ class OrientationGeometric(Solver):
 
     def __init__(self, params: OrientationParams | None = None, context: BuildContext | None = None):
         super().__init__(params, context)
-        from fusion_plugins.measurement.direction import _normals
+        from fusion_plugins.measurement.direction import receiver_normals
 
         p: OrientationParams = self.params  # type: ignore[assignment]
         names = p.beacons if p.beacons is not None else list(self.context.beacons)
@@ -132,7 +133,7 @@ class OrientationGeometric(Solver):
         if p.position is None and len(names) < 4:
             raise ConfigError("orientation_geometric: without 'position' it needs 4 beacons (TDOA fix)")
         self.beacon_positions = {n: np.asarray(self.context.beacons[n], float) for n in names}
-        self.normals = _normals("truncated_icosahedron")
+        self.normals = receiver_normals("truncated_icosahedron")
         self.counters = {"cycles": 0, "fixes": 0, "too_few_beacons": 0, "degenerate": 0, "no_convergence": 0}
         self.events: list[Event] = []
         self._cycle: dict[str, tuple[float, int, Message]] = {}
@@ -140,7 +141,7 @@ class OrientationGeometric(Solver):
         self._initialised = False
         self._agree = AgreeingFixes(p.initialise_agree)
 
-    def feed(self, message: Message) -> list[Message]:
+    def feed(self, message: Message) -> list[Message | Fix]:
         if self._initialised:
             return [message]
         try:
@@ -149,7 +150,7 @@ class OrientationGeometric(Solver):
             self.counters["malformed"] = self.counters.get("malformed", 0) + 1
             self.events.append(Event(message.t, "malformed", message.sensor, f"line {message.line}: {exc}"))
             return []
-        out: list[Message] = []
+        out: list[Message | Fix] = []
         if self._cycle and (label in self._cycle or arrival - min(a for a, _, _ in self._cycle.values())
                             >= len(self.beacon_positions) * self.params.period_s):  # type: ignore[attr-defined]
             out += self._close()
@@ -170,7 +171,7 @@ class OrientationGeometric(Solver):
             raise MalformedMessage(f"receiver must be 1-{len(self.normals)}, got {message.values[2]!r}")
         return label, arrival, int(rec)
 
-    def _close(self) -> list[Message]:
+    def _close(self) -> list[Message | Fix]:
         p: OrientationParams = self.params  # type: ignore[assignment]
         cycle, self._cycle = self._cycle, {}
         names = sorted(cycle, key=lambda n: cycle[n][0])
@@ -195,15 +196,16 @@ class OrientationGeometric(Solver):
             self.events.append(Event(float(a[-1]), "no_fix", last.sensor, f"orientation_geometric: {exc}"))
             return []
         self.counters["fixes"] += 1
-        q = tuple(quat.from_matrix(C).tolist())
+        q = quat.from_matrix(C)
+        sd = float(np.deg2rad(p.attitude_sd_deg))
+        where = {"sensor": last.sensor, "line": last.line, "used": tuple(names)}
         if p.output == "initialise":
-            from .initial_fix import pack_initial
+            from .initial_fix import initial_fix
             agreed = self._agree.add(r, cov)
             if agreed is None:
                 return []
             r, cov = agreed
             self._initialised = True
-            return [Message(float(a[-1]), last.sensor, pack_initial(
-                r, cov, B[-1], float(a[-1]), p.speed_of_sound, p.arrival_sd, np.array(q),
-                float(np.deg2rad(p.attitude_sd_deg))), last.line)]
-        return [Message(float(a[-1]), last.sensor, q + tuple(r.tolist()), last.line)]
+            return [initial_fix(r, cov, B[-1], float(a[-1]), p.speed_of_sound, p.arrival_sd, q, sd, **where)]
+        return [Fix(float(a[-1]), np.array(r, dtype=float), cov, attitude=q, attitude_cov=sd ** 2 * np.eye(3),
+                    **where)]

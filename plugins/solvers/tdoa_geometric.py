@@ -32,9 +32,7 @@ import numpy as np
 from pydantic import Field
 from scipy.linalg import cho_factor, cho_solve
 
-from fusion.api import BuildContext, ConfigError, Event, MalformedMessage, Message, Params, Solver
-
-from .ols_trilateration import pack_fix
+from fusion.api import BuildContext, ConfigError, Event, Fix, MalformedMessage, Message, Params, Solver
 
 REASONS = ("too_few_beacons", "degenerate", "no_convergence")
 
@@ -219,8 +217,8 @@ class TdoaParams(Params):
     tolerance: float = Field(1e-9, gt=0, description="converged when the step is below this (m)")
     degenerate_tol: float = Field(1e-9, gt=0, description="relative triple product (or 1/condition) below "
                                   "which the geometry is degenerate")
-    output: Literal["fix", "initialise"] = Field("fix", description="fix: one position fix (x y z and the "
-                                                 "upper triangle of its covariance) per cycle; initialise: one "
+    output: Literal["fix", "initialise"] = Field("fix", description="fix: one position fix (a fusion.api.Fix: "
+                                                 "x y z and its covariance) per cycle; initialise: one "
                                                  "initial state fix (position and firing time), then every "
                                                  "arrival passed through unchanged (the arrival_time model "
                                                  "observes the fix as the filter's first update)")
@@ -241,8 +239,8 @@ class TdoaGeometric(Solver):
     arrival), when a beacon repeats or when an arrival comes a full cycle (k T) after the first. The firing
     counts come from the arrival times, ``n_i - n_1 = round((t_i - t_1) / T)``, so a missed pulse only
     removes its beacon. A cycle with four or more beacons gives a fix by :func:`tdoa_fix` from the previous
-    fix (``warm_start``) or ``start``: ``Message(t, sensor, (x, y, z, cxx, cxy, cxz, cyy, cyz, czz))``, the
-    format of the ``position`` model (its covariance as R). No fix: ``counters`` counts the reason
+    fix (``warm_start``) or ``start``: a :class:`fusion.api.Fix` of the position (m) and its covariance
+    (m^2), stamped at the last arrival, for the ``position`` model (its covariance as R). No fix: ``counters`` counts the reason
     (``too_few_beacons``, ``degenerate``, ``no_convergence``) and ``events`` gets a ``no_fix`` Event.
     With four beacons there is no redundancy: an echo shifts the fix and cannot be detected here (paper).
     ``output: initialise`` emits one initial state fix (position, the time of the last firing, their
@@ -276,7 +274,7 @@ class TdoaGeometric(Solver):
         self._agree = AgreeingFixes(p.initialise_agree)
         self._history: list[tuple[str, float]] = []     # initialise_stationary: every arrival until the fix
 
-    def feed(self, message: Message) -> list[Message]:
+    def feed(self, message: Message) -> list[Message | Fix]:
         """Take one ``beacon arrival [receiver]`` message; return the fix of a cycle that closed (or, after
         the first fix with ``output: initialise``, the message itself)."""
         p: TdoaParams = self.params  # type: ignore[assignment]
@@ -286,7 +284,7 @@ class TdoaGeometric(Solver):
             label, arrival = parse_arrival(message, self.beacon_positions)
         except MalformedMessage as exc:
             return self._malformed(message, exc)
-        out: list[Message] = []
+        out: list[Message | Fix] = []
         if self._cycle:
             t_first = min(a for a, _ in self._cycle.values())
             if label in self._cycle or arrival - t_first >= len(self.beacon_positions) * p.period_s:
@@ -298,18 +296,18 @@ class TdoaGeometric(Solver):
             out += self._close()
         return out
 
-    def _malformed(self, message: Message, exc: Exception) -> list[Message]:
+    def _malformed(self, message: Message, exc: Exception) -> list[Message | Fix]:
         """A bad message is counted (``counters['malformed']``) and reported as an event, not raised: the
         run goes on (a raise from a preprocessor would stop it)."""
         self.counters["malformed"] = self.counters.get("malformed", 0) + 1
         self.events.append(Event(message.t, "malformed", message.sensor, f"line {message.line}: {exc}"))
         return []
 
-    def flush(self) -> list[Message]:
+    def flush(self) -> list[Message | Fix]:
         """The last, incomplete cycle (end of input): a fix only if it has enough beacons."""
         return self._close() if self._cycle and not self._initialised else []
 
-    def _close(self) -> list[Message]:
+    def _close(self) -> list[Message | Fix]:
         p: TdoaParams = self.params  # type: ignore[assignment]
         cycle, self._cycle = self._cycle, {}
         names = sorted(cycle, key=lambda n: cycle[n][0])
@@ -335,21 +333,23 @@ class TdoaGeometric(Solver):
             agreed = self._agree.add(pos, cov)
             if agreed is None:
                 return []
-            from .initial_fix import pack_initial
+            from .initial_fix import initial_fix
             self._initialised = True
             pos, cov = agreed
+            where = {"sensor": last.sensor, "line": last.line, "used": tuple(names)}
             if p.initialise_stationary:
                 try:
-                    return [Message(float(a[-1]), last.sensor, self._stationary(pos, cov), last.line)]
+                    return [self._stationary(pos, cov, float(a[-1]), where)]
                 except np.linalg.LinAlgError:     # cannot happen with the agreeing cycles kept; be safe
                     self._history = []
-            return [Message(float(a[-1]), last.sensor, pack_initial(
-                pos, cov, self.beacon_positions[names[-1]], float(a[-1]), p.speed_of_sound, p.arrival_sd), last.line)]
-        return [Message(float(a[-1]), last.sensor, pack_fix(pos, cov), last.line)]
+            return [initial_fix(pos, cov, self.beacon_positions[names[-1]], float(a[-1]), p.speed_of_sound,
+                                p.arrival_sd, **where)]
+        return [Fix(float(a[-1]), pos, cov, used=tuple(names), sensor=last.sensor, line=last.line)]
 
-
-    def _stationary(self, start: np.ndarray, start_cov: np.ndarray) -> tuple[float, ...]:
-        """The initial fix message (initial_fix format) of every arrival so far, from the agreeing position."""
+    def _stationary(self, start: np.ndarray, start_cov: np.ndarray, t: float, where: dict) -> Fix:
+        """The initial fix (fusion_plugins.solvers.initial_fix), stamped at ``t``, of every arrival so far, from
+        the agreeing position."""
+        from .initial_fix import state_fix
         from .stationary_fix import stationary_fix
 
         p: TdoaParams = self.params  # type: ignore[assignment]
@@ -358,7 +358,7 @@ class TdoaGeometric(Solver):
         pos, t0, C, _ = stationary_fix(B, a, p.period_s, p.speed_of_sound, p.arrival_sd, start, start_cov)
         self._history = []
         n_last = float(np.rint((a[-1] - a[0]) / p.period_s))        # t: the latest firing, t0 + n T
-        return pack_fix(pos, C[:3, :3]) + (t0 + n_last * p.period_s,) + tuple(C[:3, 3].tolist()) + (float(C[3, 3]),)
+        return state_fix(t, pos, C[:3, :3], t0 + n_last * p.period_s, C[:3, 3], float(C[3, 3]), **where)
 
 
 def parse_arrival(message: Message, known: Sequence[str]) -> tuple[str, float]:

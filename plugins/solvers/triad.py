@@ -19,8 +19,8 @@ Functions (vectorised over leading axes, shapes ``(..., 3)``):
 
 Component ``triad`` (a preprocessor of the magnetometer sensor): each magnetometer sample and the
 accelerometer's specific force at its time (the held IMU sample, through the ``take_input`` capability,
-fusion.api.UsesInput) give an attitude fix ``qw qx qy qz`` plus the upper triangle of its covariance
-(6 values, rad^2, navigation frame), for the ``attitude`` measurement. A static accelerometer reads
+fusion.api.UsesInput) give an attitude fix, a :class:`fusion.api.Fix` with the ``attitude`` quaternion and
+its ``attitude_cov`` (3, 3) (rad^2, navigation frame), for the ``attitude`` measurement. A static accelerometer reads
 ``f_b = -C_n^b g_n``: the body "gravity" is ``-f_b`` and the reference is ``g_n = [0, 0, g]``. When the
 vehicle accelerates, ``f_b`` is not ``-g_b`` (paper 002 sec. 2.3): ``accel_disturbance_sd`` widens the
 accelerometer's covariance accordingly.
@@ -33,7 +33,7 @@ import numpy as np
 from pydantic import Field
 
 from fusion import quaternion as quat
-from fusion.api import BuildContext, Event, MalformedMessage, Message, Params, Solver
+from fusion.api import BuildContext, Event, Fix, MalformedMessage, Message, Params, Solver
 
 __all__ = ["triad", "improved_triad", "attitude_covariance", "solve", "TriadSolver"]
 
@@ -132,8 +132,9 @@ class TriadParams(Params):
 
 class TriadSolver(Solver):
     """TRIAD / Improved TRIAD attitude fixes from the magnetometer and the held accelerometer sample
-    (module docstring). Output message: ``qw qx qy qz pxx pxy pxz pyy pyz pzz`` (covariance of the
-    navigation-frame attitude error, rad^2)."""
+    (module docstring). Output: a :class:`fusion.api.Fix` of the attitude C_b^n (``attitude``, the
+    quaternion) and the covariance of its navigation-frame error (``attitude_cov``, rad^2), stamped at the
+    magnetometer sample."""
 
     name: ClassVar[str] = "triad"
     Params: ClassVar[type[Params]] = TriadParams
@@ -159,7 +160,7 @@ class TriadSolver(Solver):
         """The held IMU sample (fusion.api.UsesInput): its specific force (m/s^2, FRD)."""
         self._f = None if u is None else np.asarray(u, dtype=float)[:3]
 
-    def feed(self, message: Message) -> list[Message]:
+    def feed(self, message: Message) -> list[Fix]:
         try:
             m_b = message.floats()
         except MalformedMessage as exc:
@@ -178,9 +179,8 @@ class TriadSolver(Solver):
                                      "triad: gravity and magnetic field (nearly) parallel: no attitude"))
             return []
         C, P = self.solve(g_b, m_b)
-        q = quat.from_matrix(C)
-        return [Message(message.t, message.sensor, tuple(q.tolist()) + tuple(P[np.triu_indices(3)].tolist()),
-                        message.line)]
+        return [Fix(message.t, attitude=quat.from_matrix(C), attitude_cov=P, sensor=message.sensor,
+                    line=message.line)]
 
     def solve(self, g_b: np.ndarray, m_b: np.ndarray, S1: np.ndarray | None = None,
               S2: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:

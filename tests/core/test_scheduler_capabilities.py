@@ -88,7 +88,7 @@ def test_triad_preprocessor_reads_the_latest_input_sample(tmp_path, monkeypatch)
         return out
     monkeypatch.setattr(TriadSolver, "feed", recording_feed)
     _run(system, tmp_path / "s.log")
-    at = {round(f.t, 3): np.array(f.values[:4]) for f in fixes}
+    at = {round(f.t, 3): f.attitude for f in fixes}
     assert quat.angle_between(at[1.5], qb) < 1e-9 and quat.angle_between(at[1.333], qa) < 1e-9
 
 

@@ -75,7 +75,7 @@ def test_pair_choice_and_degenerate_cycle():
 
 def test_orientation_solver_component():
     """A cycle of four exact arrivals: the solver's TDOA position and attitude from the closest receivers."""
-    from fusion_plugins.measurement.direction import _normals
+    from fusion_plugins.measurement.direction import receiver_normals as _normals
     ctx = BuildContext(beacons=BEACONS, sensor="us")
     s = testing.build("solver", "orientation_geometric", {}, ctx)
     r, rot = np.array([1.2, 1.1, 1.4]), Rotation.from_euler("xyz", [10, -20, 30], degrees=True)
@@ -85,8 +85,8 @@ def test_orientation_solver_component():
         a = 0.1 + 0.225 * k + np.linalg.norm(r - b) / 340.0
         rec = int(np.argmax(N @ rot.inv().apply(_unit(b - r)))) + 1
         out += s.feed(Message(a, "us", (name, a, float(rec))))
-    assert len(out) == 1 and len(out[0].values) == 7
-    q, pos = np.array(out[0].values[:4]), np.array(out[0].values[4:])
+    assert len(out) == 1 and out[0].value.shape == (3,) and out[0].attitude_cov.shape == (3, 3)
+    q, pos = out[0].attitude, out[0].value
     assert np.abs(pos - r).max() < 1e-8
     assert np.rad2deg(quat.angle_between(q, rot.as_quat(scalar_first=True))) < 30.0   # discretised directions
     assert s.feed(Message(9.0, "us", ("B1", 9.0, 33.0))) == [] and s.counters["malformed"] == 1
@@ -124,7 +124,7 @@ def test_direction_is_eq_19_against_rotation(seed):
 
 def test_direction_noise_is_the_discretisation():
     """Default sd: RMS per axis of the angle to the closest of the 32 normals, checked by random sampling."""
-    from fusion_plugins.measurement.direction import _normals
+    from fusion_plugins.measurement.direction import receiver_normals as _normals
     proc = testing.build("process", "static_orientation", {})
     model = _direction(proc.layout, position=[1.0, 1.0, 1.0])
     d = _unit(np.random.default_rng(0).normal(size=(50000, 3)))
@@ -171,7 +171,7 @@ def test_firing_clock_with_attitude():
 def test_cell_constraint():
     """Zero inside the receiver's cell (exactly where that receiver is the closest), negative outside: the
     signed distance (sine) to the violated bisecting great circle; Jacobian by finite differences outside."""
-    from fusion_plugins.measurement.direction import _normals
+    from fusion_plugins.measurement.direction import receiver_normals as _normals
     N = _normals("truncated_icosahedron")
     proc = testing.build("process", "static_orientation", {})
     model = _direction(proc.layout, position=[1.2, 0.9, 1.4], cell=True)

@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 
 from fusion import testing
-from fusion.api import BuildContext, ConfigError, MalformedMessage, Message
-from fusion_plugins.solvers.ols_trilateration import unpack_fix
+from fusion.api import BuildContext, ConfigError, Fix, MalformedMessage, Message
 from fusion_plugins.solvers.tdoa_geometric import NoFix, biorthogonal_step, tdoa_fix
 
 C, T = 340.0, 0.225
@@ -116,7 +115,8 @@ def test_solver_one_fix_per_cycle_with_covariance():
     fixes = [m for msg in _messages(r, 5) for m in s.feed(msg)]
     assert len(fixes) == 5 and s.counters["fixes"] == 5
     for f in fixes:
-        pos, cov = unpack_fix(f.values)
+        assert isinstance(f, Fix) and f.used == ("B1", "B2", "B3", "B4") and f.line is None
+        pos, cov = f.value, f.cov
         assert np.abs(pos - r).max() < 1e-8
         assert np.all(np.linalg.eigvalsh(cov) > 0)
 
@@ -130,7 +130,8 @@ def test_solver_counts_missing_beacons_and_initialise_mode():
     s = _solver(output="initialise")
     msgs = _messages(r, 5)
     out = [m for msg in msgs for m in s.feed(msg)]
-    assert len(out[0].values) == 14 and out[1:] == msgs[12:]      # one fix (three cycles agree), then the arrivals
+    assert out[0].value.shape == (4,) and out[0].cov.shape == (4, 4) and out[0].attitude is None
+    assert out[1:] == msgs[12:]      # one fix (three cycles agree), then the arrivals
 
 
 def test_initialiser_is_not_placed_by_an_echo():
@@ -142,10 +143,10 @@ def test_initialiser_is_not_placed_by_an_echo():
     msgs[1] = Message(a + 1.0 / C, "us", (b, a + 1.0 / C, rec))
     s = _solver(output="initialise", initialise_agree=2)
     out = [m for msg in msgs for m in s.feed(msg)]
-    pos, _ = unpack_fix(out[0].values)
+    pos = out[0].value[:3]
     assert np.abs(pos - r).max() < 1e-6 and out[0].t == msgs[11].t
     s1 = _solver(output="initialise", initialise_agree=1)      # without the agreement: placed by the echo
-    pos1, _ = unpack_fix([m for msg in msgs for m in s1.feed(msg)][0].values)
+    pos1 = [m for msg in msgs for m in s1.feed(msg)][0].value[:3]
     assert np.linalg.norm(pos1 - r) > 0.2
 
 
@@ -168,19 +169,23 @@ def test_initial_state_fix_carries_the_firing_time():
     msgs = _messages(r, 3, t0=0.137)
     s = _solver(output="initialise")
     out = [m for msg in msgs for m in s.feed(msg)]
-    v = np.array(out[0].values)
+    v = out[0].value
     assert np.abs(v[:3] - r).max() < 1e-8
-    assert v[9] == pytest.approx(0.137 + 11 * T, abs=1e-10)           # the 12th firing (B4 of cycle 3)
+    assert v[3] == pytest.approx(0.137 + 11 * T, abs=1e-10)           # the 12th firing (B4 of cycle 3)
     proc = testing.build("process", "firing_clock", {})
     ctx = BuildContext(layout=proc.layout, beacons={f"B{i + 1}": b for i, b in enumerate(LAB)})
     obs = observe_initial(out[0], ctx)
-    x = np.r_[r, T, v[9]]
+    x = np.r_[r, T, v[3]]
     assert obs.z.shape == (4,) and np.allclose(obs.model.h(x), obs.z, atol=1e-8)
     u = (r - LAB[3]) / np.linalg.norm(r - LAB[3])
     assert np.allclose(obs.R[:3, 3], -obs.R[:3, :3] @ u / C)          # cov(p, t) = -C u / c
     assert np.all(np.linalg.eigvalsh(obs.R) > 0)
-    with pytest.raises(MalformedMessage):
-        observe_initial(Message(1.0, "us", tuple(v[:13].tolist()) + ("x",)), ctx)
+    with pytest.raises(MalformedMessage):                              # a message is no typed fix
+        observe_initial(Message(1.0, "us", tuple(v.tolist())), ctx)
+    with pytest.raises(MalformedMessage, match="4 finite"):
+        observe_initial(Fix(1.0, np.r_[v[:3], np.nan], out[0].cov), ctx)
+    with pytest.raises(MalformedMessage, match="4 x 4"):
+        observe_initial(Fix(1.0, v, None), ctx)
 
 
 # --------------------------------------------------------------------------- echoes thrown far, the bound
@@ -212,7 +217,7 @@ def test_initialiser_is_not_placed_by_an_echo_thrown_far():
     msgs[8] = Message(a + 0.7 / C, "us", (b, a + 0.7 / C, rec))
     s = _solver(output="initialise", initialise_agree=3)
     out = [m for msg in msgs for m in s.feed(msg)]
-    pos, cov = unpack_fix(out[0].values[:9])
+    pos, cov = out[0].value[:3], out[0].cov[:3, :3]
     assert np.abs(pos - FAR).max() < 1e-6
     assert np.sqrt(np.diag(cov)).max() < 0.15         # 3 fixes of 0.2 ms arrivals (~0.18 m each), not metres
     assert out[0].t >= msgs[23].t        # three agreeing cycles after the echo's (3 disagrees with 2 and 4)
@@ -284,9 +289,9 @@ def test_stationary_initialiser_keeps_the_wait():
     batch = _solver(output="initialise", initialise_stationary=True)
     f0 = [m for msg in msgs for m in plain.feed(msg)][0]
     f1 = [m for msg in msgs for m in batch.feed(msg)][0]
-    assert f0.t == f1.t and len(f0.values) == len(f1.values) == 14
-    p0, c0 = unpack_fix(f0.values[:9])
-    p1, c1 = unpack_fix(f1.values[:9])
+    assert f0.t == f1.t and f0.value.shape == f1.value.shape == (4,) and f1.cov.shape == (4, 4)
+    p0, c0 = f0.value[:3], f0.cov[:3, :3]
+    p1, c1 = f1.value[:3], f1.cov[:3, :3]
     assert np.abs(p1 - FAR).max() < 1e-6
     assert np.trace(c1) < 0.6 * np.trace(c0)       # 28 genuine arrivals against 12
-    assert abs(f1.values[9] - f0.values[9]) < 1e-6  # the same latest firing time (noise-free)
+    assert abs(f1.value[3] - f0.value[3]) < 1e-6  # the same latest firing time (noise-free)

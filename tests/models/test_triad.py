@@ -105,10 +105,10 @@ def test_solver_emits_fix_with_covariance_from_the_held_accelerometer():
     assert s.feed(Message(1.0, "mag", tuple(b2))) == []        # no accelerometer sample yet
     s.take_input(0.98, np.r_[-b1, 0.0, 0.0, 0.0])             # static: f_b = -g_b
     (out,) = s.feed(Message(1.0, "mag", tuple(b2), 5))
-    q = np.array(out.values[:4])
-    assert quat.angle_between(q, quat.from_matrix(C)) < 1e-12
+    assert out.t == 1.0 and out.line == 5 and out.sensor == "mag" and out.value.size == 0
+    assert quat.angle_between(out.attitude, quat.from_matrix(C)) < 1e-12
     P, _ = attitude_covariance("improved_triad", b1, b2, G_N, M_N, np.eye(3) * 0.05**2, np.eye(3) * 0.09)
-    np.testing.assert_allclose(out.values[4:], P[np.triu_indices(3)], rtol=1e-9)
+    np.testing.assert_allclose(out.attitude_cov, P, rtol=1e-9)
     assert s.feed(Message(1.1, "mag", ("x", 1.0, 2.0))) == [] and s.events[-1].kind == "no_fix"
 
 

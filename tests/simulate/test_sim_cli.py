@@ -53,19 +53,19 @@ def test_noise_off_and_stdout(tmp_path, capsys):
 
 @pytest.mark.parametrize("yaml, expect", [
     ("trajectory: {type: waypoints, waypoints: [[0, 0], [1, 0]]}\nsensors: {u: {type: range}}\nbogus: 1\n",
-     "bogus (line 3): unknown field"),
+     "bad.yaml:3: bogus: unknown key"),
     ("trajectory: {type: waypoints, waypoints: [[0, 0], [1, 0]]}\nsensors:\n  u:\n    type: range\n"
-     "    noise_sd: -1\n", "sensors.u.noise_sd (line 5): Input should be greater than or equal to 0"),
+     "    noise_sd: -1\n", "bad.yaml:5: sensors.u.noise_sd: Input should be greater than or equal to 0"),
     ("trajectory: {type: waypoints, waypoints: [[0, 0], [1, 0]]}\nsensors: {u: {type: rnage}}\n",
      "sensors.u.type: unknown simulator 'rnage'; did you mean 'range'?"),
-    ("trajectory: {type: spiral}\nsensors: {u: {type: range}}\n", "trajectory (line 1): Input tag 'spiral'"),
+    ("trajectory: {type: spiral}\nsensors: {u: {type: range}}\n", "bad.yaml:1: trajectory: Input tag 'spiral'"),
     ("trajectory:\n  type: waypoints\n  waypoints: [[0, 0], {at: [1, 0], stopp: 2}]\nsensors: {u: {type: range}}\n",
-     "trajectory.waypoints.1.stopp (line 3): unknown field"),
+     "bad.yaml:3: trajectory.waypoints.1.stopp: unknown key"),
     ("trajectory: {type: waypoints, waypoints: [[0, 0], [1, 0]]}\nsensors: {u: {type: range, beacons: [X]}}\n",
      "unknown beacon"),
     ("dim: 2\nbeacons: {1A: [0, 0]}\ntrajectory: {type: waypoints, waypoints: [[0, 0], [1, 0]]}\n"
      "sensors: {u: {type: range}}\n", "must start with a letter"),
-    ("a: [1, 2\n", "not valid YAML"),
+    ("a: [1, 2\n", "bad.yaml:2: invalid YAML"),
 ])
 def test_bad_scenarios_exit_2_with_one_clear_line(tmp_path, capsys, yaml, expect):
     sc = tmp_path / "bad.yaml"
@@ -100,3 +100,31 @@ def test_simulators_are_registered_plugins():
     for name in names:
         cls = reg.get("simulator", name)
         assert issubclass(cls, Simulator) and cls.__doc__ and cls.Params.model_config.get("extra") == "forbid"
+
+
+def test_a_scenario_error_and_a_config_error_are_formatted_alike(tmp_path, capsys):
+    """One locator and one formatter (fusion.yamlsource): the same two mistakes (a value out of its bounds,
+    an unknown key) in a scenario's sensor and in a config's sensor model give messages of one form,
+    ``file:line: field.path: problem (and 1 more: file:line: field.path: unknown key)``."""
+    import re
+
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text("trajectory: {type: waypoints, waypoints: [[0, 0], [1, 0]]}\n"
+                        "sensors:\n  u:\n    type: range\n    noise_sd: -1\n    bogus: 2\n")
+    config = tmp_path / "c.yaml"
+    config.write_text("name: c\nprocess: {type: pv, dims: 2, spectral_density: 0.1}\n"
+                      "initial: {mean: {p: [0, 0], v: [0, 0]}, sd: {p: 1.0, v: 1.0}}\nfilter: ekf\n"
+                      "sensors:\n  u:\n    model:\n      type: position\n      dim: 9\n      bogus: 2\n"
+                      "    noise: {sd: 1}\n")
+    assert main(["simulate", str(scenario), "-o", str(tmp_path / "x.log")]) == 2
+    sim_err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert main(["validate", str(config)]) == 2
+    cfg_err = capsys.readouterr().err.strip().splitlines()[-1]
+    form = r"(\S+):(\d+): ([\w.]+): (Input should be [^(]+) \(and 1 more: (\S+):(\d+): ([\w.]+): unknown key\)$"
+    sim, cfg = re.search(form, sim_err), re.search(form, cfg_err)
+    assert sim and cfg, (sim_err, cfg_err)
+    assert sim.group(1) == sim.group(5) == str(scenario) and cfg.group(1) == cfg.group(5) == str(config)
+    assert (sim.group(2), sim.group(3), sim.group(6), sim.group(7)) == ("5", "sensors.u.noise_sd", "6",
+                                                                         "sensors.u.bogus")
+    assert (cfg.group(2), cfg.group(3), cfg.group(6), cfg.group(7)) == ("9", "sensors.u.model.dim", "10",
+                                                                         "sensors.u.model.bogus")

@@ -144,9 +144,7 @@ def test_initialiser_at_the_far_position_over_seeds(tmp_path):
     import numpy as np
 
     from fusion import testing
-    from fusion.api import BuildContext, Message
-    from fusion_plugins.solvers.initial_fix import SIZES
-    from fusion_plugins.solvers.ols_trilateration import unpack_fix
+    from fusion.api import BuildContext, Fix, Message
 
     uc = _cases()
     from ultrasonic_3d_tables import ECHO_RATE
@@ -162,8 +160,8 @@ def test_initialiser_at_the_far_position_over_seeds(tmp_path):
                           BuildContext(beacons={k: np.array(v, float) for k, v in sc.beacons.items()}, sensor="us"))
         fix = next(m for j in range(len(log.t))
                    for m in s.feed(Message(log.t[j], "us", (log.beacon[j], log.arrival[j], float(log.receiver[j]))))
-                   if len(m.values) in SIZES)
-        p, C = unpack_fix(np.array(fix.values[:9], float))
+                   if isinstance(m, Fix))
+        p, C = fix.value[:3], fix.cov[:3, :3]
         e = p - truth
         errs.append(float(np.linalg.norm(e)))
         fits += float(e @ np.linalg.solve(C, e)) <= 11.34

@@ -152,3 +152,16 @@ def test_malformed_lines_are_counted_and_logged_with_line_numbers(tmp_path):
             assert app.query_one(SensorCounters).cells["ignored:sonar"][0] == "sonar (not in config)"
 
     asyncio.run(drive())
+
+
+def test_a_timer_tick_or_a_feed_update_without_a_screen_draws_nothing():
+    """A tick of the half-second timer or a snapshot from the feed's thread can arrive when no screen is
+    mounted (before the first, or during teardown: an IndexError once ended a test run); they are dropped."""
+    from fusion.tui.messages import FeedUpdate
+
+    app = make_app(CONFIG, speed=0)
+    assert not app.screen_stack
+    asyncio.run(app._tick())
+    snap = app.feed._emit(time.monotonic())    # a real snapshot of the feed, before any line was read
+    app.on_feed_update(FeedUpdate(snap))
+    assert app.latest is snap and app.updates == 1

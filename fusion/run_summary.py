@@ -1,0 +1,53 @@
+"""The summary of a run (DESIGN.md "Outputs"; what ``--summary-json`` writes), assembled from its
+fusion.run_stats.RunStats: configuration, steps and their cost, per-sensor counters, errors against truth,
+consistency, agreement with a reference, health, component info, events and the filter's counters."""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from fusion.run_stats import RunStats
+
+__all__ = ["summary"]
+
+
+def summary(stats: "RunStats", source: str, wall_s: float) -> dict[str, Any]:
+    """The summary dict of a run: ``source`` its input's label, ``wall_s`` its wall time (s)."""
+    system, sched = stats.system, stats.scheduler
+    track = stats.tracker.summary()
+    steps = dict(sched.steps)
+    duration = (stats.t_last - stats.t_first) if stats.estimates else 0.0
+    out: dict[str, Any] = {
+        "config": str(system.path) if system.path else system.spec.name,
+        "filter": system.filter.name,
+        "input": str(source),
+        "duration_s": duration,
+        "wall_s": wall_s,
+        "steps": steps,
+        "us_per_predict": 1e6 * sched.time_s["predict"] / steps["predict"] if steps["predict"] else None,
+        "us_per_update": 1e6 * sched.time_s["update"] / steps["update"] if steps["update"] else None,
+        "sensors": stats.counters(),
+    }
+    if track.get("errors"):
+        out["errors"] = track["errors"]
+        if system.spec.evaluation.position:
+            out["errors"]["position_elements"] = list(system.spec.evaluation.position)
+    if track.get("consistency"):
+        out["consistency"] = track["consistency"]
+    if stats.reference is not None:
+        agreement = stats.reference.tracker.summary()["errors"]
+        if agreement:
+            out["agreement"] = {"with": "reference (the onboard estimator's output in the log); "
+                                            "an agreement, not an error", **agreement}
+    out["health"] = stats.health()
+    info = stats.component_info()
+    if info:
+        out["info"] = info
+    if sched.unused:
+        out["ignored_sensors"] = dict(sched.unused)
+    if stats.events:
+        out["events"] = dict(stats.events)
+    counters = stats.filter_counters
+    if counters:
+        out["filter_counters"] = counters
+    return out
