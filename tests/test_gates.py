@@ -115,3 +115,24 @@ def test_the_gate_contract_catches_a_gate_that_counts_inside_itself():
 
     with pytest.raises(AssertionError, match="NaN"):
         testing.check_gate(NanPasses)
+
+
+def test_the_gate_contract_catches_a_gate_that_changes_its_state_in_place():
+    """A replay rewinds to states it kept: a gate that appends to the list it was given (instead of
+    returning a new state) would rewrite history, and the kit says so."""
+    from fusion.api import Gate
+
+    class InPlace(Gate):
+        """Remembers the recent NIS by appending to its state (what a gate must not do)."""
+
+        name = "in_place"
+
+        def initial_state(self) -> list:
+            return []
+
+        def check(self, nis, dim, state):
+            state.append(nis)
+            return GateDecision(bool(nis <= 9.0), 9.0), state
+
+    with pytest.raises(AssertionError, match="changed the state"):
+        testing.check_gate(InPlace)

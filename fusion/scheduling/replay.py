@@ -20,6 +20,7 @@ class _Snapshot:
     next_output: float
     index: int  # position in the processed-message log after which this snapshot was taken
     gates: dict[str, Any]  # sensor -> its gate's state (fusion.api.GateRun.state)
+    gate_counts: dict[str, Any]  # sensor -> its gate's counters then: a replay re-counts from here
 
 
 class Replay:
@@ -37,7 +38,8 @@ class Replay:
             return
         self._history.append(_Snapshot(self.belief.t, self.belief, self.u, self._next_output,
                                        self._log_start + len(self._log),
-                                       {n: g.state for n, g in self.gates.items()}))
+                                       {n: g.state for n, g in self.gates.items()},
+                                       {n: g.counters.copy() for n, g in self.gates.items()}))
 
     def _replay(self, late: Message) -> Iterator[Estimate | Event]:
         snap = None
@@ -54,10 +56,12 @@ class Replay:
         rerun.sort(key=lambda m: m.t)
         self.belief, self.u, self._next_output = snap.belief, snap.u, snap.next_output
         for n, state in snap.gates.items():
+            # the gate decides the re-run messages again, and its counts are those of the re-run decisions
+            # (the late message's included), not the ones made before the late message arrived
             self.gates[n].state = state
+            self.gates[n].counters = snap.gate_counts[n].copy()
         self._replaying = True
         counters = {n: dict(s.counters) for n, s in self.sensors.items()}
-        gate_counts = {n: g.counters.copy() for n, g in self.gates.items()}
         try:
             for msg in rerun:
                 for out in self._process(msg):
@@ -66,8 +70,6 @@ class Replay:
             self._replaying = False
         for n, s in self.sensors.items():  # re-run messages were already counted
             s.counters.update(counters[n])
-        for n, g in self.gates.items():
-            g.counters = gate_counts[n]
         sensor.counters["used"] += 1
         self._record(late)
         self._history.clear()

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from fusion.api import Estimate
+from fusion.api import Estimate, KeepsGateState, has
 
 from . import batchstats
 from .lockstep import NotLockstep, from_simulation
@@ -56,6 +56,9 @@ def unsupported(system: Any, trial: Trial) -> str | None:
             return f"sensor {name!r} has a preprocessor, recovery or time offset"
         if type(s.model).__dict__.get("pseudo_observation") is not None:
             return f"sensor {name!r} is a pseudo-measurement"
+        if s.gate is not None and has(s.gate, KeepsGateState):
+            # the batch gates by threshold masks; a gate with per-run memory (reopening) decides otherwise
+            return f"sensor {name!r}: gate {s.gate.name!r} keeps per-run state"
     return None
 
 

@@ -28,7 +28,8 @@ def check_gate(cls: type[Gate], params: Mapping[str, Any] | None = None, *, cont
     """The gate contract: :func:`check_component`; ``check(nis, dim, state)`` returns a
     ``(GateDecision, state)`` pair whose threshold is a number > 0 (``inf`` allowed: an open gate); a NaN
     NIS is never accepted; the gate object is unchanged by ``n`` decisions (it is immutable: counts and
-    memory belong to the run's GateRun); two GateRuns of one gate, fed the same NIS, decide and count
+    memory belong to the run's GateRun); ``check`` leaves the state it is given as it was (a new state is
+    returned; a replay rewinds to old ones); two GateRuns of one gate, fed the same NIS, decide and count
     alike (its state is a value, not shared); a gate without KeepsGateState answers ``accept`` as
     ``check``; ``threshold(dim)`` (HasThreshold) is > 0 for dim 1-6. Returns the counts of the first run."""
     check_component(cls)
@@ -41,7 +42,10 @@ def check_gate(cls: type[Gate], params: Mapping[str, Any] | None = None, *, cont
     nis[rng.random(n) < 0.05] = np.nan
     state = gate.initial_state() if has(gate, KeepsGateState) else None
     for v, m in zip(nis[:20], dims[:20]):
+        kept = copy.deepcopy(state)
         out = gate.check(float(v), int(m), state)
+        assert _same({"s": state}, {"s": kept}), (f"{who}.check changed the state it was given: a state is a "
+                                                  "value (the run keeps old ones to rewind a replay)")
         assert isinstance(out, tuple) and len(out) == 2 and isinstance(out[0], GateDecision), \
             f"{who}.check must return (GateDecision, state), got {out!r}"
         d, state = out

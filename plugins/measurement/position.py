@@ -190,6 +190,9 @@ class Position(MeasurementModel[PositionParams]):
         if not self.params.use_fix_covariance:
             return None
         R = cov[:self.dim, :self.dim]
+        if R.shape != (self.dim, self.dim) or not np.all(np.isfinite(R)):   # cholesky passes NaN through
+            raise MalformedMessage(f"position: the fix's covariance {R.tolist()} (m^2) is not a finite "
+                                   f"{self.dim} x {self.dim} matrix")
         try:
             np.linalg.cholesky(R)
         except np.linalg.LinAlgError:

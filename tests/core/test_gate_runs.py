@@ -123,3 +123,5 @@ def test_replay_rewinds_a_gate_state_with_the_belief():
     np.testing.assert_allclose(sched.belief.x, ref[-1].belief.x, atol=1e-10)
     np.testing.assert_allclose(sched.belief.cov, ref[-1].belief.cov, atol=1e-10)
     assert sched.gates["fast"].state == ordered.gates["fast"].state
+    # the counts are the time-ordered decisions (the re-run ones, the late messages' own included)
+    assert dict(sched.gates["fast"].counters) == dict(ordered.gates["fast"].counters)

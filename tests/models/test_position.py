@@ -147,3 +147,16 @@ def test_position_from_inverts_h():
     x[0:3] = m.position_from(z, x)
     np.testing.assert_allclose(m.h(x), z, atol=1e-14)
     np.testing.assert_array_equal(model(PV2).position_from(z, np.zeros(4)), z[:2])
+
+
+def test_a_typed_fix_with_a_non_finite_covariance_is_malformed():
+    """np.linalg.cholesky does not raise on NaN: the covariance is checked for finiteness first, so a solver's
+    NaN covariance never reaches the filter as R."""
+    from fusion.api import Fix
+
+    m = model()
+    good = np.diag([0.01, 0.02, 0.09])
+    assert np.allclose(m.observe(Fix(1.0, np.array([1.0, 2.0, 3.0]), good)).R, good)
+    for bad in (np.full((3, 3), np.nan), np.diag([0.01, np.inf, 0.09]), np.diag([0.01, -0.02, 0.09])):
+        with pytest.raises(MalformedMessage, match="covariance"):
+            m.observe(Fix(1.0, np.array([1.0, 2.0, 3.0]), bad))

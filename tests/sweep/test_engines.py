@@ -96,3 +96,12 @@ def test_not_lockstep_falls_back_on_the_pipeline(trials, monkeypatch):
     assert {r["engine"] for r in rows.values()} == {"pipeline"}
     for t in ts:
         assert_rows_equal(rows[t.key()], run_trial(t))
+
+
+def test_a_gate_with_per_run_memory_goes_to_the_pipeline(trials):
+    """The batch gates by threshold masks: a reopening gate (state kept per run) would decide otherwise, so
+    its variants are routed to the pipeline, with the reason."""
+    ts = trials(seeds=range(2), filters=("ukf",), params=[("sensors.uwb.gate", ["{type: reopening, n_sigma: 3.0}"])])
+    ready, rest, why = engines.batch_ready(ts)
+    assert not ready and len(rest) == 2
+    assert set(why.values()) == {"sensor 'uwb': gate 'reopening' keeps per-run state"}
