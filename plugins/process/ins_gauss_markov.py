@@ -22,7 +22,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from fusion.api import Block, BuildContext, Event, Message, Params, ProcessModel, ReportsStepEvents, StateLayout, has
+from fusion.api import (Block, BuildContext, Event, LinearisesInputRuns, Message, Params, ProcessModel,
+                        ReportsStepEvents, StateLayout, has)
 
 from .ins_params import InsParams
 
@@ -119,6 +120,29 @@ class InsGaussMarkov(ProcessModel):
         out[:, :m, :m] = core_batch(x[:, :m], u, dt)
         out[:, range(m, n), range(m, n)] = self.block_noise(dt)
         return out
+
+    def linearise_inputs(self, x: np.ndarray, us: np.ndarray, dts: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The EKF's run of samples (fusion.api.LinearisesInputRuns) when the INS part has one (the paper-002
+        state sets): its means, F_j and Q_j with the blocks' decay exp(-dt_j / tau) and noise appended
+        (block diagonal, as :meth:`jacobian` and :meth:`Q`); None otherwise (sample by sample)."""
+        if not has(self.core, LinearisesInputRuns):
+            return None
+        x = np.asarray(x, dtype=float)
+        run = self.core.linearise_inputs(x[:self.m], us, dts)
+        if run is None:
+            return None
+        y, F_ins, Q_ins = run
+        dts = np.asarray(dts, dtype=float)
+        k, n, m = dts.shape[0], self.layout.n, self.m
+        d = np.arange(m, n)
+        F = np.zeros((k, n, n))
+        F[:, :m, :m] = F_ins
+        F[:, d, d] = np.exp(-dts[:, None] / self._tau)
+        Q = np.zeros((k, n, n))
+        Q[:, :m, :m] = Q_ins
+        Q[:, d, d] = self._var * -np.expm1(-2.0 * dts[:, None] / self._tau)
+        return self._join(x, y, float(np.sum(dts))), F, Q
 
     def Q_inputs(self, x0: np.ndarray, x1: np.ndarray, us: np.ndarray, dts: np.ndarray) -> np.ndarray:
         """Q (n, n) of a run of samples: ``ins.Q_inputs`` and the blocks' noise over T = sum dts."""

@@ -129,3 +129,27 @@ def test_ekf_falls_back_to_per_sample_predictions():
         b = ekf.predict(b, m, u, float(dt))
     np.testing.assert_array_equal(batched.x, b.x)
     np.testing.assert_array_equal(batched.P, b.P)
+
+
+def test_gauss_markov_blocks_keep_the_run_path():
+    """22 states with a Gauss-Markov block appended (ins gauss_markov): the run of samples is the INS's with
+    the block's exact decay and noise, and ekf.predict_inputs still equals k predicts."""
+    rng = np.random.default_rng(21)
+    m = make(22, gauss_markov=[{"name": "hz", "size": 1, "tau": 10.0, "sd": 0.1}])
+    assert m.layout.n == 23 and has(m, LinearisesInputRuns)
+    assert make(16, gauss_markov=[{"name": "hz", "size": 1, "tau": 10.0, "sd": 0.1}]).linearise_inputs(
+        np.r_[np.zeros(6), 1.0, np.zeros(10)], run_inputs(rng, 2), np.full(2, 0.02)) is None   # 16: no run path
+    ekf = ExtendedKalmanFilter()
+    x = np.r_[random_state(rng, 22), 0.05]
+    b0 = ekf.initial_belief(0.0, x, 1e-3 * np.eye(23))
+    us, dts = run_inputs(rng, 6), rng.uniform(0.015, 0.025, 6)
+    x_end, F, Q = m.linearise_inputs(x, us, dts)
+    np.testing.assert_allclose(F[:, 22, 22], np.exp(-dts / 10.0), rtol=1e-15)
+    np.testing.assert_allclose(Q[:, 22, 22], 0.01 * (1 - np.exp(-2 * dts / 10.0)), rtol=1e-12)
+    assert x_end[22] == pytest.approx(0.05 * np.exp(-dts.sum() / 10.0), rel=1e-14)
+    b = b0
+    for u, dt in zip(us, dts):
+        b = ekf.predict(b, m, u, float(dt))
+    batched = ekf.predict_inputs(b0, m, us, dts)
+    np.testing.assert_allclose(batched.x, b.x, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(batched.P, b.P, rtol=1e-11, atol=1e-16)
