@@ -154,7 +154,7 @@ class Run:
         recording's clock moves truth with it), then to its comparison."""
         sched = self.scheduler
         clock = sched.clock
-        newest = sched._newest
+        newest = sched.newest
         t = msg.t
         stats = self.stats
         comp = stats.truth if msg.sensor == "truth" and stats.truth is not None else stats.comparison(msg.sensor)

@@ -23,6 +23,12 @@ def _msg_t(msg: Message) -> float:
 class Reordering:
     """Mixin: ``push``, ``_push``, ``_accept``, ``_release``, ``_flush_inputs`` (see fusion.scheduler)."""
 
+    @property
+    def newest(self) -> float:
+        """The latest sensor time (s) accepted so far (-inf before any): where the clock guard centres
+        its window for truth and reference lines as for the sensors."""
+        return self._newest
+
     def push(self, item: Message | MalformedMessage) -> Iterable[Estimate | Event]:
         """Accept one message; returns (an iterable of) whatever it releases. Iterate it to drive the filter.
 
