@@ -19,12 +19,18 @@ untimed run first writes them; PYTHONDONTWRITEBYTECODE is dropped for the childr
 """
 from __future__ import annotations
 
-import argparse
 import os
-import subprocess
-import sys
-import time
-from pathlib import Path
+
+# The replay alone runs in this process: BLAS single-threaded, as fusion/cli.py sets it for `fusion run`
+# (before numpy is first imported).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "abps_ins.yaml"
