@@ -18,14 +18,12 @@ by name (``position``'s ``offset_block``).
 """
 from __future__ import annotations
 
-from typing import ClassVar
-
 import numpy as np
 
-from fusion.api import (Block, BuildContext, Event, LinearisesInputRuns, Message, Params, ProcessModel,
-                        ReportsStepEvents, StateLayout, has)
+from fusion.api import (Block, BuildContext, Event, LinearisesInputRuns, Message, ReportsStepEvents, StateLayout,
+                        has)
 
-from .ins_params import InsParams
+from .ins_params import InsParams, InsProcess
 
 __all__ = ["InsGaussMarkov", "GaussMarkovBlock"]
 
@@ -37,15 +35,11 @@ class GaussMarkovBlock(Block):
         return (self.name,) if self.size == 1 else super().element_names()
 
 
-class InsGaussMarkov(ProcessModel):
+class InsGaussMarkov(InsProcess):
     """The ``ins`` process with Gauss-Markov blocks appended (module docstring). State: the INS state
     (``p v q ba bw`` for 16 states; see ``ins``) then each ``gauss_markov`` block. Input as ``ins``:
     ``u = [ax ay az gx gy gz]`` (m/s^2, rad/s, FRD)."""
 
-    name: ClassVar[str] = "ins"
-    Params: ClassVar[type[Params]] = InsParams
-    input_dim: int = 6
-    linear: bool = False
 
     def __init__(self, params: InsParams | None = None, context: BuildContext | None = None):
         super().__init__(params, context)

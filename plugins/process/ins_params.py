@@ -1,12 +1,12 @@
 """Parameters of the ``ins`` process model (paper 000 sec. V-A): gravity, noise densities (SI units)."""
 from __future__ import annotations
 
-from typing import Literal
+from typing import ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
 
-from fusion.api import Params
+from fusion.api import Params, ProcessModel
 
 STANDARD_GRAVITY = 9.80665          # m/s^2
 EARTH_RATE = 7.292115e-5            # rad/s (WGS84)
@@ -103,3 +103,13 @@ def density_variance(density: Density) -> np.ndarray:
     if np.any(d < 0):
         raise ValueError(f"noise densities must be >= 0, got {density}")
     return d * d
+
+
+class InsProcess(ProcessModel):
+    """What the ``ins`` family shares (``Ins``, ``InsStates``, ``InsGaussMarkov``): the component's name,
+    its parameters and the IMU input ``u = [ax ay az gx gy gz]`` (m/s^2, rad/s, FRD); non-linear."""
+
+    name: ClassVar[str] = "ins"
+    Params: ClassVar[type[Params]] = InsParams
+    input_dim: int = 6
+    linear: bool = False

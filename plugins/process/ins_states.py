@@ -20,15 +20,14 @@ s = 1 (an error of ~2 |s - 1| in the variance, far inside the uncertainty of dat
 """
 from __future__ import annotations
 
-from typing import ClassVar
-
 import math
 
 import numpy as np
 
-from fusion.api import BuildContext, Event, Message, Params, ProcessModel, StateLayout
+from fusion.api import BuildContext, Event, Message, StateLayout
 
 from .ins import Ins, InsParams, density_variance
+from .ins_params import InsProcess
 from .ins_linearise import linearise_run
 
 __all__ = ["InsStates"]
@@ -37,7 +36,7 @@ _LAYOUTS = {10: StateLayout.parse("p:3 v:3 q:4:quaternion"),
             22: StateLayout.parse("p:3 v:3 q:4:quaternion ba:3 bw:3 sa:3 sw:3")}
 
 
-class InsStates(ProcessModel):
+class InsStates(InsProcess):
     """Strapdown INS with the 10- or 22-state set of paper 002 (eqs. 8, 11-13), NED / FRD.
 
     State: ``p`` (m, NED), ``v`` (m/s, NED), ``q`` (Hamilton, scalar first, C_b^n); with 22 states also
@@ -46,10 +45,6 @@ class InsStates(ProcessModel):
     the input checks are those of ``ins`` (same parameters); see the module docstring for the mapping.
     """
 
-    name: ClassVar[str] = "ins"
-    Params: ClassVar[type[Params]] = InsParams
-    input_dim: int = 6
-    linear: bool = False
 
     def __init__(self, params: InsParams | None = None, context: BuildContext | None = None):
         super().__init__(params, context)
