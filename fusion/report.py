@@ -48,7 +48,7 @@ _ERROR_ROWS = (  # key, label, unit
 )
 _ELEMENT_UNITS = {"p": "m", "v": "m/s"}  # by the block-prefixed element name (px, vy); others vary
 _KNOWN = {"config", "filter", "input", "duration_s", "wall_s", "steps", "us_per_predict", "us_per_update",
-          "sensors", "errors", "consistency"}
+          "sensors", "errors", "consistency", "not_started"}
 
 
 def _num(v: Any, fmt: str = ".4g") -> str:
@@ -174,6 +174,8 @@ def print_summary(summary: dict, console: Console | None = None) -> None:
     if summary.get("errors"):
         console.print()
         console.print(_errors_table(summary["errors"]))
+    elif summary.get("not_started"):
+        console.print(f"\n[bold yellow]{summary['not_started']}[/]")
     elif summary.get("errors") is None:
         console.print("\n[dim]no truth in the input: no errors[/]")
     c = summary.get("consistency") or {}

@@ -28,6 +28,11 @@ def summary(stats: "RunStats", source: str, wall_s: float) -> dict[str, Any]:
         "us_per_update": 1e6 * sched.time_s["update"] / steps["update"] if steps["update"] else None,
         "sensors": stats.counters(),
     }
+    if not stats.estimates:
+        init = system.spec.initial
+        why = (f"waiting for a first fix from {init.from_sensor!r} (initial.from_sensor)" if init.from_sensor
+               else "no input reached the filter")
+        out["not_started"] = f"no estimate was made: the filter was never initialised ({why})"
     if track.get("errors"):
         out["errors"] = track["errors"]
         if system.spec.evaluation.position:

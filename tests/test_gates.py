@@ -136,3 +136,15 @@ def test_the_gate_contract_catches_a_gate_that_changes_its_state_in_place():
 
     with pytest.raises(AssertionError, match="changed the state"):
         testing.check_gate(InPlace)
+
+
+@pytest.mark.parametrize("name,params", [("chi2", {"probability": 1e-200}), ("chi2", {"n_sigma": 1e155}),
+                                         ("reopening", {"n_sigma": 1e155}), ("reopening", {"trigger_sigma": 1e200})])
+def test_gate_parameters_out_of_a_meaningful_range_are_config_errors(name, params):
+    """Values that pass a plain 'positive' check but cannot be computed (a chi-square quantile at 1e-200, an
+    n-sigma whose square overflows) are refused when the config is read, not in the middle of a run."""
+    from pydantic import ValidationError
+
+    cls = testing.registry_class("gate", name)
+    with pytest.raises(ValidationError):
+        cls.Params(**params)

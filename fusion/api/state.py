@@ -41,6 +41,10 @@ class Block:
         return tuple(f"{self.name}{i}" for i in range(self.size))
 
 
+#: Output columns besides the state's elements (fusion.outputs): no state element may be named so.
+RESERVED_NAMES = frozenset({"t", "reason", "sensor"})
+
+
 class StateLayout:
     """Ordered named blocks; everything outside a model addresses the state by block name.
 
@@ -61,6 +65,16 @@ class StateLayout:
             i += b.size
         self.n: int = i
         self.names: tuple[str, ...] = tuple(e for b in self.blocks for e in b.element_names())
+        # Element names are the columns of the outputs (t, px, ..., sd_px, ..., reason, sensor) and the keys
+        # of truth and summaries: one that repeats or is taken by the output would silently overwrite another.
+        seen: set[str] = set()
+        for e in self.names:
+            if e in seen:
+                raise ValueError(f"state element name {e!r} appears twice (blocks {names}): rename a block")
+            if e in RESERVED_NAMES or e.startswith("sd_"):
+                raise ValueError(f"state element name {e!r} is taken by the outputs (t, reason, sensor and the "
+                                 "sd_ columns): rename its block")
+            seen.add(e)
         #: The quaternion blocks kept at unit norm, as slices: what :meth:`normalize` renormalises.
         self.unit_quaternions: tuple[slice, ...] = tuple(
             self._slices[b.name] for b in self.blocks if b.kind == "quaternion" and b.unit)

@@ -51,7 +51,8 @@ class EventNotes:
     """Prints events a user should see while a replay runs (warnings, gaps, malformed lines, late
     messages, rejections), the first few of each kind with sensor, time and line, then a count."""
 
-    SHOWN = {"warning": 10, "cleared": 10, "gap": 5, "malformed": 3, "late": 3, "rejected": 3, "no_fix": 3}
+    SHOWN = {"warning": 10, "cleared": 10, "gap": 5, "malformed": 3, "late": 3, "rejected": 3, "no_fix": 3,
+             "time": 3, "clock": 3, "not_positive_definite": 3}
 
     def __init__(self, stream, enabled: bool = True):
         self.stream = stream

@@ -54,11 +54,24 @@ def read_rows(path: str | Path) -> list[dict[str, Any]]:
         return []
     if p.suffix == ".parquet":
         pq = _pyarrow()
-        return pq.read_table(p).to_pylist()
-    with open(p, newline="", encoding="utf-8") as fh:
-        rd = csv.DictReader(fh)
-        return [{k: (_parse(v) if k not in ("key", "error", "config", "scenario", "filter") and not k.startswith("param.")
-                     else v) for k, v in r.items()} for r in rd]
+        if p.stat().st_size == 0:
+            return []
+        try:
+            return pq.read_table(p).to_pylist()
+        except Exception as exc:  # pyarrow.ArrowInvalid and kin: not (all of) a Parquet file
+            raise ConfigError(f"{p}: not a readable Parquet results file ({exc}); use another -o") from None
+    try:
+        with open(p, newline="", encoding="utf-8") as fh:
+            rd = csv.DictReader(fh)
+            rows = []
+            for r in rd:
+                if None in r or any(v is None for v in r.values()):
+                    continue   # a row cut short (an interrupted sweep) or overlong: its trial runs again
+                rows.append({k: (_parse(v) if k not in ("key", "error", "config", "scenario", "filter")
+                                 and not k.startswith("param.") else v) for k, v in r.items()})
+            return rows
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise ConfigError(f"{p}: not a readable CSV results file ({exc}); use another -o") from None
 
 
 def done_keys(rows: list[dict[str, Any]]) -> set[str]:
@@ -88,7 +101,12 @@ class CsvWriter:
             if head != cols:
                 raise ConfigError(f"{self.path}: its columns are not this sweep's (another config, --param or "
                                   f"--smooth?); first difference: {_first_diff(head, cols)}; use another -o")
-        self.fh = open(self.path, "a", newline="", encoding="utf-8")
+        try:
+            self.fh = open(self.path, "a", newline="", encoding="utf-8")
+        except OSError as exc:
+            raise ConfigError(f"{self.path}: cannot write the results there ({exc.strerror})") from None
+        if exists and not _ends_with_newline(self.path):
+            self.fh.write("\n")       # a row cut by an interrupted sweep stays a line of its own (skipped)
         self.w = csv.DictWriter(self.fh, fieldnames=cols, extrasaction="ignore")
         if not exists:
             self.w.writeheader()
@@ -100,6 +118,12 @@ class CsvWriter:
 
     def close(self) -> None:
         self.fh.close()
+
+
+def _ends_with_newline(path: Path) -> bool:
+    with open(path, "rb") as fh:
+        fh.seek(-1, 2)
+        return fh.read(1) == b"\n"
 
 
 def _first_diff(a: list[str], b: list[str]) -> str:
@@ -115,5 +139,8 @@ def write_parquet(path: str | Path, rows: list[dict[str, Any]], cols: list[str])
     import pyarrow as pa
     table = pa.Table.from_pylist([{c: r.get(c) for c in cols} for r in rows])
     tmp = Path(str(path) + ".tmp")
-    pq.write_table(table, tmp)
-    os.replace(tmp, path)
+    try:
+        pq.write_table(table, tmp)
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot write the results there ({exc.strerror or exc})") from None

@@ -113,7 +113,7 @@ class NmeaDecoder(Decoder):
         self._epoch: dict[str, Any] = {}
         self._key: Any = None
         self._avg: list[np.ndarray] = []      # ECEF of the fixes averaged into the origin
-        self._avg_t0: float | None = None
+        self._window_t0: float | None = None  # the first GPS message's time: the static start's window opens
         self.counters: dict[str, int] = {"epochs": 0, "invalid": 0, "incomplete": 0, "origin_fixes": 0}
 
     # ------------------------------------------------------------------ public
@@ -123,6 +123,10 @@ class NmeaDecoder(Decoder):
         return {"origin": o, "origin_source": self.origin_source, **self.counters}
 
     def decode(self, message: Message) -> Message | None:
+        if self._window_t0 is None:
+            # the origin's window is the first origin_s seconds of the GPS stream, valid fixes or not: a
+            # receiver whose first fixes are bad must not average the fixes of the drive that follows
+            self._window_t0 = float(message.t)
         sentence = self._parse(message)
         kind = sentence.sentence_type
         if kind not in _KNOWN:
@@ -206,11 +210,13 @@ class NmeaDecoder(Decoder):
         averaged = 1.0
         if self.origin is None:
             ecef = np.array(pymap3d.geodetic2ecef(lat, lon, h), dtype=float)
-            if self._avg_t0 is None:
-                self._avg_t0 = message.t
+            if not self._avg and p.origin_s > 0 and message.t - self._window_t0 >= p.origin_s:  # type: ignore[operator]
+                # no valid fix in the window: this one alone is the origin, and the summary says so
+                self.origin_source = (f"the first valid fix, at {message.t:.3f} s (no valid fix in the first "
+                                      f"{p.origin_s:g} s of GPS messages)")
             self._avg.append(ecef)
             self.counters["origin_fixes"] += 1
-            if message.t - self._avg_t0 < p.origin_s:
+            if message.t - self._window_t0 < p.origin_s:   # type: ignore[operator]
                 return None
             mean = np.mean(self._avg, axis=0)
             self.origin = tuple(float(v) for v in pymap3d.ecef2geodetic(*mean))  # type: ignore[assignment]

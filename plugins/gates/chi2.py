@@ -54,9 +54,9 @@ class Chi2Gate(Gate):
     class Params(Params):
         """Gate threshold: a probability, or n_sigma for scalar measurements."""
 
-        probability: float | None = Field(None, gt=0.0, lt=1.0,
+        probability: float | None = Field(None, ge=1e-12, lt=1.0,
                                           description="probability mass inside the gate (e.g. 0.997)")
-        n_sigma: float | None = Field(None, gt=0.0, description="gate at n standard deviations (scalars)")
+        n_sigma: float | None = Field(None, gt=0.0, le=1e3, description="gate at n standard deviations (scalars)")
 
         @model_validator(mode="after")
         def _one_of(self):

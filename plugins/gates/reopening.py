@@ -49,8 +49,8 @@ class ReopeningGate(Gate):
     name = "reopening"
 
     class Params(Params):
-        n_sigma: float = Field(2.0, gt=0.0, description="gate at n standard deviations (paper 003: 2)")
-        trigger_sigma: float | None = Field(None, gt=0.0, description="a sample 'fits' the integrator within "
+        n_sigma: float = Field(2.0, gt=0.0, le=1e3, description="gate at n standard deviations (paper 003: 2)")
+        trigger_sigma: float | None = Field(None, gt=0.0, le=1e3, description="a sample 'fits' the integrator within "
                                             "this many sd (default n_sigma)")
         window: int = Field(40, ge=2, description="integrator size (measurements): about how many mostly "
                             "rejected samples it takes to open, and fitting ones to close")

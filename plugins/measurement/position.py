@@ -106,6 +106,11 @@ class Position(MeasurementModel[PositionParams]):
             raise ConfigError(f"position: offset_block {p.offset_block!r} is no block of the state (blocks are "
                               f"{[b.name for b in layout.blocks]}; the ins process makes one with gauss_markov:)")
         sl = layout[p.offset_block]
+        own = [b for b, s in (("position", self._p), ("velocity", self._v), ("attitude", self._q))
+               if s is not None and sl.start < s.stop and s.start < sl.stop]
+        if own:
+            raise ConfigError(f"position: offset_block {p.offset_block!r} is the state's {own[0]} block, which the "
+                              "model already measures; name an error block (e.g. an ins gauss_markov block)")
         size = sl.stop - sl.start
         axes = np.asarray(p.offset_axes if p.offset_axes is not None else range(size), dtype=int)
         if axes.size != size or len(set(axes.tolist())) != size or np.any(axes < 0) or np.any(axes >= self.dim):

@@ -31,8 +31,8 @@ class GaussMarkovBlock(Params):
 
     name: str = Field(..., pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="block name in the state")
     size: int = Field(1, ge=1, le=6, description="number of elements")
-    tau: float = Field(..., gt=0, description="correlation time (s)")
-    sd: float = Field(..., gt=0, description="stationary standard deviation (units of the quantity)")
+    tau: float = Field(..., gt=0, le=1e9, description="correlation time (s)")
+    sd: float = Field(..., gt=0, le=1e6, description="stationary standard deviation (units of the quantity)")
 
 
 def somigliana_gravity(latitude_deg: float, height_m: float = 0.0) -> float:

@@ -154,7 +154,8 @@ def test_position_adds_the_offset_block_to_the_named_axes():
 
 @pytest.mark.parametrize("kw, needle", [
     ({"offset_block": "hz"}, "no block of the state"),
-    ({"offset_block": "p", "offset_axes": (0, 3, 1)}, "offset_axes"),
+    ({"offset_block": "ba", "offset_axes": (0, 3, 1)}, "offset_axes"),
+    ({"offset_block": "p"}, "already measures"),
     ({"offset_axes": (2,)}, "needs offset_block"),
 ])
 def test_position_offset_errors(kw, needle):
@@ -210,3 +211,25 @@ def test_every_filter_and_the_smoother_run_the_shipped_config_with_the_block(tmp
         out[flt] = xf
     np.testing.assert_allclose(out["ukf"], out["srukf"], atol=1e-6)
     assert np.abs(out["ekf"][:, :3] - out["srukf"][:, :3]).max() < 0.05
+
+
+@pytest.mark.parametrize("blocks, needle", [
+    ([{"name": "px", "tau": 1.0, "sd": 1.0}], "'px' appears twice"),            # an INS element's name
+    ([{"name": "qw", "tau": 1.0, "sd": 1.0}], "'qw' appears twice"),
+    ([{"name": "t", "tau": 1.0, "sd": 1.0}], "taken by the outputs"),          # the time column
+    ([{"name": "sd_x", "tau": 1.0, "sd": 1.0}], "taken by the outputs"),
+    ([{"name": "hz", "tau": 1.0, "sd": 1.0}, {"name": "h", "size": 3, "tau": 1.0, "sd": 1.0}], "'hz' appears twice"),
+])
+def test_block_names_never_shadow_another_column(blocks, needle):
+    """An element name repeated or taken by the outputs would overwrite a column (the time, px) in the CSV
+    and JSONL estimates: refused when the state is built."""
+    with pytest.raises(ValueError, match=needle):
+        Ins(InsParams(gauss_markov=blocks))
+
+
+@pytest.mark.parametrize("bad", [{"tau": 0.0}, {"tau": 1e12}, {"sd": 0.0}, {"sd": 1e160}, {"sd": float("nan")}])
+def test_block_parameters_are_bounded(bad):
+    from pydantic import ValidationError
+
+    with pytest.raises(ValidationError):
+        InsParams(gauss_markov=[{"name": "hz", "tau": 10.0, "sd": 0.1, **bad}])

@@ -170,3 +170,28 @@ def test_bad_params_are_config_errors():
         NmeaParams(epoch=["GGA", "XYZ"])
     with pytest.raises(ValidationError, match="needs GGA"):
         NmeaParams(epoch=["RMC"])
+
+
+def test_bad_fixes_in_the_static_window_do_not_move_it_into_the_drive():
+    """The origin's window is the first origin_s seconds of GPS messages, valid or not: when every fix in it
+    is bad (checksums), the first valid fix after it is the origin on its own, and origin_source says so.
+    (Before, the window opened at the first valid fix and averaged the drive that followed.)"""
+    lat0, lon0, h0 = 35.0, 139.0, 40.0
+    drive = np.array([[0.0, 0.0, 0.0]] * 10 + [[10.0 * k, 0.0, 0.0] for k in range(1, 11)])
+    sentences = _fixes(lat0, lon0, h0, drive)
+    d = dec(origin_s=9.0)
+    outs = []
+    for k, s in enumerate(sentences):
+        t = float(k // 2)
+        if t < 9.0:                                  # the static start: every sentence's checksum broken
+            s = s[:-2] + ("00" if s[-2:] != "00" else "01")
+            with pytest.raises(MalformedMessage):
+                d.decode(msg(s, t))
+            continue
+        out = d.decode(msg(s, t))
+        if out is not None:
+            outs.append(out)
+    assert "first valid fix, at 9.000 s" in d.info()["origin_source"]
+    assert outs[0].t == 9.0 and outs[0].values[9] == 1.0        # the origin fix: one fix, not an average
+    np.testing.assert_allclose(d.origin, pymap3d.ned2geodetic(*drive[9], lat0, lon0, h0), atol=1e-3, rtol=0)
+    np.testing.assert_allclose(outs[-1].values[:3], drive[-1] - drive[9], atol=2e-3)

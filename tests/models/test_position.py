@@ -160,3 +160,15 @@ def test_a_typed_fix_with_a_non_finite_covariance_is_malformed():
     for bad in (np.full((3, 3), np.nan), np.diag([0.01, np.inf, 0.09]), np.diag([0.01, -0.02, 0.09])):
         with pytest.raises(MalformedMessage, match="covariance"):
             m.observe(Fix(1.0, np.array([1.0, 2.0, 3.0]), bad))
+
+
+def test_offset_block_must_be_an_error_block_not_one_the_model_measures():
+    """offset_block adds a state block to the fix; naming p, v or q would add the position (or velocity,
+    attitude) to itself: a wiring error, not a silent 27 m error."""
+    lay = StateLayout.parse("p:3 v:3 q:4:quaternion ba:3 bw:3 hz:1")
+    assert model(lay, offset_block="hz", offset_axes=(2,))._off == slice(16, 17)
+    for bad in ("p", "v"):
+        with pytest.raises(ConfigError, match="already measures"):
+            model(lay, offset_block=bad, offset_axes=(0, 1, 2))
+    with pytest.raises(ConfigError, match="attitude block"):         # with a lever arm, q is measured too
+        model(lay, lever_arm=ARM, offset_block="q")

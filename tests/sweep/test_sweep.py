@@ -118,9 +118,14 @@ def test_cli_end_to_end(tmp_path, capsys):
     (["--seeds", "x"], "--seeds 'x'"),
     (["-o", "r.txt"], "must end in .csv or .parquet"),
     (["--scenario", "nosuch.yaml"], "nosuch.yaml"),
+    (["-o", "nodir/r.csv"], "no such directory 'nodir'"),
+    (["-o", CONFIG], "must end in .csv or .parquet"),
+    (["--seeds", "100000000000"], "at most 1000000"),
+    (["-o", "bad.parquet"], "not a readable Parquet results file"),
 ])
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, extra, needle, monkeypatch):
     monkeypatch.chdir(tmp_path)
+    (tmp_path / "bad.parquet").write_bytes(b"junk")
     args = ["sweep", CONFIG, "--scenario", SCENARIO, "--seeds", "2", "-o", "r.csv", "--no-progress"]
     for i in range(0, len(extra), 2):      # later options replace earlier ones
         if extra[i] in args:
@@ -133,6 +138,33 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, extra, needle, monke
     assert rc == 2
     assert len(err.splitlines()) == 1 and needle in err, err
     assert not (tmp_path / "r.csv").exists() or extra[0] != "-o"
+
+
+def test_an_output_that_is_an_input_is_refused(tmp_path, capsys):
+    """-o naming the config itself (here through a link, with a .csv name) would overwrite it: exit 2."""
+    import shutil
+
+    cfg = tmp_path / "cfg.csv"
+    shutil.copy(CONFIG, cfg)
+    link = tmp_path / "link.csv"
+    link.symlink_to(cfg)
+    before = cfg.read_bytes()
+    assert main(["sweep", str(cfg), "--scenario", SCENARIO, "--seeds", "1", "-o", str(link), "--no-progress"]) == 2
+    assert "is the input" in capsys.readouterr().err and cfg.read_bytes() == before
+
+
+def test_a_row_cut_by_an_interrupted_sweep_is_run_again(trials, tmp_path):
+    """The last row cut in half (the sweep was killed while writing): reading skips it, the resumed sweep
+    runs that trial again and appends after it."""
+    ts = trials(seeds=range(3), filters=("ukf",))
+    out = tmp_path / "r.csv"
+    sweep(ts, out, engine="serial")
+    text = out.read_text()
+    out.write_text(text[:-40])                        # the last row loses its end (and its newline)
+    assert len(read_rows(out)) == 2
+    rows, info = sweep(ts, out, engine="serial")
+    assert info["skipped"] == 2 and len(rows) == 3
+    assert {r["key"] for r in read_rows(out)} == {t.key() for t in ts}
 
 
 def test_missing_dask_is_a_clear_message(monkeypatch):
