@@ -108,9 +108,28 @@ def parse_yaml(text: str) -> tuple[Any, yaml.Node | None]:
         if root is None:
             return None, None
         _check_expansion(root)
-        return loader.construct_document(root), root
+        try:
+            return loader.construct_document(root), root
+        except ValueError as exc:   # Python's limit on int digits (4300), a date out of range, ...
+            raise yaml.constructor.ConstructorError(None, None, f"a value cannot be read ({exc})",
+                                                    _longest_scalar(root)) from None
     finally:
         loader.dispose()
+
+
+def _longest_scalar(root: yaml.Node):
+    """The start mark of the longest scalar under ``root`` (where an unreadable value most likely is)."""
+    best, mark, stack = -1, None, [root]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, yaml.ScalarNode):
+            if len(node.value) > best:
+                best, mark = len(node.value), node.start_mark
+        elif isinstance(node, yaml.MappingNode):
+            stack.extend(v for kv in node.value for v in kv)
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend(node.value)
+    return mark
 
 
 def yaml_problem(exc: yaml.YAMLError) -> tuple[int | None, str]:

@@ -153,11 +153,13 @@ def _duration_hint(source: str | Path) -> float | None:
     if str(source) == "-":
         return None
     try:
+        if not Path(source).is_file():   # a device (/dev/zero) or a pipe has no tail: read() would not end
+            return None
         with open(source, "rb") as fh:
             fh.seek(0, 2)
             size = fh.tell()
             fh.seek(max(0, size - 4096))
-            tail = fh.read().decode("utf-8", "replace").splitlines()
+            tail = fh.read(4096).decode("utf-8", "replace").splitlines()
         for line in reversed(tail):
             head = line.split(",", 1)[0]
             try:

@@ -85,6 +85,10 @@ class SimParts:
     streams: list[SimStream]
 
 
+MAX_DURATION_S = 1e7      # s (~116 days) of one simulated recording
+MAX_SAMPLES = 5e7         # messages of one stream (a few GB of text)
+
+
 def simulate_parts(sc: Scenario, seed: int | None = None, noise: bool = True, registry=None,
                    where: str = "<scenario>", text: str | None = None, trajectory: Any = None) -> SimParts:
     """The recording of :func:`simulate` as data (before formatting). ``trajectory``: an already built
@@ -92,12 +96,26 @@ def simulate_parts(sc: Scenario, seed: int | None = None, noise: bool = True, re
     seed = sc.seed if seed is None else int(seed)
     sims = build_simulators(sc, registry, where, text)
     if trajectory is None:
+        if sc.duration is not None and sc.duration > MAX_DURATION_S:
+            raise _document(sc, where, text).error(f"duration: {sc.duration:g} s; at most {MAX_DURATION_S:g} s "
+                                                   "(a simulated recording is held in memory)")
         try:
             trajectory = build_trajectory(sc.trajectory, sc.dim, sc.duration)
         except TrajectoryError as exc:
             raise _document(sc, where, text).error(str(exc)) from None
+        except MemoryError:
+            raise _document(sc, where, text).error("trajectory: too long to sample in memory (a speed near 0 or "
+                                                   "a huge duration or stop?)") from None
     traj = trajectory
     duration = float(sc.duration if sc.duration is not None else traj.duration)
+    # every stream is held in memory before it is written: refuse sizes that cannot be, naming the field
+    truth_rate = sc.truth.rate_hz or max((s.rate_hz() for s in sims.values()), default=10.0) or 10.0
+    for field_name, r in [*((f"sensors.{n}.rate_hz", sm.rate_hz()) for n, sm in sims.items()),
+                          ("truth.rate_hz", truth_rate)]:
+        if r and duration * r > MAX_SAMPLES:
+            raise _document(sc, where, text).error(
+                f"{field_name}: {r:g} Hz over {duration:g} s is {duration * r:.3g} samples; at most {MAX_SAMPLES:g} "
+                "in one recording (lower the rate or split the duration)")
     beacons = {k: np.array(v + [0.0] * (3 - len(v)), float) for k, v in sc.beacons.items()}
     origin = (sc.origin.lat_deg, sc.origin.lon_deg, sc.origin.alt_m) if sc.origin else None
     try:
@@ -131,8 +149,7 @@ def simulate_parts(sc: Scenario, seed: int | None = None, noise: bool = True, re
         streams.append(SimStream(name, order, np.asarray(out.t), out.values, prec))
 
     # truth at the highest sensor rate
-    rate = sc.truth.rate_hz or max((s.rate_hz() for s in sims.values()), default=10.0) or 10.0
-    tt = sample_times(rate, duration)
+    tt = sample_times(truth_rate, duration)
     kin = traj.sample(tt)
     if sc.dim == 2:
         names = ["px", "py", "vx", "vy"]

@@ -38,6 +38,8 @@ from typing import BinaryIO, Callable, Iterator
 from pydantic import Field
 
 from fusion.api import InputError, Params, Source
+from fusion.logformat import OVERLONG
+from fusion.sources.recording import MAX_LINE
 
 _CHUNK = 4096  # bytes per read at most
 
@@ -189,6 +191,7 @@ class SerialSource(Source):
         import serial
 
         buf = bytearray()
+        skipping = False
         first = True  # the first line is cut when the port is opened while the device is sending
         port = self.port
         while not self._closed.is_set():
@@ -210,7 +213,23 @@ class SerialSource(Source):
             self.bytes_received += len(chunk)
             self._tee(chunk)
             buf += chunk
-            if b"\n" not in chunk:
+            if skipping:               # inside an overlong line already reported: drop it to its end
+                i = buf.find(b"\n")
+                if i < 0:
+                    buf.clear()
+                    continue
+                del buf[:i + 1]
+                skipping = False
+                if b"\n" not in buf:
+                    continue
+            elif b"\n" not in chunk:
+                if len(buf) > MAX_LINE:
+                    # no newline for MAX_LINE bytes (a device at the wrong baud rate, /dev/zero): one
+                    # malformed line, as a recording's bounded_lines makes it, never a buffer filling memory
+                    first = False
+                    yield bytes(buf[:MAX_LINE]).decode("utf-8", "replace") + OVERLONG + "\n"
+                    buf.clear()
+                    skipping = True
                 continue
             *done, rest = buf.split(b"\n")
             buf = bytearray(rest)

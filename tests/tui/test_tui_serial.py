@@ -163,3 +163,26 @@ async def until_silent_read(src):
 def _write(path: Path, text: str) -> Path:
     path.write_text(text)
     return path
+
+
+def test_a_port_that_never_sends_a_newline_gives_one_malformed_line_not_a_full_memory(monkeypatch):
+    """A device at the wrong baud rate (or /dev/zero) sends bytes without a newline: after MAX_LINE bytes
+    they are one overlong (malformed) line and the rest to the next newline is dropped, so the buffer stays
+    bounded; the lines after it come through."""
+    from fusion import logformat
+    from fusion.sources import serial as serial_source
+
+    monkeypatch.setattr(serial_source, "MAX_LINE", 64)
+    src = SerialSource(port="loop://", timeout=0.05).open()
+    src.port.write(b"1.0,uwb,B1,3.0\n")                        # the first line (cut by the open: a comment)
+    lines = src.lines()
+    next(lines)
+    src.port.write(b"7" * 500)                                  # 500 bytes, no newline
+    junk = next(lines)
+    src.port.write(b"7" * 10 + b"\n2.0,uwb,B2,4.0\n")            # the rest of the junk, then a line
+    good = next(lines)
+    assert junk.endswith(logformat.OVERLONG + "\n") and len(junk) <= 64 + 2
+    with pytest.raises(logformat.MalformedMessage, match="longer than"):
+        logformat.parse_line(junk)
+    assert good == "2.0,uwb,B2,4.0\n"
+    src.close()
