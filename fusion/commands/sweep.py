@@ -77,23 +77,6 @@ def seeds_of(text: str) -> range:
 MAX_SEEDS = 1_000_000   # a sweep's trials are listed up front: 1e11 seeds would exhaust memory silently
 
 
-def check_output(output: str, inputs: list[str]) -> None:
-    """ConfigError unless ``output`` is a .csv or .parquet file in an existing directory and none of the
-    ``inputs`` (the config, the scenario: never overwritten, also not through a link)."""
-    from pathlib import Path
-
-    out = Path(output)
-    if out.suffix not in (".csv", ".parquet"):
-        raise ConfigError(f"-o {output}: results file must end in .csv or .parquet")
-    if out.exists() and out.is_dir():
-        raise ConfigError(f"-o {output}: is a directory")
-    if not out.parent.is_dir():
-        raise ConfigError(f"-o {output}: no such directory {str(out.parent)!r}")
-    for i in inputs:
-        if out.exists() and Path(i).exists() and out.samefile(i):
-            raise ConfigError(f"-o {output}: is the input {i} (it would be overwritten); use another file")
-
-
 class _Progress:
     """A rich progress bar on stderr (when it is a terminal)."""
 
@@ -135,7 +118,6 @@ def run(args: argparse.Namespace) -> int:
     filters = [f.strip() for f in args.filter.split(",")] if args.filter else [None]
     if args.filter and any(not f for f in filters):
         raise ConfigError(f"--filter {args.filter!r}: an empty name (e.g. --filter ukf,ekf)")
-    check_output(args.output, [args.config, scenario])
     params = parse_params(args.param)
     trials = trials_of(args.config, scenario, seeds_of(args.seeds), filters, params, args.smooth, args.initial)
     where = args.scheduler or args.dask

@@ -105,12 +105,11 @@ def sweep(trials: list[Trial], out: str | Path, engine: str = "auto", jobs: int 
     pool for the rest; with ``dask`` the rest goes to the cluster), batch (all in this process), serial,
     pool, dask."""
     from . import engines
-    from .results import CsvWriter, columns, done_keys, read_rows, trial_fields, write_parquet
+    from .results import CsvWriter, check_output, columns, done_keys, read_rows, trial_fields, write_parquet
     from .trial import system_of
 
     out = Path(out)
-    if out.suffix not in (".csv", ".parquet"):
-        raise ConfigError(f"-o {out}: results file must end in .csv or .parquet")
+    check_output(str(out), sorted({p for t in trials for p in (t.config, t.scenario)}))
     if engine not in engines.ENGINES:
         raise ConfigError(f"--engine {engine!r}: one of {', '.join(engines.ENGINES)}")
     variants = {t.variant(): t for t in trials}

@@ -13,9 +13,24 @@ from fusion.api import ConfigError
 
 from .trial import METRICS, SMOOTHED, Trial
 
-__all__ = ["columns", "trial_fields", "read_rows", "CsvWriter", "write_parquet", "done_keys"]
+__all__ = ["check_output", "columns", "trial_fields", "read_rows", "CsvWriter", "write_parquet", "done_keys"]
 
 TRIAL_COLUMNS = ("key", "config", "scenario", "seed", "filter")
+
+
+def check_output(output: str, inputs: list[str]) -> None:
+    """ConfigError unless ``output`` is a .csv or .parquet file in an existing directory and none of the
+    ``inputs`` (the config, the scenario: never overwritten, also not through a link)."""
+    out = Path(output)
+    if out.suffix not in (".csv", ".parquet"):
+        raise ConfigError(f"-o {output}: results file must end in .csv or .parquet")
+    if out.exists() and out.is_dir():
+        raise ConfigError(f"-o {output}: is a directory")
+    if not out.parent.is_dir():
+        raise ConfigError(f"-o {output}: no such directory {str(out.parent)!r}")
+    for i in inputs:
+        if out.exists() and Path(i).exists() and out.samefile(i):
+            raise ConfigError(f"-o {output}: is the input {i} (it would be overwritten); use another file")
 
 
 def columns(param_keys: Iterable[str], sensors: Iterable[str], smooth: bool) -> list[str]:

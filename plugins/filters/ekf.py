@@ -50,7 +50,7 @@ class ExtendedKalmanFilter(KalmanBase):
         x1, F, Q = run
         P = covariance_of(belief)
         t = belief.t
-        for j, dt in enumerate(dts.tolist()):
+        for j, dt in enumerate(np.asarray(dts, dtype=float).tolist()):
             Fj = F[j]
             P = Fj @ P @ Fj.T
             P += Q[j]

@@ -15,52 +15,22 @@ import math
 
 import numpy as np
 
+from fusion import quaternion as quat
+
 __all__ = ["linearise_run"]
 
-def _homogeneous_dcm(q: np.ndarray) -> np.ndarray:
-    """R(q) with C_b^n = R(q) / |q|^2 (paper 000 eq. 35, not normalised): quadratic in q."""
-    q0, q1, q2, q3 = q
-    return np.array([[q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3, 2 * (q1 * q2 - q0 * q3), 2 * (q1 * q3 + q0 * q2)],
-                     [2 * (q1 * q2 + q0 * q3), q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3, 2 * (q2 * q3 - q0 * q1)],
-                     [2 * (q1 * q3 - q0 * q2), 2 * (q2 * q3 + q0 * q1), q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3]])
-
-
-def _quadratic_form() -> np.ndarray:
-    """A (4, 4, 3, 3) symmetric in its first two axes with R(q)_rc = sum_jl q_j q_l A[j, l, r, c]
-    (polarisation on the basis quaternions)."""
-    E = np.eye(4)
-    A = np.empty((4, 4, 3, 3))
-    for j in range(4):
-        for l in range(4):
-            A[j, l] = (_homogeneous_dcm(E[j] + E[l]) - _homogeneous_dcm(E[j]) - _homogeneous_dcm(E[l])) / 2.0 \
-                if j != l else _homogeneous_dcm(E[j])
-    return A
-
-
-# Constant tensors so that each block of F is one product over the whole run (a handful of numpy calls
-# instead of one per matrix element: the block shapes are tiny, so call overhead is the cost):
-#   R(q) (k, 9)          = (q q^T) (k, 16) @ _R_OF_QQ (16, 9)
-#   dR/dq a (k, 3 x 4)   = (q a^T) (k, 12) @ _DRA_OF_QA (12, 12),   dR_r/dq_j = 2 sum_lc A[j, l, r, c] q_l a_c
+# The structure constants of fusion.quaternion, arranged so that each block of F is one product over the
+# whole run (a handful of numpy calls instead of one per matrix element: the blocks are tiny, so call
+# overhead is the cost):
+#   R(q) (k, 9)          = (q q^T) (k, 16) @ ROTATION_FORM (16, 9)       (C_b^n = R(q) / |q|^2)
+#   dR/dq a (k, 3 x 4)   = (q a^T) (k, 12) @ _DRA_OF_QA (12, 12),   dR_rc/dq_j = sum_l (K + K^T)[j, l, rc] q_l
 #   R(p), L(q) (k, 16)   = p (k, 4) @ _RIGHT / _LEFT (4, 16):       q (x) p = R(p) q = L(q) p
-_A = _quadratic_form()
-_R_OF_QQ = _A.reshape(16, 9)
-_DRA_OF_QA = (2.0 * _A).transpose(1, 3, 2, 0).reshape(12, 12)   # [(l, c), (r, j)]
-
-
-def _product_matrices() -> tuple[np.ndarray, np.ndarray]:
-    def mul(a, b):
-        a0, a1, a2, a3 = a
-        b0, b1, b2, b3 = b
-        return np.array([a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3, a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
-                         a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1, a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0])
-    E = np.eye(4)
-    # R(p)[i, j] = d(q (x) p)_i / dq_j, linear in p: column block of basis p = e_m
-    right = np.array([[mul(E[j], E[m]) for j in range(4)] for m in range(4)])   # [m, j, i]
-    left = np.array([[mul(E[m], E[j]) for j in range(4)] for m in range(4)])    # [m, j, i] for L(q)
-    return right.transpose(0, 2, 1).reshape(4, 16), left.transpose(0, 2, 1).reshape(4, 16)
-
-
-_RIGHT, _LEFT = _product_matrices()
+_K = quat.ROTATION_FORM.reshape(4, 4, 3, 3)
+_R_OF_QQ = quat.ROTATION_FORM
+_DRA_OF_QA = np.ascontiguousarray((_K + _K.transpose(1, 0, 2, 3)).transpose(1, 3, 2, 0).reshape(12, 12))
+_T = quat.PRODUCT_FORM.reshape(4, 4, 4)          # [left, right, out]: (a (x) b)_i = a_j b_m T[j, m, i]
+_RIGHT = np.ascontiguousarray(_T.transpose(1, 2, 0).reshape(4, 16))   # [m, (i, j)] = T[j, m, i]
+_LEFT = np.ascontiguousarray(_T.transpose(0, 2, 1).reshape(4, 16))    # [m, (i, j)] = T[m, j, i]
 _I3 = np.eye(3)
 _I4 = np.eye(4)
 

@@ -208,10 +208,11 @@ def test_truncated_corrupt_and_foreign_files_are_one_error(tmp_path, capsys):
 def test_start_utc_from_gps_week_and_milliseconds(imported):
     import datetime as dt
     rec, v, _ = imported
-    # GPS time of the first row (t = 2.0 s): week 2300 + 345600 s; GPS - UTC = 18 s since 2017
-    want = dt.datetime(1980, 1, 6, tzinfo=dt.timezone.utc) + dt.timedelta(weeks=2300, seconds=345_600 - 18 - 2.0)
-    got = dt.datetime.fromisoformat(rec.header.meta["start_utc"].replace("Z", "+00:00"))
-    assert abs(got - want) <= dt.timedelta(microseconds=1)   # a stamp in the log's data, not a timing
+    # The log's first GPS row (log time t = 2.0 s) says week 2300, 345600 s; GPS - UTC = 18 s since 2017.
+    # The same instant by Unix-epoch arithmetic (GPS epoch 1980-01-06 = Unix 315964800), a second method:
+    unix = 315_964_800 + 2300 * 604_800 + 345_600 - 18 - 2
+    want = dt.datetime.fromtimestamp(unix, dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    assert rec.header.meta["start_utc"] == want      # a date in the log's data, compared as text
 
 
 def test_vehicle_and_text_messages_in_the_header(imported):

@@ -16,8 +16,9 @@ from fusion.smoothing.live import attach_fixed_lag
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def pushed(config: str, lag: float) -> list:
-    """The fixed-lag estimates of a run fed message by message through Run.push (the live loop)."""
+def pushed(config: str, lag: float) -> tuple[list, object]:
+    """The fixed-lag estimates of a run fed message by message through Run.push (the live loop), and its
+    fixed-lag sink."""
     system = load_system(ROOT / "configs" / config)
     got: list = []
     wrapped, sink = attach_fixed_lag(system, lag, got.append)
@@ -27,7 +28,7 @@ def pushed(config: str, lag: float) -> list:
             run.push(item)
     run.scheduler_finish()
     run.finish()
-    return got
+    return got, sink
 
 
 @pytest.mark.parametrize("config, lag", [("example_2d.yaml", 2.0), ("uwb_pv_ukf.yaml", 0.5)])
@@ -35,7 +36,7 @@ def test_push_loop_gives_the_numbers_of_the_batch_loop(config, lag):
     system = load_system(ROOT / "configs" / config)
     kept = pipeline.Collect()
     run_smoothed(system, system.recording, [kept], lag=lag)
-    live = pushed(config, lag)
+    live, _ = pushed(config, lag)
     assert len(live) == len(kept.estimates) > 100
     np.testing.assert_array_equal([e.t for e in live], [e.t for e in kept.estimates])
     np.testing.assert_allclose(np.array([e.belief.x for e in live]), np.array([e.belief.x for e in kept.estimates]),
@@ -46,13 +47,6 @@ def test_push_loop_gives_the_numbers_of_the_batch_loop(config, lag):
 
 def test_a_late_noted_estimate_is_placed_at_its_own_node():
     """Every estimate of a pushed run matches a recorded node's belief (none mapped by default)."""
-    system = load_system(ROOT / "configs" / "example_2d.yaml")
-    wrapped, sink = attach_fixed_lag(system, 1.0, lambda e: None)
-    run = pipeline.Run(wrapped, [sink])
-    with open(system.recording) as f:
-        for item in iter_messages(f, run.parsed):
-            run.push(item)
-    run.scheduler_finish()
-    run.finish()
+    _, sink = pushed("example_2d.yaml", 1.0)
     assert sink.log.unmatched == 0
     assert sink.fixed.emitted > 100
