@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
-from scipy.linalg import lapack
+from fusion.lapack import lapack
 from fusion.chisquare import chi2
 
 __all__ = ["chi2_interval", "nees", "ChiSquareStat", "NisTracker"]

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 from pydantic import Field
-from scipy.linalg import blas
 
+from fusion.lapack import blas
 from fusion.api import (Belief, Gate, MeasurementModel, NonAdditiveMeasurementNoise, NonAdditiveProcessNoise,
                         ProcessModel, UpdateResult, has)
 

@@ -5,10 +5,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg import qr, solve_triangular
-from scipy.linalg.lapack import dpotrf as _dpotrf, dpotrs as _dpotrs, dtrtrs as _dtrtrs
 
+from fusion.lapack import lapack
 from fusion_plugins.solvers.range_fix import Cycle, Fit, NoFix, range_cov
+
+_dpotrf, _dpotrs, _dtrtrs = lapack.dpotrf, lapack.dpotrs, lapack.dtrtrs   # no checks: ~2 us a call
 
 
 def condition(D: np.ndarray, dim: int, degenerate_condition: float) -> float:
@@ -51,6 +52,7 @@ def solve_linear(B: np.ndarray, r: np.ndarray, dim: int, z: float, ref: int,
             M = _dpotrs(c, A.T, lower=1)[0]
             method = "ols"
     if M is None:                                             # A = QR, R x = Q^T b by back substitution
+        from scipy.linalg import qr, solve_triangular         # rare (ill-conditioned): not at start-up
         Qm, Rm = qr(A, mode="economic", check_finite=False)
         M = solve_triangular(Rm, Qm.T, check_finite=False)    # (A^T A)^-1 A^T without forming A^T A
         method = "qr"
