@@ -59,6 +59,7 @@ def source_class(spec: str, registry=None, device: bool = False) -> type[Source]
     text without a scheme is a port (``fusion tui --port``), even when no such device exists yet."""
     reg = _registry(registry)
     classes = [e.cls for e in reg.entries("source")]
+    option = "--port" if device else "--input"
     if spec == "-":
         return reg.get("source", "recording")
     m = _SCHEME.match(spec)
@@ -68,7 +69,7 @@ def source_class(spec: str, registry=None, device: bool = False) -> type[Source]
             if scheme in cls.schemes:
                 return cls
         known = sorted({f"{s}://" for cls in classes for s in cls.schemes})
-        raise ConfigError(f"--input {spec}: no source reads {scheme}:// (known schemes: {', '.join(known)}; "
+        raise ConfigError(f"{option} {spec}: no source reads {scheme}:// (known schemes: {', '.join(known)}; "
                           "a plugin can add one)")
     if device or _is_device(spec):
         for cls in classes:
@@ -98,7 +99,7 @@ def open_source(spec: str, registry=None, device: bool = False, **options: Any) 
     except ValidationError as exc:
         err = exc.errors()[0]
         field = ".".join(str(p) for p in err.get("loc", ())) or "?"
-        raise ConfigError(f"--input {spec}: source {cls.name!r}: {field}: {err.get('msg', exc)}") from None
+        raise ConfigError(f"{'--port' if device else '--input'} {spec}: source {cls.name!r}: {field}: {err.get('msg', exc)}") from None
 
 
 def sink_class(path: str, registry=None) -> type[Sink]:

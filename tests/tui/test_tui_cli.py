@@ -25,6 +25,12 @@ def test_missing_port_exits_2_with_one_line(capsys):
     assert line.startswith("fusion tui: error: cannot open /dev/fusion-no-such-port: No such file or directory")
 
 
+def test_unknown_port_scheme_names_the_option_given(capsys):
+    assert main(["tui", str(CONFIG), "--port", "nosuch://x"]) == 2
+    line = one_error_line(capsys)
+    assert line.startswith("fusion tui: error: --port nosuch://x: no source reads nosuch://"), line
+
+
 def test_missing_port_with_record_leaves_no_file(tmp_path, capsys):
     rec = tmp_path / "rec.log"
     assert main(["tui", str(CONFIG), "--port", "/dev/fusion-no-such-port", "--record", str(rec)]) == 2
