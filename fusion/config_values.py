@@ -36,7 +36,7 @@ def _noise_matrix(noise: NoiseSpec | float | list[float] | None, m: int, where: 
     if noise.sd is not None:
         sd = np.atleast_1d(np.asarray(noise.sd, float))
         if sd.size not in (1, m):
-            raise ConfigError(f"{where}.sd: needs 1 or {m} values for this measurement model, got {sd.size}")
+            raise ConfigError(f"{where}.sd: needs {'1 value' if m == 1 else f'1 or {m} values'} for this measurement model, got {sd.size}")
         if np.any(sd <= 0):
             raise ConfigError(f"{where}.sd: standard deviations must be > 0")
         with np.errstate(over="ignore", under="ignore"):

@@ -31,7 +31,7 @@ class ConstantVelocity(ProcessModel):
         def _check(self):
             s = np.atleast_1d(np.asarray(self.spectral_density, float))
             if s.size not in (1, self.dims):
-                raise ValueError(f"spectral_density needs 1 or {self.dims} values, got {s.size}")
+                raise ValueError(f"spectral_density needs {'1 value' if self.dims == 1 else f'1 or {self.dims} values'}, got {s.size}")
             if np.any(s < 0):
                 raise ValueError("spectral_density must be >= 0")
             return self

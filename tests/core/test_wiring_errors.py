@@ -116,3 +116,22 @@ def test_a_misspelt_hook_in_an_installed_package_is_exit_2_naming_it_and_the_way
     assert "FUSION_BLOCK_PLUGINS=badhook" in err
     proc = subprocess.run(cmd, env={**env, "FUSION_BLOCK_PLUGINS": "badhook"}, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
+
+
+@pytest.mark.parametrize("sd, message", [
+    ("[0.1, 0.2]", r"sys.yaml:7: sensors.uwb.noise.sd: needs 1 value for this measurement model, got 2"),
+    ("[0.1, 0.2, 0.3]", r"needs 1 value for this measurement model, got 3"),
+])
+def test_a_noise_sd_list_of_the_wrong_length_says_how_many_it_needs(tmp_path, sd, message):
+    path = tmp_path / "sys.yaml"
+    path.write_text(CONFIG.replace("filter: kf", "filter: ekf").replace("noise: {sd: 0.1}", f"noise: {{sd: {sd}}}"))
+    with pytest.raises(ConfigError, match=message):
+        load_system(path)
+
+
+def test_a_spectral_density_list_of_the_wrong_length_says_how_many_it_needs(tmp_path):
+    path = tmp_path / "sys.yaml"
+    path.write_text(CONFIG.replace("filter: kf", "filter: ekf").replace("spectral_density: 0.5",
+                                                                        "spectral_density: [0.5, 0.5, 0.5]"))
+    with pytest.raises(ConfigError, match=r"spectral_density needs 1 or 2 values, got 3"):
+        load_system(path)
