@@ -4,6 +4,7 @@ existing file, for resuming and for the summary."""
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 from pathlib import Path
@@ -110,6 +111,10 @@ class CsvWriter:
         self.path = Path(path)
         self.cols = cols
         exists = self.path.exists() and self.path.stat().st_size > 0
+        if exists and _cut_header(self.path, cols):
+            # an interrupted first write: part of this sweep's header and no row, so nothing to keep
+            self.path.write_text("", encoding="utf-8")
+            exists = False
         if exists:
             with open(self.path, newline="", encoding="utf-8") as fh:
                 head = next(csv.reader(fh), [])
@@ -133,6 +138,20 @@ class CsvWriter:
 
     def close(self) -> None:
         self.fh.close()
+
+
+def _cut_header(path: Path, cols: list[str]) -> bool:
+    """Whether ``path`` holds only the beginning of the header this sweep writes (no newline yet)."""
+    buf = io.StringIO()
+    csv.writer(buf).writerow(cols)
+    header = buf.getvalue()
+    if path.stat().st_size >= len(header.encode("utf-8")):
+        return False
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return False
+    return header.startswith(text)
 
 
 def _ends_with_newline(path: Path) -> bool:

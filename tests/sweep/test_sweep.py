@@ -167,6 +167,25 @@ def test_a_row_cut_by_an_interrupted_sweep_is_run_again(trials, tmp_path):
     assert {r["key"] for r in read_rows(out)} == {t.key() for t in ts}
 
 
+@pytest.mark.parametrize("keep", [0.2, 0.8])
+def test_a_header_cut_by_an_interrupted_start_is_written_again(trials, tmp_path, keep):
+    """Killed while writing the header (no row yet): the file holds part of this sweep's header; the rerun
+    starts it afresh instead of calling it another sweep's file. A header that differs is still refused."""
+    from fusion.api import ConfigError
+
+    ts = trials(seeds=range(2), filters=("ukf",))
+    out = tmp_path / "r.csv"
+    sweep(ts, out, engine="serial")
+    header = out.read_text().splitlines()[0]
+    out.write_text(header[:int(len(header) * keep)])
+    rows, info = sweep(ts, out, engine="serial")
+    assert info["skipped"] == 0 and len(rows) == 2
+    assert out.read_text().splitlines()[0] == header and len(read_rows(out)) == 2
+    out.write_text(header[:10] + "X" + header[11:int(len(header) * keep)])
+    with pytest.raises(ConfigError, match="its columns are not this sweep's"):
+        sweep(ts, out, engine="serial")
+
+
 def test_missing_dask_is_a_clear_message(monkeypatch):
     import builtins
 
