@@ -33,8 +33,10 @@ class Replay:
             self._log_start += 1
         self._log.append(msg)
 
-    def _snapshot(self) -> None:
-        if self.late_policy != "replay" or self._replaying or self.belief is None:
+    def _snapshot(self, rerun: bool = False) -> None:
+        """Keep the belief (and the gates' states) after the messages logged so far; ``rerun``: also
+        while a late message's re-run is in progress (its states are the run's from then on)."""
+        if self.late_policy != "replay" or (self._replaying and not rerun) or self.belief is None:
             return
         self._history.append(_Snapshot(self.belief.t, self.belief, self.u, self._next_output,
                                        self._log_start + len(self._log),
@@ -51,9 +53,17 @@ class Replay:
         if snap is None:
             yield Event(late.t, "late", late.sensor, "older than the replay history; dropped")
             return
-        rerun = list(itertools.islice(self._log, snap.index - self._log_start, None))
+        keep = snap.index - self._log_start
+        rerun = list(itertools.islice(self._log, keep, None))
         rerun.append(late)
         rerun.sort(key=lambda m: m.t)
+        # The log from the snapshot on is rewritten in the order the re-run processes it, and the snapshots
+        # after it (states the late message changes) give way to the re-run's own: the history stays valid
+        # for the next late message, which may be older than this one's re-run (consecutive late ranges).
+        while len(self._log) > keep:
+            self._log.pop()
+        while self._history and self._history[-1] is not snap:
+            self._history.pop()
         self.belief, self.u, self._next_output = snap.belief, snap.u, snap.next_output
         for n, state in snap.gates.items():
             # the gate decides the re-run messages again, and its counts are those of the re-run decisions
@@ -64,15 +74,16 @@ class Replay:
         counters = {n: dict(s.counters) for n, s in self.sensors.items()}
         try:
             for msg in rerun:
+                self._record(msg)
                 for out in self._process(msg):
                     pass
+                if self.sensors[msg.sensor].role != "input":   # as a run keeps them: after measurements
+                    self._snapshot(rerun=True)
         finally:
             self._replaying = False
         for n, s in self.sensors.items():  # re-run messages were already counted
             s.counters.update(counters[n])
         sensor.counters["used"] += 1
-        self._record(late)
-        self._history.clear()
         self._snapshot()
         yield Event(late.t, "replayed", late.sensor, f"re-ran {len(rerun)} messages")
         if self.on_update and self.belief is not None:
