@@ -5,9 +5,14 @@ at ``tcp://HOST:8786``). Every engine yields ``(trial, row)`` as trials finish; 
 function of its fields, so the rows do not depend on the engine (tests/sweep/test_engines.py)."""
 from __future__ import annotations
 
+import multiprocessing
+import multiprocessing.pool
 import os
+import signal
+import threading
+import time
 from collections import defaultdict
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
 from typing import Any, Iterator
 
 from fusion.api import ConfigError
@@ -25,6 +30,44 @@ def _threads_one() -> None:
         os.environ.setdefault(v, "1")
 
 
+def _worker_init() -> None:
+    """A pool worker: single-threaded BLAS; Ctrl-C is the parent's (a terminal sends SIGINT to the whole
+    process group: the parent stops the pool and keeps the rows so far, a worker must not die mid-trial
+    and break the pool); and the worker exits when its parent is gone (a killed sweep leaves no orphans)."""
+    _threads_one()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent = os.getppid()
+
+    def watch_parent() -> None:
+        while True:
+            time.sleep(1.0)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch_parent, name="fusion-watch-parent", daemon=True).start()
+
+
+@contextmanager
+def _pool(jobs: int) -> Iterator[multiprocessing.pool.Pool]:
+    """A process pool that, when the sweep is interrupted (Ctrl-C, an error, the consumer closing the
+    generator), stops its workers at once (``Pool.terminate``) instead of finishing every submitted trial
+    first, which is what ``with ProcessPoolExecutor`` does (its exit is ``shutdown(wait=True)``; and a
+    ``shutdown(cancel_futures=True)`` still leaves the running trials to wait for at interpreter exit)."""
+    pool = multiprocessing.Pool(processes=jobs, initializer=_worker_init)
+    try:
+        yield pool
+    except BaseException:
+        pool.terminate()
+        pool.join()
+        raise
+    pool.close()
+    pool.join()
+
+
+def _trial_row(trial: Trial) -> tuple[Trial, dict[str, Any]]:
+    return trial, run_trial(trial)
+
+
 def run_serial(trials: list[Trial]) -> Iterator[tuple[Trial, dict[str, Any]]]:
     for t in trials:
         yield t, run_trial(t)
@@ -33,10 +76,8 @@ def run_serial(trials: list[Trial]) -> Iterator[tuple[Trial, dict[str, Any]]]:
 def run_pool(trials: list[Trial], jobs: int) -> Iterator[tuple[Trial, dict[str, Any]]]:
     """A local process pool of ``jobs`` workers."""
     _threads_one()
-    with ProcessPoolExecutor(max_workers=jobs, initializer=_threads_one) as ex:
-        futs = {ex.submit(run_trial, t): t for t in trials}
-        for f in as_completed(futs):
-            yield futs[f], f.result()
+    with _pool(jobs) as pool:
+        yield from pool.imap_unordered(_trial_row, trials)
 
 
 def dask_client(where: str, jobs: int):
@@ -118,6 +159,6 @@ def run_batched(groups: list[list[Trial]], chunk: int = 256, jobs: int = 1) -> I
             yield from _batch_part(part)
         return
     _threads_one()
-    with ProcessPoolExecutor(max_workers=jobs, initializer=_threads_one) as ex:
-        for f in as_completed([ex.submit(_batch_part, p) for p in parts]):
-            yield from f.result()
+    with _pool(jobs) as pool:
+        for rows in pool.imap_unordered(_batch_part, parts):
+            yield from rows
