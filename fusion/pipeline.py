@@ -26,7 +26,7 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -70,7 +70,8 @@ class Collect:
 class RunResult:
     """What a run leaves: its ``summary`` (the ``--summary-json`` dict), its ``stats``, the ``last``
     estimate (None when there was none), the parse state (``parsed``: header and malformed lines),
-    ``interrupted`` (Ctrl-C) and the wall time."""
+    ``interrupted`` (Ctrl-C), the wall time, and ``source_error``: why the source stopped early (it raised
+    an OSError or a FusionError, e.g. a lost link), None when it ended normally."""
 
     summary: dict[str, Any]
     stats: RunStats
@@ -78,6 +79,7 @@ class RunResult:
     parsed: ParsedStream
     interrupted: bool
     wall_s: float
+    source_error: str | None = None
 
 
 class Run:
@@ -210,9 +212,10 @@ class Run:
             self._dispatch(out)
         return outs
 
-    def finish(self, *, flush: bool = True, interrupted: bool = False) -> RunResult:
+    def finish(self, *, flush: bool = True, interrupted: bool = False, source_error: str | None = None) -> RunResult:
         """End the run: release what the scheduler still buffers (``flush``), close the sinks, build the
-        summary and call ``fusion_on_run_end``. Idempotent."""
+        summary (with ``source_error``, why the source stopped early, if it did) and call
+        ``fusion_on_run_end``. Idempotent."""
         if self.finished is not None:
             return self.finished
         try:
@@ -227,9 +230,11 @@ class Run:
         summary = self.stats.summary(self.label, wall)
         if interrupted:
             summary["interrupted"] = True
+        if source_error is not None:
+            summary["source_error"] = source_error
         if self._hook_end is not None:
             _call(self._hook_end, "fusion_on_run_end", summary=summary, system=self.system)
-        self.finished = RunResult(summary, self.stats, self.last, self.parsed, interrupted, wall)
+        self.finished = RunResult(summary, self.stats, self.last, self.parsed, interrupted, wall, source_error)
         return self.finished
 
     def close_sinks(self) -> None:
@@ -266,6 +271,26 @@ def _lines_of(source: Any) -> tuple[Iterable[str], str, Callable[[], Any] | None
     return source, "<lines>", None
 
 
+class _SourceLost(Exception):
+    """The source's own iteration raised (``__cause__``): a lost link, a vanished file, a source's
+    InputError. Told apart from a component's failure, which the same loop would otherwise see."""
+
+
+def _guarded(lines: Iterable[str]) -> Iterator[str]:
+    try:
+        yield from lines
+    except (OSError, FusionError) as exc:
+        raise _SourceLost(str(exc)) from exc
+
+
+def _source_message(name: str, exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.strerror:
+        text = exc.strerror + (f": {exc.filename}" if exc.filename else "")
+    else:
+        text = str(exc) or type(exc).__name__
+    return text if name and name in text else f"{name}: {text}"
+
+
 def run(system: System, source: Any, sinks: Sequence[Any] = (), *, on_event: Callable[[Event], Any] | None = None,
         progress: Callable[[float], Any] | None = None, plot: Any = None, hooks: bool = True,
         label: str | None = None, on_truth: Callable[[Message], Any] | None = None) -> RunResult:
@@ -274,17 +299,22 @@ def run(system: System, source: Any, sinks: Sequence[Any] = (), *, on_event: Cal
     ``on_truth`` every truth message, on the stream's time base (as ``Run``'s).
 
     Ctrl-C stops reading: what was read is processed, the sinks are closed and the result has
-    ``interrupted=True``. A bug in a component ends the run with a RuntimeError that says how far it got;
-    a ``FusionError`` (bad input the run cannot go on with, such as a vanished port) is raised as is,
-    after the sinks are closed."""
+    ``interrupted=True``. A source that fails while it is read (an OSError or a FusionError from its lines,
+    e.g. a lost link) ends the run the same way, what was read processed and summarised, the hooks
+    called, with ``source_error`` saying why (``fusion run`` then exits 2). A bug in a component ends the
+    run with a RuntimeError that says how far it got; a component's ``FusionError`` (bad input the run
+    cannot go on with) is raised as is, after the sinks are closed."""
     lines, name, close = _lines_of(source)
     session = Run(system, sinks, on_event=on_event, progress=progress, plot=plot, hooks=hooks,
                   label=label if label is not None else name, on_truth=on_truth)
     interrupted = False
+    source_error = None
     try:
-        session.consume(iter_messages(lines, session.parsed))
+        session.consume(iter_messages(_guarded(lines), session.parsed))
     except KeyboardInterrupt:
         interrupted = True
+    except _SourceLost as exc:
+        source_error = _source_message(name, exc.__cause__ or exc)
     except FusionError:
         session.close_sinks()
         raise
@@ -297,6 +327,6 @@ def run(system: System, source: Any, sinks: Sequence[Any] = (), *, on_event: Cal
         if close is not None:
             close()
     try:
-        return session.finish(interrupted=interrupted)
+        return session.finish(interrupted=interrupted, source_error=source_error)
     except KeyboardInterrupt:  # a second Ctrl-C while flushing: report what there is
-        return session.finish(flush=False, interrupted=True)
+        return session.finish(flush=False, interrupted=True, source_error=source_error)

@@ -125,6 +125,10 @@ def run(args: argparse.Namespace) -> int:
     if result.interrupted:
         print("fusion run: interrupted; the summary covers what was read", file=sys.stderr)
         return 130
+    if result.source_error is not None:
+        print(f"fusion run: error: the input stopped early: {result.source_error}; the summary covers what was "
+              "read", file=sys.stderr)
+        return 2
     if result.stats.estimates and not result.stats.last_finite:
         print("fusion run: the estimate ended non-finite (the filter diverged); see the summary's health",
               file=sys.stderr)

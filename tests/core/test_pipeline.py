@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fusion.errors import InputError
+
 from fusion import hookimpl, pipeline
 from fusion.api import Message, Source
 from fusion.cli import main
@@ -229,6 +231,67 @@ def test_ctrl_c_writes_the_summary_of_what_was_read_and_exits_130(tmp_path, monk
     n_uwb = sum(",uwb," in ln for ln in list(open_lines(ROOT / "recordings" / "example_2d.log"))[:Interrupting.n])
     assert s["sensors"]["uwb"]["received"] == n_uwb and "errors" in s
     assert len(csv.read_text().splitlines()) == 1 + s["sensors"]["uwb"]["used"]  # every estimate kept on disk
+
+
+class Failing(Source):
+    """Yields the first ``n`` lines of a recording, then its link fails (``error``: what it raises)."""
+
+    name = "failing"
+    label = "flaky://bench"
+    n = 1200
+    error: BaseException = ConnectionResetError(104, "Connection reset by peer")
+
+    def lines(self):
+        for k, line in enumerate(open_lines(ROOT / "recordings" / "example_2d.log")):
+            if k == self.n:
+                raise self.error
+            yield line
+
+
+@pytest.mark.parametrize("error, text", [(ConnectionResetError(104, "Connection reset by peer"), "Connection reset"),
+                                         (InputError("link lost"), "link lost")])
+def test_a_source_that_fails_mid_run_ends_it_like_ctrl_c_with_exit_2(tmp_path, monkeypatch, capsys, error, text):
+    """What was read is processed and summarised (--summary-json written, every estimate in the CSV), the
+    run-end hook is called, and the one-line error names the source and what it raised."""
+    import fusion.sources.select as select
+
+    src = Failing()
+    src.error = error
+    monkeypatch.setattr(select, "open_source", lambda spec, registry=None, **kw: src)
+    out, csv = tmp_path / "s.json", tmp_path / "e.csv"
+    assert main(["run", str(EXAMPLE), "-q", "--summary-json", str(out), "-o", str(csv)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "internal error" not in err
+    assert f"the input stopped early: flaky://bench: {text}" in err
+    s = json.loads(out.read_text())
+    n_uwb = sum(",uwb," in ln for ln in list(open_lines(ROOT / "recordings" / "example_2d.log"))[:Failing.n])
+    assert s["sensors"]["uwb"]["received"] == n_uwb and text in s["source_error"]
+    assert len(csv.read_text().splitlines()) == 1 + s["sensors"]["uwb"]["used"]
+
+
+def test_the_run_end_hook_sees_a_failed_source(tmp_path):
+    watcher = Watcher()
+    _, registry = make_plugin_manager(extra_plugins=[watcher])
+    system = load_system(EXAMPLE, registry=registry)
+    result = pipeline.run(system, Failing())
+    assert result.source_error.startswith("flaky://bench: ") and watcher.ends == [result.summary]
+
+
+def test_a_component_failure_is_still_an_internal_error_not_a_lost_source():
+    """An OSError raised by a model (not by the source) is that message's failure, not 'the input stopped'."""
+    system = load_system(EXAMPLE)
+    sensor = system.sensors["uwb"]
+    model = sensor.model
+
+    class Boom(type(model)):
+        def observe(self, message):
+            raise OSError("disk on fire")
+
+    model.__class__ = Boom
+    result = pipeline.run(system, system.recording)
+    assert result.source_error is None and "source_error" not in result.summary
+    uwb = result.summary["sensors"]["uwb"]
+    assert uwb["used"] == 0 and uwb["malformed"] == uwb["received"] > 1000   # each message's failure counted
 
 
 def test_extreme_decimator_is_bounded_and_keeps_the_largest():
