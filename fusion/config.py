@@ -20,11 +20,12 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, Union
+from typing import Annotated, Any, Literal, Union
 import warnings
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator,
+                      model_validator)
 
 from fusion.api import (Aligns, BuildContext, CapabilityWarning, Component, ConfigError, Decoder, Filter, Gate,
                         MeasurementModel, ProcessModel, Solver, has, near_misses)
@@ -36,6 +37,19 @@ from fusion.yamlsource import LocatedYAML, load_yaml, pydantic_errors
 SENSOR_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")   # as fusion.logformat parses a line's sensor
 RESERVED_SENSORS = ("truth", "reference")
 BEACON_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.:\-/]*$")   # a label of fusion.logformat
+#: Largest beacon coordinate (m): far beyond any local or Earth-centred frame (6.4e6 m), and small enough
+#: that ranges and their squares stay finite in every solver.
+MAX_BEACON_M = 1e8
+
+
+def _not_bool(v: Any) -> Any:
+    """A YAML true/false where a coordinate belongs (pydantic would take it as 1.0 / 0.0)."""
+    if isinstance(v, bool):
+        raise ValueError(f"a coordinate must be a number, got {str(v).lower()}")
+    return v
+
+
+Coordinate = Annotated[float, BeforeValidator(_not_bool)]
 
 
 class _Strict(BaseModel):
@@ -143,7 +157,7 @@ class SystemSpec(_Strict):
     name: str
     description: str = ""
     recording: str | None = None
-    beacons: dict[str, list[float]] = Field(default_factory=dict)
+    beacons: dict[str, list[Coordinate]] = Field(default_factory=dict)
     process: ComponentSpec
     initial: InitialSpec = Field(default_factory=InitialSpec)
     filter: ComponentSpec = "ekf"
@@ -156,12 +170,20 @@ class SystemSpec(_Strict):
     @field_validator("beacons")
     @classmethod
     def _beacon_dims(cls, v: dict[str, list[float]]) -> dict[str, list[float]]:
+        first = None
         for name, pos in v.items():
             if len(pos) not in (2, 3):
                 raise ValueError(f"beacon {name!r} needs 2 or 3 coordinates, got {len(pos)}")
             if not BEACON_NAME.match(name) or name.lower() in ("nan", "inf", "infinity"):
                 raise ValueError(f"beacon {name!r} can never be named by a log line (a label: a letter or _, "
                                  "then letters, digits, _ . : - /)")
+            if any(abs(c) > MAX_BEACON_M for c in pos):
+                raise ValueError(f"beacon {name!r}: a coordinate beyond {MAX_BEACON_M:g} m ({pos})")
+            if first is None:
+                first = (name, len(pos))
+            elif len(pos) != first[1]:
+                raise ValueError(f"beacon {name!r} has {len(pos)} coordinates and {first[0]!r} {first[1]}: give "
+                                 "every beacon 2 (x y) or every beacon 3 (x y z)")
         return v
 
 

@@ -135,3 +135,17 @@ def test_a_spectral_density_list_of_the_wrong_length_says_how_many_it_needs(tmp_
                                                                         "spectral_density: [0.5, 0.5, 0.5]"))
     with pytest.raises(ConfigError, match=r"spectral_density needs 1 or 2 values, got 3"):
         load_system(path)
+
+
+@pytest.mark.parametrize("beacon, message", [
+    ("[true, 0]", r"sys.yaml:2: beacons.B2.0: .*a coordinate must be a number, got true"),
+    ("[10, 0, 5]", r"beacon 'B2' has 3 coordinates and 'B1' 2: give every beacon 2 \(x y\) or every beacon 3"),
+    ("[1.0e200, 0]", r"beacon 'B2': a coordinate beyond 1e\+08 m"),
+])
+def test_beacons_that_are_not_coordinates_are_refused_with_the_reason(tmp_path, beacon, message):
+    path = tmp_path / "sys.yaml"
+    path.write_text(CONFIG.replace("filter: kf", "filter: ekf").replace("B2: [10, 0]", f"B2: {beacon}"))
+    with pytest.raises(ConfigError, match=message):
+        load_system(path)
+    path.write_text(CONFIG.replace("filter: kf", "filter: ekf"))
+    assert load_system(path).beacons["B2"].tolist() == [10.0, 0.0]
