@@ -271,7 +271,8 @@ def pydantic_errors(doc: LocatedYAML | None, exc: Any, prefix: Sequence[Any] = (
         msg = err["msg"]
         if err["type"] == "extra_forbidden":
             msg = "unknown key"
-        line = f"{doc.where(loc) if doc is not None else '.'.join(map(str, loc))}: {msg}"
+        where = doc.where(loc) if doc is not None else ".".join(map(str, loc))
+        line = f"{where}: {msg}" if where else msg   # a model-wide check has no field path
         if line not in lines:
             lines.append(line)
     more = f" (and {len(lines) - 1} more: " + "; ".join(lines[1:4]) + ")" if len(lines) > 1 else ""

@@ -95,7 +95,7 @@ def _read_yaml(path: str) -> Any:
 def _validation(where: str, exc: Any) -> ConfigError:
     err = exc.errors()[0]
     loc = ".".join(str(p) for p in err.get("loc", ()))
-    return ConfigError(f"{where}: {loc}: {err.get('msg', exc)}")
+    return ConfigError(f"{where}: {loc + ': ' if loc else ''}{err.get('msg', exc)}")
 
 
 def scenario_of(trial: Trial):
@@ -113,7 +113,8 @@ def scenario_of(trial: Trial):
     try:
         return Scenario.model_validate(data)
     except ValidationError as exc:
-        raise _validation(f"{trial.scenario} (with --param)", exc) from None
+        with_ = " (with --param)" if any(k.startswith("scenario.") for k, _ in trial.params) else ""
+        raise _validation(f"{trial.scenario}{with_}", exc) from None
 
 
 def system_of(trial: Trial):
@@ -137,8 +138,15 @@ def system_of(trial: Trial):
     try:
         spec = SystemSpec.model_validate(data)
     except ValidationError as exc:
-        raise _validation(f"{trial.config} (with --param/--filter)", exc) from None
-    return wire(spec, path=Path(trial.config))
+        given = [o for o, on in (("--param", any(not k.startswith("scenario.") for k, _ in trial.params)),
+                                 ("--filter", trial.filter is not None)) if on]
+        raise _validation(f"{trial.config}{' (with ' + '/'.join(given) + ')' if given else ''}", exc) from None
+    try:
+        return wire(spec, path=Path(trial.config))
+    except ConfigError as exc:
+        given = [f"--param {k}={v}" for k, v in trial.params if not k.startswith("scenario.")]
+        given += [f"--filter {trial.filter}"] if trial.filter is not None else []
+        raise ConfigError(f"{trial.config}{' (with ' + ', '.join(given) + ')' if given else ''}: {exc}") from None
 
 
 #: Seeds the initial-mean draw apart from the simulator's noise (the same stream for every filter).
@@ -259,7 +267,11 @@ def run_trial(trial: Trial) -> dict[str, Any]:
             from fusion import pipeline
             result = pipeline.run(system, lines, hooks=False)
         row = row_of(result.summary, [n for n, s in system.sensors.items() if s.role == "measurement"])
-        row.update(status="ok", error="", engine="pipeline", wall_s=time.perf_counter() - t0)
+        # a run that never initialised (e.g. a scenario without the config's sensors) is no result: a failed
+        # row that says why, so the summary counts it, rather than "ok" with nothing in it
+        not_started = result.summary.get("not_started")
+        row.update(status="error" if not_started else "ok", error=not_started or "", engine="pipeline",
+                   wall_s=time.perf_counter() - t0)
         return row
     except Exception as exc:  # a failed trial is a row, the sweep goes on
         msg = f"{type(exc).__name__}: {exc}".replace("\n", " ")

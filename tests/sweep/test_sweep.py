@@ -13,7 +13,7 @@ from fusion.sweep.grid import split_values, sweep
 from fusion.sweep.results import read_rows
 from fusion.sweep.stats import mean_ci, paired
 
-from .conftest import CONFIG, SCENARIO
+from .conftest import CONFIG, ROOT, SCENARIO
 
 
 def test_rows_and_resume(trials, tmp_path):
@@ -213,3 +213,22 @@ def test_default_scenario_is_the_one_that_made_the_recording(tmp_path):
     cfg.write_text(open(CONFIG).read().replace("recording: ../recordings/uwb_route1.log", "recording: null"))
     with pytest.raises(ConfigError, match="give --scenario"):
         default_scenario(str(cfg))
+
+
+def test_a_bad_param_value_names_the_param_without_an_empty_field_path(capsys):
+    assert main(["sweep", CONFIG, "--scenario", SCENARIO, "--seeds", "1", "--param",
+                 "process.spectral_density=-1,0.2", "-o", "unused.csv", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "(with --param process.spectral_density=-1): process: " in err and ": :" not in err
+    assert "spectral_density must be >= 0" in err
+
+
+def test_a_scenario_without_the_configs_sensors_gives_failed_rows_that_say_why(tmp_path):
+    """No estimate at all (the scenario has none of the config's sensors): not an 'ok' row full of blanks."""
+    from fusion.sweep.grid import trials_of
+
+    ts = trials_of(CONFIG, str(ROOT / "scenarios" / "car_gps_mag.yaml"), range(1), ["ukf"],
+                   [("scenario.duration", ["5.0"])], False, "config")
+    rows, _ = sweep(ts, tmp_path / "r.csv", engine="serial")
+    assert [r["status"] for r in rows] == ["error"]
+    assert "never initialised" in rows[0]["error"]
