@@ -223,6 +223,8 @@ class Run:
                 self._flushed = True
                 for out in self.scheduler.finish():
                     self._dispatch(out)
+            for event in header_beacon_warnings(self.parsed.header.beacons, self.system.beacons):
+                self._dispatch(event)
         finally:
             self.close_sinks()
         self.stats.finish()
@@ -247,6 +249,34 @@ class Run:
                 errors.append(exc)
         if errors:
             raise errors[0]
+
+
+#: Distance (m) between a recording's declared beacon and the config's beyond which they disagree.
+BEACON_TOLERANCE_M = 0.01
+
+
+def header_beacon_warnings(declared: dict[str, tuple[float, ...]], configured: dict[str, np.ndarray]) -> list[Event]:
+    """Warnings when the recording's header (``# beacon B5: x y z``, as ``fusion simulate`` writes it) names a
+    beacon the config lacks (its ranges are all malformed) or puts one elsewhere than the config does (every
+    range to it is then wrong by up to the distance). Nothing when the config has no beacons."""
+    if not configured:
+        return []
+    events = []
+    missing = [b for b in declared if b not in configured]
+    if missing:
+        events.append(Event(math.nan, "warning", None, f"the recording declares beacon(s) {', '.join(missing)} that "
+                            f"the config does not define (defined: {', '.join(sorted(configured))})"))
+    for name, pos in declared.items():
+        mine = configured.get(name)
+        if mine is None:
+            continue
+        d = len(mine)
+        theirs = np.asarray(pos[:d] if len(pos) >= d else tuple(pos) + (0.0,) * (d - len(pos)), float)
+        gap = float(np.linalg.norm(theirs - mine))
+        if not gap <= BEACON_TOLERANCE_M:
+            events.append(Event(math.nan, "warning", None, f"beacon {name} is at {list(map(float, pos))} in the "
+                                f"recording's header and at {mine.tolist()} in the config ({gap:.3g} m apart)"))
+    return events
 
 
 def _call(hook, name: str, **kwargs) -> None:

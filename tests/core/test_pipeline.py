@@ -294,6 +294,24 @@ def test_a_component_failure_is_still_an_internal_error_not_a_lost_source():
     assert uwb["used"] == 0 and uwb["malformed"] == uwb["received"] > 1000   # each message's failure counted
 
 
+def test_recording_beacons_the_config_lacks_or_places_elsewhere_are_warned_about(tmp_path, capsys):
+    uwb = ROOT / "configs" / "uwb_pv_ukf.yaml"
+    lines = (ROOT / "recordings" / "uwb_route1.log").read_text().splitlines()
+    at = next(i for i, ln in enumerate(lines) if ln.startswith("# beacon B2"))
+    lines[at] = "# beacon B2: 300 0 0"
+    lines.insert(at + 1, "# beacon B5: 1 2 0")
+    log = tmp_path / "moved.log"
+    log.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "s.json"
+    assert main(["run", str(uwb), "--input", str(log), "--summary-json", str(out), "-o", str(tmp_path / "e.csv")]) == 0
+    err = capsys.readouterr().err
+    assert "the recording declares beacon(s) B5 that the config does not define" in err
+    assert "beacon B2 is at [300.0, 0.0, 0.0] in the recording's header and at [30.0, 0.0] in the config (270 m" in err
+    assert json.loads(out.read_text())["events"]["warning"] == 2
+    main(["run", str(uwb), "-q", "--summary-json", str(out), "-o", str(tmp_path / "e.csv"), "--force"])
+    assert "warning" not in json.loads(out.read_text()).get("events", {})      # the shipped recording agrees
+
+
 def test_extreme_decimator_is_bounded_and_keeps_the_largest():
     rng = np.random.default_rng(0)
     scores = rng.exponential(size=100_003)
