@@ -112,6 +112,12 @@ class ErrorTracker:
         if truth is not None and len(truth):
             self.set_truth(truth)
 
+    def position_group(self) -> list[str]:
+        """The state elements whose error is the position error (``position`` or the block ``p``)."""
+        if self.position_elements:
+            return list(self.position_elements)
+        return _group(self.layout, "p", ("px", "py", "pz"))
+
     def set_truth(self, truth) -> None:
         """Compare against ``truth`` from now on: a ``Truth``, or a ``fusion.truth_stream.TruthWindow``
         filled as the run goes (anything with ``names``, ``index``, ``angles``, ``with_angles``, ``row``)."""
@@ -142,8 +148,7 @@ class ErrorTracker:
         def covered(group: list[str]) -> list[int] | None:
             return [self._elems.index(n) for n in group] if group and all(n in tr.index for n in group) else None
 
-        self._pos = covered(list(self.position_elements) if self.position_elements
-                            else _group(layout, "p", ("px", "py", "pz")))
+        self._pos = covered(self.position_group())
         self._vel = covered(_group(layout, "v", ("vx", "vy", "vz")))
         self._acc = {k: _Acc() for k in ("position", "velocity", "attitude")}
         # NEES: vector/angle elements truth has (+ 3-dof attitude per quaternion block)

@@ -124,6 +124,7 @@ class Run:
         self.wall0 = time.perf_counter()
         self.finished: RunResult | None = None
         self._flushed = False
+        self._unnamed: dict[str, int] = {}  # stream -> truth/reference lines without a "# fields" line
 
     # ------------------------------------------------------------------ feeding
     def push(self, item: Message | MalformedMessage) -> list[Estimate | Event]:
@@ -164,6 +165,8 @@ class Run:
             clock.on_base(msg.sensor)  # the common case, without building the lists admit() returns
             if comp is not None:
                 comp.add_truth(msg)
+            else:
+                self._unnamed[msg.sensor] = self._unnamed.get(msg.sensor, 0) + 1
             if self.on_truth is not None and msg.sensor == "truth":
                 self.on_truth(msg)
             return
@@ -225,6 +228,8 @@ class Run:
                     self._dispatch(out)
             for event in header_beacon_warnings(self.parsed.header.beacons, self.system.beacons):
                 self._dispatch(event)
+            for event in truth_warnings(self.stats, self._unnamed, self.system.layout.names):
+                self._dispatch(event)
         finally:
             self.close_sinks()
         self.stats.finish()
@@ -249,6 +254,30 @@ class Run:
                 errors.append(exc)
         if errors:
             raise errors[0]
+
+
+def truth_warnings(stats: RunStats, unnamed: dict[str, int], state_names: Sequence[str]) -> list[Event]:
+    """Warnings when truth (or reference) lines could not be compared: no ``# fields`` line names their
+    columns, or truth has columns that are no state element while it lacks the state's position elements,
+    or all of them (``x y`` for a state's ``px py``: a naming mismatch, not a state truth cannot give)."""
+    events = []
+    for stream, n in sorted(unnamed.items()):
+        events.append(Event(math.nan, "warning", None, f"{n} {stream} line(s) but no '# fields {stream} ...' "
+                            f"header line names their columns: not compared (the state's elements: "
+                            f"{' '.join(state_names)})"))
+    for stream, comp in (("truth", stats.truth), ("reference", stats.reference)):
+        if comp is None:
+            continue
+        names = list(comp.window.names)
+        foreign = [c for c in names if c not in state_names]
+        absent = [n for n in state_names if n not in names]
+        position = comp.tracker.position_group()
+        if foreign and (len(absent) == len(state_names) or any(n in absent for n in position)):
+            events.append(Event(math.nan, "warning", None, f"{stream} columns {' '.join(foreign)} are no element "
+                                f"of the state, and the state's {' '.join(absent)} are not among the {stream} "
+                                "columns: those are not compared (a column is compared when it has the "
+                                "element's name)"))
+    return events
 
 
 #: Distance (m) between a recording's declared beacon and the config's beyond which they disagree.

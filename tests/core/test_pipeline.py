@@ -312,6 +312,30 @@ def test_recording_beacons_the_config_lacks_or_places_elsewhere_are_warned_about
     assert "warning" not in json.loads(out.read_text()).get("events", {})      # the shipped recording agrees
 
 
+@pytest.mark.parametrize("fields, expect", [
+    ("# fields truth x y vx vy", "truth columns x y are no element of the state, and the state's px py are not "
+                                 "among the truth columns"),
+    (None, "1357 truth line(s) but no '# fields truth ...' header line names their columns"),
+    ("# fields truth px py vx vy", None),
+])
+def test_truth_that_cannot_be_compared_is_warned_about(tmp_path, fields, expect):
+    uwb = ROOT / "configs" / "uwb_pv_ukf.yaml"
+    lines = [ln for ln in (ROOT / "recordings" / "uwb_route1.log").read_text().splitlines()
+             if not ln.startswith("# fields truth")]
+    if fields:
+        lines.insert(1, fields)
+    log = tmp_path / "t.log"
+    log.write_text("\n".join(lines) + "\n")
+    notes = []
+    result = pipeline.run(load_system(uwb), log, on_event=notes.append)
+    warnings = [e.detail for e in notes if e.kind == "warning" and "truth" in e.detail]
+    if expect is None:
+        assert warnings == [] and result.summary["errors"]["position_rmse_m"] > 0
+    else:
+        assert len(warnings) == 1 and expect in warnings[0], warnings
+        assert "position_rmse_m" not in result.summary.get("errors", {})
+
+
 def test_extreme_decimator_is_bounded_and_keeps_the_largest():
     rng = np.random.default_rng(0)
     scores = rng.exponential(size=100_003)
