@@ -38,9 +38,10 @@ def frame_offset(summary: dict, header_origin: tuple[float, float, float], senso
 def block_nees(estimates, truth: Truth, layout, offset: np.ndarray, t_min: float = 0.0) -> dict:
     """Mean NEES of each block of :data:`BLOCKS` over ``estimates`` after ``t_min`` s, in the filter's frame
     (truth position - ``offset``); ``all``: the 21-dof NEES, ``in95``: its fraction inside the per-sample
-    95% chi-square interval, ``p_scenario``: the position block against the untranslated truth."""
+    95% chi-square interval, ``p_scenario``: the position block against the untranslated truth; ``bax`` ...
+    ``swz``: each sensor-error element's mean squared error over its variance (1 if consistent)."""
     sums = {name: [] for name, _ in BLOCKS}
-    total, p_sc = [], []
+    total, p_sc, axes = [], [], []
     lo, hi = chi2_interval(21)
     for est in estimates:
         if est.t < t_min:
@@ -73,10 +74,13 @@ def block_nees(estimates, truth: Truth, layout, offset: np.ndarray, t_min: float
         for name, k in BLOCKS:
             sums[name].append(float(E[j:j + k] @ np.linalg.solve(C[j:j + k, j:j + k], E[j:j + k])))
             j += k
+        axes.append(E[9:21] ** 2 / np.diag(C)[9:21])
         e_sc = E[0:3] - offset
         p_sc.append(float(e_sc @ np.linalg.solve(C[0:3, 0:3], e_sc)))
     tot = np.array(total)
     out = {name: float(np.mean(v)) for name, v in sums.items()}
+    ax = np.mean(axes, axis=0)
     out.update({"all": float(tot.mean()), "in95": float(np.mean((tot >= lo) & (tot <= hi))),
                 "p_scenario": float(np.mean(p_sc))})
+    out.update({f"{b}{c}": float(v) for (b, c), v in zip(((b, c) for b in ("ba", "bw", "sa", "sw") for c in "xyz"), ax)})
     return out

@@ -1,6 +1,6 @@
 """A matched-model control, small (issue 17; the 50-seed version is experiments/smoother_seeds.py): the
 UWB system of paper 001 (configs/uwb_pv_ukf.yaml, UKF and its RTS smoother) on truths drawn from its own
-PV model (scenarios/uwb_pv_matched.yaml: white acceleration of the config's 0.2 m^2/s^3, the initial state
+PV model (scenarios/controls/uwb_pv_matched.yaml: white acceleration of the config's 0.2 m^2/s^3, the initial state
 from the config's prior, 0.1 m ranges), a new walk each seed. On its own model the filter and the smoother
 must be consistent: the mean NEES over the seeds near its 4 dof (the shipped routes, a mismatched truth,
 give ~2.3; a smoother that kept the filtered covariance, or shrank it too far, leaves these bounds), most
@@ -22,7 +22,7 @@ SEEDS = range(1, 7)   # 6 walks of 15 s (~0.3 s each)
 
 
 def _recording(seed: int, walls: bool) -> list[str]:
-    sc, text = load_scenario(ROOT / "scenarios" / "uwb_pv_matched.yaml")
+    sc, text = load_scenario(ROOT / "scenarios" / "controls" / "uwb_pv_matched.yaml")
     upd = {"seed": seed} if walls else {"seed": seed, "bounds": None}
     sc = sc.model_copy(update={"trajectory": sc.trajectory.model_copy(update=upd)})
     return simulate(sc, seed=seed, text=text).splitlines()
