@@ -89,7 +89,34 @@ class RandomWalkTrajectory(_Model):
         return v
 
 
-Trajectory = Annotated[Union[WaypointsTrajectory, RandomWalkTrajectory], Field(discriminator="type")]
+class WhiteAccelerationTrajectory(_Model):
+    """The constant-velocity (white-acceleration) model's own motion: per axis, position and velocity driven
+    by white acceleration of power spectral density ``spectral_density`` (q, m^2/s^3), the ``pv`` process's
+    model, drawn exactly on a grid of ``step`` s (Q = q [[h^3/3, h^2/2], [h^2/2, h]]). A matched truth for a
+    filter that states this model (issue 17's controls). ``bounds`` keep it in an area: ``redraw`` draws
+    the whole walk again until it stays inside (the model conditioned on staying in), ``reflect`` folds it
+    at the walls (an elastic bounce: the velocity's normal component flips, an impulse the model lacks)."""
+
+    type: Literal["white_acceleration"]
+    start: Vec = Field(description="mean initial position (m): [x, y] in a 2-D scenario, [x, y, z] in 3-D")
+    start_velocity: Vec | None = Field(None, description="mean initial velocity (m/s); None: at rest")
+    start_sd: float = Field(0.0, ge=0, description="sd per axis of the drawn initial position (m)")
+    start_velocity_sd: float = Field(0.0, ge=0, description="sd per axis of the drawn initial velocity (m/s)")
+    spectral_density: float = Field(gt=0, description="PSD of the white acceleration per axis (m^2/s^3)")
+    duration: float = Field(gt=0, description="seconds of the walk (the scenario's duration, if given, is at "
+                                              "most this)")
+    step: float = Field(0.01, gt=0, description="grid of the exact discretisation (s); between grid points "
+                                                "the motion is the cubic through the two states")
+    bounds: list[Vec] | None = Field(None, description="[[xmin, xmax], [ymin, ymax](, [zmin, zmax])] (m), "
+                                                       "checked at the grid points")
+    boundary: Literal["redraw", "reflect"] = Field("redraw", description="how bounds are kept: redraw the "
+                                                   "walk until it stays inside, or reflect it at the walls")
+    max_draws: int = Field(1000, ge=1, le=100000, description="redraw: draws before giving up (an error)")
+    seed: int = Field(0, ge=0, description="seed of the walk itself (the sensor noise follows the scenario seed)")
+
+
+Trajectory = Annotated[Union[WaypointsTrajectory, RandomWalkTrajectory, WhiteAccelerationTrajectory],
+                       Field(discriminator="type")]
 
 
 class Origin(_Model):

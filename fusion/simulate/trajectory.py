@@ -5,6 +5,8 @@ angular rate are mutually consistent, so an IMU derived from them integrates bac
   speed ramps (continuous acceleration and jerk); heading along the path, pitch along its slope, no roll.
 * ``RandomWalkTrajectory``: position and Euler angles random-walk by a step each interval, interpolated
   by quintic splines (C^4), blended in smoothly after a static start.
+* ``WhiteAccelerationTrajectory`` (fusion.simulate.white_acceleration): the constant-velocity model's own
+  motion, white acceleration of a given PSD drawn exactly on a grid (a matched truth for a ``pv`` filter).
 """
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ from fusion.simulate.path import PathError, WaypointPath
 from fusion.simulate.profiles import H_PRIME_MAX, smoothstep, smoothstep_d1, smoothstep_d2, smoothstep_int
 from fusion.simulate.scenario import RandomWalkTrajectory as RandomWalkSpec
 from fusion.simulate.scenario import WaypointsTrajectory as WaypointsSpec
+from fusion.simulate.scenario import WhiteAccelerationTrajectory as WhiteAccelerationSpec
 
 
 class TrajectoryError(ValueError):
@@ -216,4 +219,11 @@ def build_trajectory(spec, dim: int, duration: float | None):
         if duration is None:
             raise TrajectoryError("duration: a random_walk trajectory needs the scenario's duration")
         return RandomWalkTrajectory(spec, duration)
+    if isinstance(spec, WhiteAccelerationSpec):
+        from fusion.simulate.white_acceleration import WhiteAccelerationError, WhiteAccelerationTrajectory
+
+        try:
+            return WhiteAccelerationTrajectory(spec, dim, duration)
+        except WhiteAccelerationError as exc:
+            raise TrajectoryError(str(exc)) from None
     raise TrajectoryError(f"trajectory.type: unknown {type(spec).__name__}")

@@ -24,6 +24,9 @@ class ImuParams(SimParams):
     gyro_bias_rw: float = Field(0.0, ge=0, description="gyro bias random walk (rad/s^2/sqrt(Hz))")
     accel_scale_sd: float = Field(0.0, ge=0, description="sd of the accelerometer scale-factor error (1 = 100%)")
     gyro_scale_sd: float = Field(0.0, ge=0, description="sd of the gyro scale-factor error (1 = 100%)")
+    accel_scale_rw: float = Field(0.0, ge=0, description="random walk of each accelerometer scale factor "
+                                  "(1/sqrt(s); paper 002 eq. 13, the ins process's accel_scale_rw)")
+    gyro_scale_rw: float = Field(0.0, ge=0, description="random walk of each gyro scale factor (1/sqrt(s))")
     misalignment_sd: float = Field(0.0, ge=0, description="sd of the axis misalignments (rad)")
     accel_range: float | None = Field(None, gt=0, description="saturation of each accelerometer axis (m/s^2)")
     gyro_range: float | None = Field(None, gt=0, description="saturation of each gyro axis (rad/s)")
@@ -43,9 +46,11 @@ class ImuSimulator(SensorSimulator):
     (NED), angular rate ``w_b`` of the body relative to NED (Earth rate neglected). Measured:
     ``(I + S + M) f_b + b_a(t) + n_a`` (and the same for the gyros) with scale factors S (diagonal),
     misalignments M (off-diagonal), a turn-on bias plus a random walk b(t), white noise of the given
-    density (sd = density * sqrt(rate)), and optional saturation. The true biases go to the truth lines as
-    ``bax bay baz bwx bwy bwz`` (the INS state blocks ba, bw) and, when scale errors are simulated, the
-    scale factors ``sax say saz swx swy swz`` (``s = 1 + S_ii``, paper 002 eq. 11: ``f~ = s f + b + w``).
+    density (sd = density * sqrt(rate)), and optional saturation. The scale factors may random-walk too
+    (``accel_scale_rw``, ``gyro_scale_rw``: S_ii(t), steps of sd rw sqrt(dt) from the turn-on draw). The
+    true biases go to the truth lines as ``bax bay baz bwx bwy bwz`` (the INS state blocks ba, bw) and,
+    when scale errors are simulated, the scale factors ``sax say saz swx swy swz`` (``s = 1 + S_ii``,
+    paper 002 eq. 11: ``f~ = s f + b + w``; at the truth's times when they walk).
     ``--noise off`` makes every sample exact.
     """
 
@@ -84,9 +89,10 @@ class ImuSimulator(SensorSimulator):
         kin = sim.kinematics(t)
         R = kin.rotation
         g_n = np.array([0.0, 0.0, sim.gravity])
-        f = R.apply(kin.a - g_n, inverse=True)
-        w = kin.w_b
+        f = f_true = R.apply(kin.a - g_n, inverse=True)
+        w = w_true = kin.w_b
         n = len(t)
+        self._scale_t = None
         if sim.noise:
             r_ab, r_wb, r_an, r_wn, r_err = sim.rng.spawn(5)
             dt = 1.0 / p.rate_hz
@@ -98,6 +104,13 @@ class ImuSimulator(SensorSimulator):
             sq = np.sqrt(p.rate_hz)
             f = f + f @ Ea.T + self._ba + r_an.normal(0.0, p.accel_noise_density * sq, (n, 3))
             w = w + w @ Ew.T + self._bw + r_wn.normal(0.0, p.gyro_noise_density * sq, (n, 3))
+            if p.accel_scale_rw > 0 or p.gyro_scale_rw > 0:   # drawn only then: the other scenarios' bytes stay
+                (r_sw,) = sim.rng.spawn(1)
+                dS = self._bias(r_sw, [0.0] * 3, 0.0, p.accel_scale_rw, n, dt)   # S_ii(t) - S_ii(0)
+                dW = self._bias(r_sw, [0.0] * 3, 0.0, p.gyro_scale_rw, n, dt)
+                f = f + dS * f_true
+                w = w + dW * w_true
+                self._scale_t = self._scale + np.column_stack([dS, dW])   # (n, 6): s(t) at the samples
         else:
             self._ba = np.zeros((n, 3))
             self._bw = np.zeros((n, 3))
@@ -110,7 +123,8 @@ class ImuSimulator(SensorSimulator):
         return SensorOutput(t, vals.tolist())
 
     def _has_scale(self) -> bool:
-        return self.params.accel_scale_sd > 0 or self.params.gyro_scale_sd > 0
+        p = self.params
+        return p.accel_scale_sd > 0 or p.gyro_scale_sd > 0 or p.accel_scale_rw > 0 or p.gyro_scale_rw > 0
 
     def truth_fields(self) -> tuple[str, ...]:
         names = ("bax", "bay", "baz", "bwx", "bwy", "bwz")
@@ -119,6 +133,8 @@ class ImuSimulator(SensorSimulator):
     def truth(self, t: np.ndarray) -> np.ndarray:
         B = np.column_stack([self._ba, self._bw])
         cols = [np.interp(t, self._t, B[:, i]) for i in range(6)]
-        if self._has_scale():
+        if self._has_scale() and self._scale_t is not None:
+            cols += [np.interp(t, self._t, self._scale_t[:, i]) for i in range(6)]
+        elif self._has_scale():
             cols += [np.full(len(t), s) for s in self._scale]
         return np.column_stack(cols)

@@ -95,3 +95,31 @@ sensors: {imu: {type: imu, rate_hz: 4, gyro_bias_rw: 1.0e-3, accel_bias_rw: 1.0e
     ends = np.array(ends)  # 60 seeds x 3 axes: the rms over all of them is good to about 5 %
     assert np.sqrt(np.mean(ends[:, :3] ** 2)) == pytest.approx(1e-2 * 5, rel=0.2)
     assert np.sqrt(np.mean(ends[:, 3:] ** 2)) == pytest.approx(1e-3 * 5, rel=0.2)
+
+
+def test_scale_factor_random_walk():
+    """accel_scale_rw / gyro_scale_rw: the scale factors of the truth lines walk with steps of variance
+    rw^2 dt, and the samples are s(t) times the exact ones (paper 002 eq. 13, the ins process's walk)."""
+    yaml = """
+dim: 3
+seed: 5
+trajectory: {type: random_walk, start: [0, 0, 0], position_step_sd: 0, angle_step_sd_deg: 2, seed: 1}
+duration: 400
+sensors:
+  imu: {type: imu, rate_hz: 10, accel_noise_density: 0, gyro_noise_density: 0, accel_scale_sd: 0.01,
+        gyro_scale_sd: 0.01, accel_scale_rw: 1.0e-3, gyro_scale_rw: 2.0e-3}
+"""
+    on, _ = parse_log(run_yaml(yaml))
+    off, _ = parse_log(run_yaml(yaml, noise=False))
+    imu, exact, truth = table(on["imu"]), table(off["imu"]), table(on["truth"])
+    assert np.array_equal(imu[:, 0], truth[:, 0])
+    s = truth[:, 17:23]                                   # sax say saz swx swy swz at the IMU's times
+    steps = np.diff(s, axis=0)
+    tol = 5.0 * np.sqrt(2.0 / steps[:, :3].size)
+    assert np.var(steps[:, :3]) == pytest.approx(1e-3 ** 2 * 0.1, rel=tol)
+    assert np.var(steps[:, 3:]) == pytest.approx(2e-3 ** 2 * 0.1, rel=tol)
+    assert np.abs(s[-1] - s[0]).max() > 0.005             # it really walked
+    assert np.allclose(imu[:, 1:4], s[:, :3] * exact[:, 1:4], atol=2e-6)
+    big = np.abs(exact[:, 4:7]) > 0.05
+    assert big.sum() > 1000
+    assert np.allclose((imu[:, 4:7] / np.where(big, exact[:, 4:7], 1.0))[big], s[:, 3:][big], atol=1e-4)
