@@ -17,6 +17,9 @@ __all__ = ["noise_matrix", "initial_belief_values", "MAX_INITIAL_SD"]
 
 #: Largest initial standard deviation (SI units); the reasons are at its use in fusion/config.py.
 MAX_INITIAL_SD = 1e6
+#: Largest |initial mean| of any element (m, s, ...): beyond Earth-centred positions (6.4e6 m) and Unix times
+#: (1.8e9 s) by far, and far below where squares overflow.
+MAX_INITIAL_MEAN = 1e12
 
 
 def _noise_matrix(noise: NoiseSpec | float | list[float] | None, m: int, where: str) -> np.ndarray | None:
@@ -89,6 +92,12 @@ def _initial(spec: SystemSpec, process: ProcessModel, doc: LocatedYAML | None) -
         if block.kind == "quaternion":
             x0[lay[block.name].start] = 1.0
     _fill_blocks(x0, spec.initial.mean, lay, lambda name: where("mean", name))
+    huge = np.flatnonzero(np.abs(x0) > MAX_INITIAL_MEAN)
+    if huge.size:
+        name = next(b.name for b in lay.blocks if lay[b.name].start <= huge[0] < lay[b.name].stop)
+        raise ConfigError(f"{where('mean', name)}: {x0[huge[0]]:g} is beyond {MAX_INITIAL_MEAN:g} in magnitude: no "
+                          "state of a local frame, a clock or a sensor error is that large, and its squares would "
+                          "overflow the filter's arithmetic")
     for block in lay.blocks:
         if block.kind == "quaternion" and not np.linalg.norm(x0[lay[block.name]]) > 1e-6:
             raise ConfigError(f"{where('mean', block.name)}: a quaternion needs a non-zero norm (e.g. [1, 0, 0, 0]), "

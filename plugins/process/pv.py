@@ -15,6 +15,9 @@ from pydantic import Field, model_validator
 from fusion.api import Block, Params, ProcessModel, StateLayout
 
 
+MAX_SPECTRAL_DENSITY = 1e12
+
+
 class ConstantVelocity(ProcessModel):
     """n-D constant-velocity model (paper 001 eq. 4); state p:n v:n in m and m/s.
 
@@ -34,6 +37,9 @@ class ConstantVelocity(ProcessModel):
                 raise ValueError(f"spectral_density needs {'1 value' if self.dims == 1 else f'1 or {self.dims} values'}, got {s.size}")
             if np.any(s < 0):
                 raise ValueError("spectral_density must be >= 0")
+            if np.any(s > MAX_SPECTRAL_DENSITY):
+                raise ValueError(f"spectral_density must be at most {MAX_SPECTRAL_DENSITY:g} m^2/s^3 (an "
+                                 "acceleration sd of 1e6 m/s^2 over 1 s); beyond, the covariance overflows")
             return self
 
     def __init__(self, params=None, context=None):

@@ -149,3 +149,14 @@ def test_beacons_that_are_not_coordinates_are_refused_with_the_reason(tmp_path, 
         load_system(path)
     path.write_text(CONFIG.replace("filter: kf", "filter: ekf"))
     assert load_system(path).beacons["B2"].tolist() == [10.0, 0.0]
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ("mean: {p: [1, 2]", "mean: {p: [1.0e300, 2]", r"sys.yaml:4: initial.mean.p: 1e\+300 is beyond 1e\+12 in magnitude"),
+    ("spectral_density: 0.5", "spectral_density: 1.0e300", r"spectral_density must be at most 1e\+12 m\^2/s\^3"),
+])
+def test_values_whose_squares_overflow_are_refused(tmp_path, old, new, message):
+    path = tmp_path / "sys.yaml"
+    path.write_text(CONFIG.replace("filter: kf", "filter: ekf").replace(old, new))
+    with pytest.raises(ConfigError, match=message):
+        load_system(path)
