@@ -28,7 +28,9 @@ def describe_params(cls) -> list[tuple[str, str, str, str]]:
 
 def run(args: argparse.Namespace) -> int:
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
+    from rich.text import Text
 
     from fusion.registry import default_registry
 
@@ -41,11 +43,12 @@ def run(args: argparse.Namespace) -> int:
             table.add_column(col)
         for e in entries:
             doc = inspect.getdoc(e.cls) or ""
-            table.add_row(e.kind, e.name, e.provider, doc.splitlines()[0] if doc else "")
+            # plugin text is shown as it is, never read as rich markup ("Height [m]", a "[/x]")
+            table.add_row(*(Text(v) for v in (e.kind, e.name, e.provider, doc.splitlines()[0] if doc else "")))
         console.print(table)
         return 0
     for e in entries:
-        console.rule(f"[bold]{e.kind}[/bold] {e.name}  [dim]{e.provider}[/dim]")
+        console.rule(f"[bold]{e.kind}[/bold] {escape(e.name)}  [dim]{escape(e.provider)}[/dim]")
         console.print(inspect.getdoc(e.cls) or "(no docstring)", markup=False)
         rows = describe_params(e.cls)
         if rows:
@@ -53,6 +56,6 @@ def run(args: argparse.Namespace) -> int:
             for col in ("parameter", "type", "default", "description"):
                 t.add_column(col)
             for r in rows:
-                t.add_row(*r)
+                t.add_row(*(Text(v) for v in r))
             console.print(t)
     return 0
