@@ -3,7 +3,7 @@
 ``print_summary(summary, console=None)``
     Prints the summary dict of DESIGN.md "Outputs" as tables: the run (config, filter, input, duration,
     wall time, x real time, steps, us per predict/update), sensors (received, used, rejected, malformed,
-    late), errors against truth, consistency (NEES, per-sensor NIS with the fraction inside the 95%
+    late, and absorbed when any sensor has some), errors against truth, consistency (NEES, per-sensor NIS with the fraction inside the 95%
     chi-square interval) and any further top-level keys (events, counters). Missing sections are skipped,
     so a summary without truth prints without errors. ``console`` defaults to a rich Console on stdout;
     tests pass ``Console(file=io.StringIO(), width=..)``.
@@ -117,11 +117,14 @@ def _run_table(s: dict) -> Table:
 def _sensors_table(sensors: dict) -> Table:
     t = _table(title="Sensors", title_justify="left", title_style="bold")
     t.add_column("sensor", style="cyan")
-    for c in _SENSOR_COLUMNS:
+    # absorbed (fusion.run_stats.ABSORBED: what a decoder dropped, what a solver combined into a fix) only
+    # when some sensor has any, so the table adds up: received = used + rejected + malformed + late + absorbed
+    columns = _SENSOR_COLUMNS + (("absorbed",) if any(c.get("absorbed") for c in sensors.values()) else ())
+    for c in columns:
         t.add_column(c, justify="right")
     for name, c in sensors.items():
         cells = []
-        for col in _SENSOR_COLUMNS:
+        for col in columns:
             v = c.get(col, 0)
             bad = col in ("rejected", "malformed", "late") and v
             cells.append(f"[yellow]{_num(v)}[/]" if bad else _num(v))
