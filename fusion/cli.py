@@ -51,15 +51,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _warning_printer(command: str):
     """``warnings.showwarning`` for a command: fusion's own warnings (a ``CapabilityWarning``: a method one
-    edit away from a capability) as one line ``fusion COMMAND: warning: ...``, each once, without the
-    Python source line; any other warning as Python shows it."""
+    edit away from a capability; a ``PluginWarning``: a broken installed plugin left out) as one line
+    ``fusion COMMAND: warning: ...``, each once, without the Python source line; any other warning as
+    Python shows it."""
     shown: set[str] = set()
     default = warnings.showwarning
 
     def show(message, category, filename, lineno, file=None, line=None):
         from fusion.api import CapabilityWarning
+        from fusion.registry import PluginWarning
 
-        if not issubclass(category, CapabilityWarning):
+        if not issubclass(category, (CapabilityWarning, PluginWarning)):
             return default(message, category, filename, lineno, file, line)
         text = str(message)
         if text not in shown:
