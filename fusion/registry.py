@@ -97,8 +97,9 @@ class Registry:
 
     def __init__(self) -> None:
         self._entries: dict[str, dict[str, Entry]] = {k: {} for k in KINDS}
-        # name -> (target, provider, plugin): plugin is the name of the plugin that registered it (or None)
-        self._lazy: dict[str, dict[str, tuple[str, str, str | None]]] = {k: {} for k in KINDS}
+        # name -> (target, provider, plugin, "file:line: " of the add_lazy call): plugin is the name of the
+        # plugin that registered it (or None)
+        self._lazy: dict[str, dict[str, tuple[str, str, str | None, str]]] = {k: {} for k in KINDS}
         self.providers: dict[str, str] = {}  # top-level package -> "distribution version"
         self.pm: pluggy.PluginManager | None = None  # set by make_plugin_manager
         #: Broken plugins and refused names (fusion.registry.Problem), in the order found.
@@ -164,13 +165,13 @@ class Registry:
             raise ValueError(f"{kind} {name!r} registered twice: by {by} and {target}")
         top = target.split(".")[0]
         plugin = self._loading[0] if self._loading is not None else None
-        self._lazy[kind][name] = (target, self.providers.get(top) or _builtin_provider(), plugin)
+        self._lazy[kind][name] = (target, self.providers.get(top) or _builtin_provider(), plugin, _caller())
 
     def _resolve(self, kind: str, name: str) -> None:
         """Import a lazily registered component. A target that cannot be imported, lacks the class or
         declares another kind or name is refused (a Problem of its plugin), never raised here: ``get``
         then explains it, ``entries`` leaves it out."""
-        target, provider, plugin = self._lazy[kind].pop(name)
+        target, provider, plugin, called = self._lazy[kind].pop(name)
         modname, _, attr = target.partition(":")
         try:
             cls = getattr(importlib.import_module(modname), attr)
@@ -181,7 +182,7 @@ class Registry:
             what = str(exc) if isinstance(exc, ValueError) else f"{_where(exc, modname)}{type(exc).__name__}: {exc}"
             package = None if provider.endswith("(built-in)") else provider
             problem = Problem(plugin or modname.split(".")[0], package,
-                              f"{kind} {name!r} = {target!r} cannot be loaded: {what}", kind, name)
+                              f"{called}{kind} {name!r} = {target!r} cannot be loaded: {what}", kind, name)
             self.broken.append(problem)
             self._refused[(kind, name)] = problem
             return

@@ -148,10 +148,14 @@ def test_a_plugin_registering_a_builtin_name(broken):
                   "measurement 'lazy' but declares measurement 'height'"),
 ])
 def test_a_lazy_registration_with_a_bad_target(broken, mode, what):
+    line = {"lazy_missing": 33, "lazy_kind": 35, "lazy_name": 37}[mode]
+    what = f"{broken.site / 'fusion_broken' / 'plugin.py'}:{line}: {what}"     # where add_lazy was called
     listed = broken(mode, "plugins")
     assert listed.returncode == 2 and "height" in listed.stdout and "BROKEN" in listed.stdout
     assert listed.stderr.splitlines() == [f"fusion plugins: error: {what}: {WAY_OUT} (FUSION_DISABLE_PLUGIN_AUTOLOAD=1 "
                                           "skips every third-party plugin)"]
+    verbose = broken(mode, "plugins", "--verbose")
+    assert verbose.returncode == 2 and "Height [m] from p_z." in verbose.stdout and "broken" in verbose.stdout
     ok = broken(mode, "validate", "height.yaml")       # lazy components are imported only when used
     assert ok.returncode == 0 and ok.stderr == ""
     if mode != "lazy_kind":
