@@ -15,6 +15,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import importlib  # noqa: E402
 import sys  # noqa: E402
+import warnings  # noqa: E402
 
 from fusion import __version__  # noqa: E402
 from fusion.errors import FusionError  # noqa: E402
@@ -48,6 +49,28 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _warning_printer(command: str):
+    """``warnings.showwarning`` for a command: fusion's own warnings (a ``CapabilityWarning``: a method one
+    edit away from a capability; a ``PluginWarning``: a broken installed plugin left out) as one line
+    ``fusion COMMAND: warning: ...``, each once, without the Python source line; any other warning as
+    Python shows it."""
+    shown: set[str] = set()
+    default = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        from fusion.api import CapabilityWarning
+        from fusion.registry import PluginWarning
+
+        if not issubclass(category, (CapabilityWarning, PluginWarning)):
+            return default(message, category, filename, lineno, file, line)
+        text = str(message)
+        if text not in shown:
+            shown.add(text)
+            print(f"fusion {command}: warning: {text}", file=file or sys.stderr)
+
+    return show
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -59,7 +82,9 @@ def main(argv: list[str] | None = None) -> int:
             from fusion.lazy_imports import defer_unused_numpy_modules
 
             defer_unused_numpy_modules()
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            warnings.showwarning = _warning_printer(args.command)
+            return int(args.func(args) or 0)
     except FusionError as exc:
         if args.debug:
             raise

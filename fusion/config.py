@@ -201,7 +201,8 @@ class SensorRuntime:
     time_offset: float
     max_gap: float | None = None
     recovery: RecoverySpec | None = None
-    counters: dict[str, int] = field(default_factory=lambda: dict(received=0, used=0, rejected=0, malformed=0, late=0))
+    counters: dict[str, int] = field(default_factory=lambda: dict(received=0, used=0, rejected=0, malformed=0, late=0,
+                                                                             absorbed=0))
 
 
 @dataclass

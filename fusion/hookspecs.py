@@ -37,11 +37,16 @@ def fusion_register_components(registry: "Registry") -> None:
 # registered plugin that implements them. They observe: the return value is ignored, and an exception
 # raised by an implementation ends the run as an internal error naming the hook. Each is called only
 # when some plugin implements it, so a run without observers pays nothing.
+# Which runs call them: ``fusion run``, ``fusion tui`` and ``fusion.pipeline.run`` / ``Run`` (unless given
+# ``hooks=False``). The trials of ``fusion sweep`` do not (serial, pooled and batched alike: they run with
+# ``hooks=False``, fusion/sweep/trial.py and batched.py): a sweep is thousands of runs, and its results file
+# is what watches it.
 
 
 @hookspec
 def fusion_on_estimate(estimate: "Estimate", system: "System") -> None:
     """Called for every estimate a run emits, in time order, after the run's own sinks got it.
+    Not called by the trials of ``fusion sweep`` (``hooks=False``), nor by a ``pipeline.run(..., hooks=False)``.
 
     :param estimate: the ``fusion.api.Estimate`` (``t`` s, ``belief`` with ``x`` and ``cov``, ``reason``
         ``update`` or ``output``, ``sensor``, and ``update`` with the innovation and NIS). Immutable: keep
@@ -54,6 +59,7 @@ def fusion_on_estimate(estimate: "Estimate", system: "System") -> None:
 def fusion_on_event(event: "Event", system: "System") -> None:
     """Called for every event of a run (``malformed``, ``late``, ``rejected``, ``gap``, ``warning``,
     ``no_fix``, ...), as it happens.
+    Not called by the trials of ``fusion sweep`` (``hooks=False``), nor by a ``pipeline.run(..., hooks=False)``.
 
     :param event: the ``fusion.api.Event`` (``t`` s or NaN, ``kind``, ``sensor`` or None, ``detail``).
     :param system: the wired system being run.
@@ -63,6 +69,7 @@ def fusion_on_event(event: "Event", system: "System") -> None:
 @hookspec
 def fusion_on_run_end(summary: dict, system: "System") -> None:
     """Called once when a run ends (end of input, a lost source, or Ctrl-C), with its summary.
+    Not called by the trials of ``fusion sweep`` (``hooks=False``), nor by a ``pipeline.run(..., hooks=False)``.
 
     :param summary: the summary dict, the same that ``--summary-json`` writes (DESIGN.md "Outputs").
     :param system: the wired system that was run.

@@ -41,7 +41,10 @@ def _field(tok: str) -> float | str:
         tok = tok.strip()
         if tok.lower() not in _NONFINITE and _LABEL.match(tok):
             return tok
-        raise MalformedMessage(f"bad number {tok!r}") from None
+        # read before any decoder: say so, and what the line would need for a decoder to see it
+        raise MalformedMessage(f"bad number {tok!r} (fields are numbers or labels: a letter or _, then letters, "
+                               "digits, _ . : - /; read before any decoder, which gets the raw text only when "
+                               "the values start with '$')") from None
     if v - v != 0.0:  # nan or inf (cheaper than math.isfinite on the hot path)
         raise MalformedMessage(f"non-finite value {tok.strip()!r}")
     return v

@@ -3,7 +3,7 @@
 ``print_summary(summary, console=None)``
     Prints the summary dict of DESIGN.md "Outputs" as tables: the run (config, filter, input, duration,
     wall time, x real time, steps, us per predict/update), sensors (received, used, rejected, malformed,
-    late), errors against truth, consistency (NEES, per-sensor NIS with the fraction inside the 95%
+    late, and absorbed when any sensor has some), errors against truth, consistency (NEES, per-sensor NIS with the fraction inside the 95%
     chi-square interval) and any further top-level keys (events, counters). Missing sections are skipped,
     so a summary without truth prints without errors. ``console`` defaults to a rich Console on stdout;
     tests pass ``Console(file=io.StringIO(), width=..)``.
@@ -65,6 +65,14 @@ def _num(v: Any, fmt: str = ".4g") -> str:
     return format(f, fmt) if math.isfinite(f) else str(f)
 
 
+def _text(v: Any) -> Any:
+    """User or plugin text (a path, a sensor or component name, a value's repr) as a rich ``Text``, shown
+    as it is: a string given to rich is read as markup (``br[red]/c.yaml`` would print ``br/c.yaml``)."""
+    from rich.text import Text
+
+    return Text(str(v))
+
+
 def _table(*args: Any, **kwargs: Any) -> Table:
     from rich.table import Table
 
@@ -89,7 +97,7 @@ def _run_table(s: dict) -> Table:
     t = _kv_table("Run")
     for key, label in (("config", "config"), ("filter", "filter"), ("input", "input")):
         if key in s:
-            t.add_row(label, str(s[key]))
+            t.add_row(label, _text(s[key]))
     dur, wall = s.get("duration_s"), s.get("wall_s")
     if dur is not None:
         t.add_row("duration", f"{_num(dur)} s")
@@ -109,15 +117,18 @@ def _run_table(s: dict) -> Table:
 def _sensors_table(sensors: dict) -> Table:
     t = _table(title="Sensors", title_justify="left", title_style="bold")
     t.add_column("sensor", style="cyan")
-    for c in _SENSOR_COLUMNS:
+    # absorbed (fusion.run_stats.ABSORBED: what a decoder dropped, what a solver combined into a fix) only
+    # when some sensor has any, so the table adds up: received = used + rejected + malformed + late + absorbed
+    columns = _SENSOR_COLUMNS + (("absorbed",) if any(c.get("absorbed") for c in sensors.values()) else ())
+    for c in columns:
         t.add_column(c, justify="right")
     for name, c in sensors.items():
         cells = []
-        for col in _SENSOR_COLUMNS:
+        for col in columns:
             v = c.get(col, 0)
             bad = col in ("rejected", "malformed", "late") and v
             cells.append(f"[yellow]{_num(v)}[/]" if bad else _num(v))
-        t.add_row(str(name), *cells)
+        t.add_row(_text(name), *cells)
     return t
 
 
@@ -133,13 +144,13 @@ def _errors_table(errors: dict) -> Table:
         if key in errors:
             if axes and key.startswith("position"):
                 label = f"{label} ({' '.join(axes)})"
-            t.add_row(label, _num(errors[key]), unit)
+            t.add_row(_text(label), _num(errors[key]), unit)
     shown = {k for k, _, _ in _ERROR_ROWS} | {"samples", "element_rmse", "position_elements"}
     for name, v in (errors.get("element_rmse") or {}).items():
-        t.add_row(f"{name} RMSE", _num(v), _ELEMENT_UNITS.get(name[:1], ""))
+        t.add_row(_text(f"{name} RMSE"), _num(v), _ELEMENT_UNITS.get(name[:1], ""))
     for key, v in errors.items():
         if key not in shown:
-            t.add_row(key, _num(v) if not isinstance(v, dict) else str(v), "")
+            t.add_row(_text(key), _text(_num(v) if not isinstance(v, dict) else str(v)), "")
     return t
 
 
@@ -155,7 +166,7 @@ def _consistency_table(c: dict) -> Table:
                   _pct(c.get("nees_in_95_fraction")), _num(c.get("nees_samples")))
     frac, dof, n = (c.get(k) or {} for k in ("nis_in_95_fraction", "nis_dof", "nis_samples"))
     for sensor, mean in (c.get("nis_mean") or {}).items():
-        t.add_row(f"NIS {sensor}", _num(dof.get(sensor)), _num(mean, ".3g"), _pct(frac.get(sensor)),
+        t.add_row(_text(f"NIS {sensor}"), _num(dof.get(sensor)), _num(mean, ".3g"), _pct(frac.get(sensor)),
                   _num(n.get(sensor)))
     return t
 
@@ -166,6 +177,8 @@ def _pct(v: Any) -> str:
 
 def print_summary(summary: dict, console: Console | None = None) -> None:
     """Print ``summary`` (DESIGN.md "Outputs") as readable tables; see the module docstring."""
+    from rich.markup import escape
+
     console = console if console is not None else _console()
     console.print(_run_table(summary))
     if summary.get("sensors"):
@@ -175,7 +188,7 @@ def print_summary(summary: dict, console: Console | None = None) -> None:
         console.print()
         console.print(_errors_table(summary["errors"]))
     elif summary.get("not_started"):
-        console.print(f"\n[bold yellow]{summary['not_started']}[/]")
+        console.print(f"\n[bold yellow]{escape(str(summary['not_started']))}[/]")
     elif summary.get("errors") is None:
         console.print("\n[dim]no truth in the input: no errors[/]")
     c = summary.get("consistency") or {}
@@ -188,7 +201,7 @@ def print_summary(summary: dict, console: Console | None = None) -> None:
         t = _kv_table("Other")
         for k, v in extra.items():
             text = ", ".join(f"{kk}: {_num(vv)}" for kk, vv in v.items()) if isinstance(v, dict) else _num(v)
-            t.add_row(k, text)
+            t.add_row(_text(k), _text(text))
         console.print(t)
 
 

@@ -17,9 +17,16 @@ from fusion.truth_stream import TruthComparison
 if TYPE_CHECKING:
     from fusion.scheduler import Scheduler
 
-__all__ = ["RunStats", "COUNTERS"]
+__all__ = ["RunStats", "COUNTERS", "ABSORBED"]
 
 COUNTERS = ("received", "used", "rejected", "malformed", "late")
+#: Messages of a sensor that its decoder or preprocessor took without a measurement of their own coming
+#: out: a decoder's None (a sentence without a fix, a message it drops), a model's ``observe`` returning
+#: None, and the messages a solver (preprocessor) combined into a fix, the fix itself counted once as
+#: used, rejected, malformed or late (ols_trilateration: the 3-4 ranges of a firing cycle are one fix),
+#: or still held when the input ended. So received = used + rejected + malformed + late + absorbed. In
+#: the summary JSON for every sensor; the human table shows its column only when some sensor has any.
+ABSORBED = "absorbed"
 _NIS_WAIT_MAX = 4096  # NIS records held until the first estimate starts the settle clock
 
 
@@ -158,12 +165,16 @@ class RunStats:
 
     # ------------------------------------------------------------------ reading
     def counters(self) -> dict[str, dict[str, int]]:
-        """Per sensor: received, used, rejected, malformed, late. Malformed lines of configured sensors are
-        counted by the scheduler, the others (unknown or unreadable sensor: '?') by the parser."""
+        """Per sensor: received, used, rejected, malformed, late and absorbed (:data:`ABSORBED`). Malformed
+        lines of configured sensors are counted by the scheduler, the others (unknown or unreadable sensor:
+        '?') by the parser."""
         out = {name: dict(s.counters) for name, s in self.scheduler.sensors.items()}
+        for c in out.values():
+            if c.get(ABSORBED, 0) < 0:   # a solver that made more fixes than it was given messages
+                c[ABSORBED] = 0
         for name, n in list(self.parsed.malformed.items()):
             if name not in self.scheduler.sensors:
-                out.setdefault(name or "?", dict.fromkeys(COUNTERS, 0))["malformed"] += n
+                out.setdefault(name or "?", dict.fromkeys((*COUNTERS, ABSORBED), 0))["malformed"] += n
         return out
 
     def component_info(self) -> dict[str, dict[str, Any]]:

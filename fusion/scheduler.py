@@ -142,6 +142,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         for sensor in self.sensors.values():
             if sensor.preprocessor is not None:
                 outs = sensor.preprocessor.flush()
+                sensor.counters["absorbed"] -= len(outs)     # fixes of messages it held (counted absorbed)
                 if self._deferred:
                     deferred, self._deferred = self._deferred, []
                     yield from deferred
@@ -171,8 +172,11 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         try:
             decoded = sensor.decoder.decode(msg)
             if decoded is None:
+                sensor.counters["absorbed"] += 1     # the decoder dropped it (fusion.run_stats.ABSORBED)
                 return
             outs = [decoded] if sensor.preprocessor is None else sensor.preprocessor.feed(decoded)
+            if sensor.preprocessor is not None:      # held for a fix, or combined into the fix(es) it emits
+                sensor.counters["absorbed"] += 1 - len(outs)
         except MalformedMessage as exc:
             yield self._bad(sensor, msg, exc)
             return
@@ -263,6 +267,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             try:
                 decoded = sensor.decoder.decode(msg)
                 if decoded is None:
+                    sensor.counters["absorbed"] += 1
                     continue
                 u = self.process.input_from(decoded)
             except MalformedMessage as exc:
@@ -324,6 +329,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             yield self._bad(sensor, msg, _failed(sensor.model, exc))
             return
         if obs is None:
+            sensor.counters["absorbed"] += 1
             return
         if self._pending:
             yield from self._flush_inputs(until=obs.t)

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar, Generic, Mapping, TypeVar
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, ValidationInfo, field_validator
 
 from fusion.errors import MalformedMessage
 
@@ -19,12 +19,60 @@ __all__ = ["Params", "BuildContext", "Component", "ProcessModel", "MeasurementMo
            "Decoder", "Solver", "Source", "Sink", "Simulator"]
 
 
+def _nonfinite(value: Any, path: str, allow_inf: bool) -> str | None:
+    """The path and value of the first non-finite float in ``value`` (nested in lists, tuples, sets, dict
+    values, numpy arrays), or None; with ``allow_inf``, only a NaN counts."""
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        if v != v or (not allow_inf and v - v != 0.0):
+            return f"{path}: {v}"
+        return None
+    if isinstance(value, BaseModel):   # validated by its own model
+        return None
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind in "fc":
+            bad = np.isnan(value) if allow_inf else ~np.isfinite(value)
+            if bad.any():
+                at = tuple(int(i) for i in np.argwhere(bad)[0])
+                return f"{path}.{'.'.join(map(str, at))}: {value[at]}"
+        return None
+    if isinstance(value, dict):
+        items = value.items()
+    elif isinstance(value, (list, tuple, set, frozenset)):
+        items = enumerate(value)
+    else:
+        return None
+    for k, v in items:
+        found = _nonfinite(v, f"{path}.{k}", allow_inf)
+        if found:
+            return found
+    return None
+
+
 class Params(BaseModel):
     """Base of every plugin's Params model: unknown keys are errors, and every float (nested in lists,
-    tuples and dicts too) must be finite: NaN or inf is an error naming the field. A field that means
-    something by inf says so in its description and opts out with ``Field(..., allow_inf_nan=True)``."""
+    tuples and dicts too, typed or not: ``dict``, ``list``, ``Any``, numpy arrays) must be finite: NaN or inf
+    is an error naming the field. A field that means something by inf says so in its description and opts
+    in with ``Field(..., allow_inf_nan=True)``: inf is then accepted, NaN still is not."""
 
     model_config = ConfigDict(extra="forbid", arbitrary_types_allowed=True, allow_inf_nan=False)
+
+    @field_validator("*", mode="after")
+    @classmethod
+    def _finite(cls, value: Any, info: ValidationInfo) -> Any:
+        # pydantic checks typed floats (allow_inf_nan=False); this covers what it does not: floats inside an
+        # untyped dict/list/Any, and NaN in a field that allows inf
+        if value is None or isinstance(value, (int, str)):
+            return value
+        f = cls.model_fields.get(info.field_name) if info.field_name else None
+        allow_inf = f is not None and any(getattr(m, "allow_inf_nan", None) is True for m in f.metadata)
+        found = _nonfinite(value, info.field_name or "value", allow_inf)
+        if found:
+            rule = ("NaN is never a parameter (this field allows inf)" if allow_inf
+                    else "NaN and inf are not parameters (a field that means something by inf opts in with "
+                         "allow_inf_nan=True)")
+            raise ValueError(f"{found}: {rule}")
+        return value
 
 
 @dataclass

@@ -28,24 +28,31 @@ def describe_params(cls) -> list[tuple[str, str, str, str]]:
 
 def run(args: argparse.Namespace) -> int:
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
+    from rich.text import Text
 
     from fusion.registry import default_registry
 
-    reg = default_registry()
+    reg = default_registry(warn=False)   # the broken plugins are listed here, not warned about
     console = Console()
-    entries = reg.entries(args.kind)
+    entries = reg.entries(args.kind)   # resolves the lazy ones: a broken target joins reg.broken
+    broken = [p for p in reg.broken if args.kind is None or p.kind in (None, args.kind)]
     if not args.verbose:
         table = Table(title="fusion plugins")
         for col in ("kind", "name", "provider", "summary"):
             table.add_column(col)
         for e in entries:
             doc = inspect.getdoc(e.cls) or ""
-            table.add_row(e.kind, e.name, e.provider, doc.splitlines()[0] if doc else "")
+            # plugin text is shown as it is, never read as rich markup ("Height [m]", a "[/x]")
+            table.add_row(*(Text(v) for v in (e.kind, e.name, e.provider, doc.splitlines()[0] if doc else "")))
+        for p in broken:
+            table.add_row(Text(p.kind or "(plugin)"), Text(p.name or p.plugin), Text(p.package or p.plugin),
+                          Text(f"BROKEN: {p.what}", style="red"))
         console.print(table)
-        return 0
+        return _report_broken(broken)
     for e in entries:
-        console.rule(f"[bold]{e.kind}[/bold] {e.name}  [dim]{e.provider}[/dim]")
+        console.rule(f"[bold]{e.kind}[/bold] {escape(e.name)}  [dim]{escape(e.provider)}[/dim]")
         console.print(inspect.getdoc(e.cls) or "(no docstring)", markup=False)
         rows = describe_params(e.cls)
         if rows:
@@ -53,6 +60,19 @@ def run(args: argparse.Namespace) -> int:
             for col in ("parameter", "type", "default", "description"):
                 t.add_column(col)
             for r in rows:
-                t.add_row(*r)
+                t.add_row(*(Text(v) for v in r))
             console.print(t)
-    return 0
+    for p in broken:
+        console.rule(f"[bold red]broken[/] {escape(p.kind or 'plugin')} {escape(p.name or p.plugin)}  "
+                     f"[dim]{escape(p.package or p.plugin)}[/dim]")
+        console.print(p.what, markup=False)
+    return _report_broken(broken)
+
+
+def _report_broken(broken) -> int:
+    """One line on stderr for each broken plugin (what, where, package, how to block it); exit code 2 if any."""
+    import sys
+
+    for p in broken:
+        print(f"fusion plugins: error: {p.message()}", file=sys.stderr)
+    return 2 if broken else 0

@@ -44,7 +44,7 @@ def print_smoothed(summary: dict[str, Any], console: Console | None = None) -> N
     console.print()
     console.print(f"smoother: {sm.get('smoother')} ({sm.get('filter')}{lag}), {sm.get('nodes', 0):,} nodes, "
                   f"backward {sm.get('backward_wall_s', 0.0):.2f} s against forward "
-                  f"{sm.get('forward_wall_s', 0.0):.2f} s{disk}")
+                  f"{sm.get('forward_wall_s', 0.0):.2f} s{disk}", markup=False)  # plugin names, shown as they are
     rows = comparison_rows(summary)
     if not rows:
         console.print("[dim]no truth in the input: no errors to compare[/]")

@@ -42,6 +42,17 @@ def test_malformed_lines_say_why(text, reason):
         parse_line(text)
 
 
+def test_a_bad_field_says_the_decoder_never_saw_it_and_how_a_raw_payload_passes():
+    with pytest.raises(MalformedMessage) as exc:
+        parse_line("1.0,uwb,B1@23.8d")
+    assert str(exc.value) == ("bad number 'B1@23.8d' (fields are numbers or labels: a letter or _, then letters, "
+                              "digits, _ . : - /; read before any decoder, which gets the raw text only when the "
+                              "values start with '$')")
+    # what is accepted is unchanged: labels and numbers split, a '$' payload whole (its checksum unchecked)
+    assert parse_line("1.0,uwb,B1:a/b-c,23.8").values == ("B1:a/b-c", 23.8)
+    assert parse_line("1.0,uwb,$B1@23.8d,x*00").values == ("$B1@23.8d,x*00",)
+
+
 def test_nmea_payload_kept_whole():
     m = parse_line("3.0,gps,$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47")
     assert m.values == ("$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47",)
