@@ -79,20 +79,22 @@ def run(args: argparse.Namespace) -> int:
     from fusion.sinks.summary import write_summary_json
     from fusion.sources.select import open_sink, open_source
 
+    refuse_empty(args, "--input", "--output", "--summary-json", "--plot")
     override = filter_override(args.config, args.filter, args.filter_param)
     system = load_system(args.config, filter_override=override)
-    source = args.input or system.recording
+    source = system.recording if args.input is None else args.input
     if source is None:
         raise ConfigError(f"{args.config}: no 'recording:' in the config; give one with --input LOG")
     from fusion.outputs import check_outputs
 
+    src = open_source(str(source), system.registry)
+    # the files the source reads, by their paths (a file:// URL, a plugin's scheme): never an output
     check_outputs({"--output": args.output, "--summary-json": args.summary_json, "--plot": args.plot},
-                  [args.config, source], force=args.force)
+                  [args.config, source, *src.input_paths()], force=args.force)
     if args.plot:
         from fusion.sinks.plot import plot_format
 
         plot_format(args.plot)
-    src = open_source(str(source), system.registry)
     sinks = [open_sink(args.output, system.layout, system.registry)] if args.output else []
     plot = None
     if args.plot:
@@ -130,6 +132,14 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 3
     return 0
+
+
+def refuse_empty(args: argparse.Namespace, *options: str) -> None:
+    """ConfigError for an option given as the empty text (``--input "$LOG"`` with LOG unset): never read
+    as "not given", which would silently replay the config's own recording or drop an output."""
+    for option in options:
+        if getattr(args, option.lstrip("-").replace("-", "_"), None) == "":
+            raise ConfigError(f"{option} '': empty (an unset shell variable?); give a path, or leave {option} out")
 
 
 def _smoothing(args: argparse.Namespace, system) -> dict[str, Any] | None:
