@@ -135,3 +135,128 @@ def test_an_empty_input_or_output_is_exit_2_never_the_configs_own_recording(work
     err = capsys.readouterr().err
     assert "'': empty" in err and len(err.strip().splitlines()) == 1
     assert not (tmp / "s.json").exists()
+
+
+# --------------------------------------------------------------------------- 2. write errors, full disks
+def _enospc_after(monkeypatch, nbytes: int):
+    """Make every temporary output file (fusion.outputs) fail with ENOSPC once ``nbytes`` are written:
+    a full disk without root (a real tmpfs of 64k behaves the same)."""
+    import fusion.outputs as outputs
+
+    real_fdopen = os.fdopen
+
+    class Full:
+        def __init__(self, f):
+            self._f, self._n = f, 0
+
+        def write(self, data):
+            self._n += len(data)
+            if self._n > nbytes:
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+            return self._f.write(data)
+
+        def __getattr__(self, name):
+            return getattr(self._f, name)
+
+    monkeypatch.setattr(outputs.os, "fdopen", lambda *a, **k: Full(real_fdopen(*a, **k)))
+
+
+def test_a_full_device_is_one_line_exit_2_after_the_summary(work, capsys):
+    tmp, cfg, rec = work
+    if not os.path.exists("/dev/full"):
+        pytest.skip("no /dev/full")
+    summary = tmp / "s.json"
+    assert main(["run", str(cfg), "-o", "/dev/full", "--summary-json", str(summary)]) == 2
+    cap = capsys.readouterr()
+    assert cap.err.strip().splitlines()[-1] == \
+        "fusion run: error: cannot write estimates to /dev/full: No space left on device"
+    assert "internal error" not in cap.err and "Errors against truth" in cap.out  # the summary is kept
+    assert summary.exists()
+
+
+def test_a_full_disk_leaves_no_cut_file_and_no_temporary(work, monkeypatch, capsys):
+    tmp, cfg, rec = work
+    _enospc_after(monkeypatch, 20_000)
+    out = tmp / "out.csv"
+    assert main(["run", str(cfg), "-q", "-o", str(out), "--summary-json", str(tmp / "s.json")]) == 2
+    assert "cannot write estimates to" in capsys.readouterr().err
+    assert not out.exists() and _leftovers(tmp) == []
+    old = tmp / "old.csv"
+    old.write_text("a good file\n")
+    assert main(["run", str(cfg), "-q", "-o", str(old), "--force"]) == 2
+    assert old.read_text() == "a good file\n" and _leftovers(tmp) == []  # --force never trades it for a cut one
+
+
+def test_simulate_on_a_full_disk_keeps_the_old_recording(tmp_path, monkeypatch, capsys):
+    _enospc_after(monkeypatch, 10_000)
+    log = tmp_path / "sim.log"
+    assert main(["simulate", str(ROOT / "scenarios" / "example_2d.yaml"), "-o", str(log)]) == 2
+    assert "cannot write the recording to" in capsys.readouterr().err
+    assert not log.exists() and _leftovers(tmp_path) == []
+    log.write_text("# a good recording\n")
+    assert main(["simulate", str(ROOT / "scenarios" / "example_2d.yaml"), "-o", str(log), "--force"]) == 2
+    assert log.read_text() == "# a good recording\n" and _leftovers(tmp_path) == []
+
+
+def test_output_file_discards_on_an_exception_and_on_a_failed_close(tmp_path, monkeypatch):
+    from fusion.errors import FusionError
+    from fusion.outputs import OutputFile, write_text
+
+    target = tmp_path / "t.txt"
+    with pytest.raises(RuntimeError):
+        with OutputFile(target) as out:
+            out.write("half")
+            raise RuntimeError("the writer failed")
+    assert not target.exists() and _leftovers(tmp_path) == []
+    _enospc_after(monkeypatch, 3)
+    with pytest.raises(FusionError, match=r"cannot write summary to .*t\.txt: No space left on device"):
+        write_text(target, "more than three bytes", what="summary")
+    assert not target.exists() and _leftovers(tmp_path) == []
+
+
+# --------------------------------------------------------------------------- 7. permission bits
+def test_force_keeps_the_replaced_files_permission_bits(work):
+    tmp, cfg, rec = work
+    out, summary = tmp / "ro.csv", tmp / "ro.json"
+    for p, mode in ((out, 0o444), (summary, 0o640)):
+        p.write_text("old\n")
+        p.chmod(mode)
+    assert main(["run", str(cfg), "-q", "-o", str(out), "--summary-json", str(summary), "--force"]) == 0
+    assert out.read_text().startswith("t,px") and stat.S_IMODE(out.stat().st_mode) == 0o444
+    assert stat.S_IMODE(summary.stat().st_mode) == 0o640
+    new = tmp / "new.csv"
+    assert main(["run", str(cfg), "-q", "-o", str(new)]) == 0
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(new.stat().st_mode) == 0o666 & ~umask
+
+
+# --------------------------------------------------------------------------- 3. stdout: -o -, closed pipes
+def _fusion(*argv: str, head: int | None = None) -> tuple[int, bytes, bytes]:
+    """Run the fusion CLI in a subprocess; with ``head``, its stdout goes through ``head -n HEAD``."""
+    cmd = [sys.executable, "-m", "fusion.cli", *argv]
+    if head is None:
+        p = subprocess.run(cmd, capture_output=True, timeout=120)
+        return p.returncode, p.stdout, p.stderr
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    h = subprocess.run(["head", "-n", str(head)], stdin=proc.stdout, capture_output=True, timeout=120)
+    proc.stdout.close()
+    err = proc.stderr.read()
+    return proc.wait(60), h.stdout, err
+
+
+def test_dash_output_is_only_csv_and_the_summary_goes_to_stderr(work):
+    tmp, cfg, rec = work
+    code, out, err = _fusion("run", str(cfg), "-o", "-")
+    assert code == 0
+    lines = out.decode().splitlines()
+    assert lines[0].startswith("t,px,py") and all(ln[0].isdigit() for ln in lines[1:])
+    assert b"Errors against truth" in err
+
+
+@pytest.mark.parametrize("argv", [("-o", "-", "-q"), ()])
+def test_a_closed_stdout_ends_quietly_with_141(work, argv):
+    tmp, cfg, rec = work
+    code, out, err = _fusion("run", str(cfg), *argv, head=2)
+    assert len(out.splitlines()) == 2
+    assert code == 141 and err == b"", err.decode()
