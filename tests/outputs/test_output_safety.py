@@ -158,7 +158,11 @@ def _enospc_after(monkeypatch, nbytes: int):
         def __getattr__(self, name):
             return getattr(self._f, name)
 
-    monkeypatch.setattr(outputs.os, "fdopen", lambda *a, **k: Full(real_fdopen(*a, **k)))
+    def fdopen(fd, mode="r", *args, **kwargs):  # only the temporary files OutputFile writes
+        f = real_fdopen(fd, mode, *args, **kwargs)
+        return Full(f) if mode.startswith("w") else f
+
+    monkeypatch.setattr(outputs.os, "fdopen", fdopen)
 
 
 def test_a_full_device_is_one_line_exit_2_after_the_summary(work, capsys):
