@@ -158,8 +158,8 @@ class CsvWriter:
             self.fh.flush()
         except OSError as exc:
             self._undo()
-            raise ConfigError(f"{self.path}: cannot write the results there ({exc.strerror or exc}); the rows "
-                              "written before are kept, a rerun resumes from them") from None
+            kept = "; the complete rows are kept, a rerun resumes from them" if self.path.exists() else ""
+            raise ConfigError(f"{self.path}: cannot write the results there ({exc.strerror or exc}){kept}") from None
         self._good = self.fh.tell()
 
     def _undo(self) -> None:
