@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:   # stdout's reader went away (| head): end quietly, as other tools do
         return _end_stdout_closed()
     except Exception as exc:  # internal error: a bug, not the user's fault
-        if isinstance(exc.__cause__, BrokenPipeError):  # wrapped by the run loop (a plugin printing)
+        if isinstance(exc.__cause__, BrokenPipeError) and _stdout_gone():  # a plugin printing, wrapped by the run loop
             return _end_stdout_closed()
         if args.debug:
             raise
@@ -88,6 +88,19 @@ def _stdout_closed(exc: BaseException) -> bool:
     """Whether ``exc`` is fusion.outputs.StdoutClosed (a sink's write to ``-`` whose reader went away)."""
     outputs = sys.modules.get("fusion.outputs")  # loaded by whatever raised it; not imported at start-up
     return outputs is not None and isinstance(exc, outputs.StdoutClosed)
+
+
+def _stdout_gone() -> bool:
+    """Whether stdout is a pipe whose reader has gone (poll reports an error on it): a BrokenPipeError of
+    something else (a plugin's socket) stays an internal error."""
+    try:
+        import select
+
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(ev & select.POLLERR for _, ev in poller.poll(0))
+    except (OSError, ValueError, AttributeError):
+        return False
 
 
 def _end_stdout_closed() -> int:

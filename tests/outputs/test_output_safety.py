@@ -264,3 +264,26 @@ def test_a_closed_stdout_ends_quietly_with_141(work, argv):
     code, out, err = _fusion("run", str(cfg), *argv, head=2)
     assert len(out.splitlines()) == 2
     assert code == 141 and err == b"", err.decode()
+
+
+class _PrintingSink:
+    """A plugin's sink that prints to stdout itself (not through OutputFile), whose reader went away."""
+
+    def on_estimate(self, estimate):
+        raise BrokenPipeError(errno.EPIPE, "Broken pipe")
+
+    def close(self):
+        pass
+
+
+@pytest.mark.parametrize("gone,code", [(True, 141), (False, 1)])
+def test_a_plugins_broken_pipe_is_quiet_only_when_stdout_is_gone(work, monkeypatch, capsys, gone, code):
+    import fusion.cli
+    import fusion.sources.select as select
+
+    tmp, cfg, rec = work
+    monkeypatch.setattr(select, "open_sink", lambda *a, **k: _PrintingSink())
+    monkeypatch.setattr(fusion.cli, "_stdout_gone", lambda: gone)
+    assert main(["run", str(cfg), "-q", "-o", str(tmp / "x.csv")]) == code
+    err = capsys.readouterr().err
+    assert (err == "") if gone else ("internal error" in err)
