@@ -231,6 +231,8 @@ def write_parquet(path: str | Path, rows: list[dict[str, Any]], cols: list[str])
     tmp = Path(str(path) + ".tmp")
     try:
         pq.write_table(table, tmp)
+        if os.path.exists(path):   # the rewritten results keep the file's permission bits
+            os.chmod(tmp, stat.S_IMODE(os.stat(path).st_mode))
         os.replace(tmp, path)
     except OSError as exc:
         raise ConfigError(f"{path}: cannot write the results there ({exc.strerror or exc})") from None

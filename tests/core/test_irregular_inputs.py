@@ -127,3 +127,16 @@ def test_a_full_disk_from_the_sweep_command_is_exit_2(tmp_path, monkeypatch, cap
     assert main(["sweep", CONFIG, "--seeds", "1", "-o", str(out), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "cannot write the results there" in err and "internal error" not in err and not out.exists()
+
+
+def test_a_rewritten_parquet_keeps_its_mode_and_leaves_no_temporary(tmp_path):
+    pytest.importorskip("pyarrow")
+    import stat
+
+    from fusion.sweep.results import write_parquet
+
+    out = tmp_path / "r.parquet"
+    write_parquet(out, [{"key": "a", "x": 1.0}], ["key", "x"])
+    out.chmod(0o640)
+    write_parquet(out, [{"key": "a", "x": 1.0}, {"key": "b", "x": 2.0}], ["key", "x"])
+    assert stat.S_IMODE(out.stat().st_mode) == 0o640 and sorted(p.name for p in tmp_path.iterdir()) == ["r.parquet"]
