@@ -1,7 +1,9 @@
 """The ``fusion`` command: one subcommand a module in fusion.commands (each has ``register(subparsers)``).
 
 Exit codes: 0 success; 2 bad usage, bad config or bad input (one line naming file, line/field and what
-is wrong; no traceback unless ``--debug``); 1 internal error.
+is wrong; no traceback unless ``--debug``); 1 internal error; 141 (128 + SIGPIPE, what a shell reports for
+a tool that a closed pipe ended) when the reader of standard output went away (``fusion run -o - | head``):
+no message, no traceback, stdout pointed at the null device so that the exit's flush cannot fail again.
 """
 from __future__ import annotations
 
@@ -86,6 +88,8 @@ def main(argv: list[str] | None = None) -> int:
             warnings.showwarning = _warning_printer(args.command)
             return int(args.func(args) or 0)
     except FusionError as exc:
+        if _stdout_closed(exc):
+            return _end_stdout_closed()
         if args.debug:
             raise
         print(f"fusion {args.command}: error: {exc}", file=sys.stderr)
@@ -93,14 +97,41 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
-    except BrokenPipeError:
-        return 0
+    except BrokenPipeError:   # stdout's reader went away (| head): end quietly, as other tools do
+        return _end_stdout_closed()
     except Exception as exc:  # internal error: a bug, not the user's fault
+        if isinstance(exc.__cause__, BrokenPipeError) and _stdout_gone():  # a plugin printing, wrapped by the run loop
+            return _end_stdout_closed()
         if args.debug:
             raise
         print(f"fusion {args.command}: internal error: {type(exc).__name__}: {exc} (rerun with --debug for a traceback)",
               file=sys.stderr)
         return 1
+
+
+def _stdout_closed(exc: BaseException) -> bool:
+    """Whether ``exc`` is fusion.outputs.StdoutClosed (a sink's write to ``-`` whose reader went away)."""
+    outputs = sys.modules.get("fusion.outputs")  # loaded by whatever raised it; not imported at start-up
+    return outputs is not None and isinstance(exc, outputs.StdoutClosed)
+
+
+def _stdout_gone() -> bool:
+    """Whether stdout is a pipe whose reader has gone (poll reports an error on it): a BrokenPipeError of
+    something else (a plugin's socket) stays an internal error."""
+    try:
+        import select
+
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(ev & select.POLLERR for _, ev in poller.poll(0))
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def _end_stdout_closed() -> int:
+    from fusion.outputs import stdout_closed
+
+    return stdout_closed()
 
 
 if __name__ == "__main__":

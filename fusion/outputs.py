@@ -7,10 +7,18 @@
   when complete (a reader never sees half a file; a symlink is followed, so the link stays and its
   target is replaced); ``-`` is stdout; a FIFO, a character device (a serial port, ``/dev/null``) or a
   socket is written in place as a stream and never replaced. An OSError (disk full, no permission) is a
-  ``FusionError`` naming the file: one line, exit 2.
+  ``FusionError`` naming the file: one line, exit 2; the temporary file is removed then, so a failed write
+  never leaves a cut file under the final name (nor a hidden ``.NAME.XXXX.tmp``). A replaced file keeps its
+  permission bits (a read-only 0444 file stays 0444). Standard output closed by its reader (``| head``) is
+  ``StdoutClosed``: the command ends quietly (``stdout_closed``: exit 141, as a tool ended by SIGPIPE).
+- ``write_text``: a whole text at once through an ``OutputFile``.
+
+Plugins write their files through ``OutputFile`` too (exported as ``fusion.api.OutputFile``;
+docs/writing-plugins.md, "A sink").
 """
 from __future__ import annotations
 
+import errno
 import os
 import stat
 import sys
@@ -20,7 +28,29 @@ from typing import IO, Iterable, Mapping
 
 from fusion.errors import ConfigError, FusionError
 
-__all__ = ["check_outputs", "OutputFile", "is_stream", "write_text"]
+__all__ = ["check_outputs", "OutputFile", "is_stream", "write_text", "StdoutClosed", "stdout_closed"]
+
+#: Exit status of a command whose standard output was closed by its reader: 128 + SIGPIPE, what a shell
+#: reports for a tool that SIGPIPE ended (``seq 1000000 | head -1``), so ``set -o pipefail`` sees it.
+EXIT_STDOUT_CLOSED = 141
+
+
+class StdoutClosed(FusionError):
+    """Standard output was closed by its reader (``fusion run -o - | head -3``): not an error of the user's
+    input; the CLI ends quietly with ``stdout_closed()``."""
+
+
+def stdout_closed() -> int:
+    """End a command whose standard output was closed by its reader: point file descriptor 1 at the null
+    device, so that Python's last flush at exit cannot fail again (the recipe of the Python documentation,
+    "Note on SIGPIPE"), and return the exit status, EXIT_STDOUT_CLOSED (141)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):  # no real stdout (a test's capture): nothing to flush
+        pass
+    return EXIT_STDOUT_CLOSED
 
 
 def is_stream(path: str | os.PathLike) -> bool:
@@ -68,9 +98,12 @@ def check_outputs(outputs: Mapping[str, str | os.PathLike | None], inputs: Itera
 
 
 class OutputFile:
-    """A text (or binary) output written safely (see the module). Use as a context manager or call
-    ``close()``: the file appears under its name once closed (also after an error: what was written is
-    kept); ``discard()`` drops it instead."""
+    """A text (or binary) output written safely (see the module): ``write(data)``, ``flush()``, then
+    ``close()``, and the file appears under its name (a crash before ``close()`` leaves only the temporary
+    name; a caller that wants to keep what a crashed run wrote calls ``close()`` then). ``discard()`` drops
+    it instead. A failed ``write``, ``flush`` or ``close`` (disk full) discards it and raises FusionError
+    naming the file. As a context manager: closed at the end of the block, discarded when the block
+    raises."""
 
     def __init__(self, path: str | os.PathLike, mode: str = "w", what: str = "output", line_buffered: bool = False):
         self.path = os.fspath(path)
@@ -107,25 +140,45 @@ class OutputFile:
         try:
             self.file.write(data)
         except OSError as exc:
-            raise FusionError(f"cannot write {self.what} to {self.path}: {exc.strerror or exc}") from None
+            raise self._failed(exc) from None
+        except (AttributeError, ValueError):  # closed (or discarded after a failed write)
+            if self.file is None or self.file.closed:
+                raise FusionError(f"cannot write {self.what} to {self.path}: it is closed") from None
+            raise
+
+    def flush(self) -> None:
+        """Flush what is buffered to the file (a stream: to its reader)."""
+        f = self.file
+        if f is None:
+            return
+        try:
+            f.flush()
+        except OSError as exc:
+            raise self._failed(exc) from None
+
+    def _failed(self, exc: OSError) -> FusionError:
+        """The error of a failed write, after discarding the output (nothing cut is left behind)."""
+        self.discard()
+        if self.path == "-" and (isinstance(exc, BrokenPipeError) or exc.errno == errno.EPIPE):
+            return StdoutClosed(f"{self.what}: standard output was closed by its reader")
+        return FusionError(f"cannot write {self.what} to {self.path}: {exc.strerror or exc}")
 
     def close(self) -> None:
         f = getattr(self, "file", None)
         if f is None:
             return
-        self.file = None  # type: ignore[assignment]
         try:
             if self._owns:
                 f.close()
             else:
                 f.flush()
+            self.file = None  # type: ignore[assignment]
             if self._tmp is not None:
-                mode = 0o666 & ~_umask()
-                os.chmod(self._tmp, mode)
+                os.chmod(self._tmp, _mode_for(self._target))
                 os.replace(self._tmp, self._target)
                 self._tmp = None
         except OSError as exc:
-            raise FusionError(f"cannot write {self.what} to {self.path}: {exc.strerror or exc}") from None
+            raise self._failed(exc) from None
 
     def discard(self) -> None:
         f = getattr(self, "file", None)
@@ -145,14 +198,26 @@ class OutputFile:
     def __enter__(self) -> "OutputFile":
         return self
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is not None:
+            self.discard()   # the block failed: what it wrote is not the whole output
+        else:
+            self.close()
 
 
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+def _mode_for(target: str) -> int:
+    """Permission bits of the file a new one replaces (so a read-only file stays read-only; the owner
+    cannot be kept without privileges), else those of a new file (0666 less the umask)."""
+    try:
+        return stat.S_IMODE(os.stat(target).st_mode)
+    except OSError:
+        return 0o666 & ~_umask()
 
 
 def write_text(path: str | os.PathLike, text: str, what: str = "output") -> None:

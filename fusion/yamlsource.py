@@ -199,17 +199,52 @@ class LocatedYAML:
         return ConfigError(f"{where}: {msg}")
 
 
-def load_yaml(path: str | Path) -> LocatedYAML:
-    """Read a YAML file; ConfigError with file and line for a missing file or a syntax error."""
+#: Largest YAML file read (bytes): a config or scenario is a few kB; the bound keeps a wrong path (a log,
+#: a disk image) from filling the memory.
+MAX_YAML_BYTES = 10 * 1024 * 1024
+
+
+def read_yaml_text(path: str | Path, what: str = "file") -> str:
+    """The UTF-8 text of a YAML file (a config, scenario or mapping: ``what`` names it in messages).
+    ConfigError, naming the path, for a missing file, a directory, anything that is not a regular file (a
+    device such as /dev/zero, a FIFO: reading it would never end or fill the memory), a file over
+    MAX_YAML_BYTES, or text that is not UTF-8."""
+    import os
+    import stat as stat_
+
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))  # a FIFO without a writer: no hang
     except FileNotFoundError:
-        raise ConfigError(f"{p}: no such file") from None
+        raise ConfigError(f"{p}: no such {what}") from None
     except IsADirectoryError:
         raise ConfigError(f"{p}: is a directory, expected a YAML file") from None
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read the {what}: {exc.strerror or exc}") from None
+    with os.fdopen(fd, "rb") as fh:
+        mode = os.fstat(fd).st_mode
+        if stat_.S_ISDIR(mode):
+            raise ConfigError(f"{p}: is a directory, expected a YAML file")
+        if not stat_.S_ISREG(mode):
+            kind = ("a character device" if stat_.S_ISCHR(mode) else "a FIFO" if stat_.S_ISFIFO(mode)
+                    else "a block device" if stat_.S_ISBLK(mode) else "a socket" if stat_.S_ISSOCK(mode)
+                    else "not a regular file")
+            raise ConfigError(f"{p}: {kind}, not a readable regular file; give a YAML {what}")
+        data = fh.read(MAX_YAML_BYTES + 1)
+    if len(data) > MAX_YAML_BYTES:
+        raise ConfigError(f"{p}: larger than {MAX_YAML_BYTES // (1024 * 1024)} MB, too large for a YAML {what} "
+                          "(a recording or a binary file given in its place?)")
+    try:
+        return data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{p}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+
+
+def load_yaml(path: str | Path, what: str = "file") -> LocatedYAML:
+    """Read a YAML file (through ``read_yaml_text``: a regular file of at most MAX_YAML_BYTES); ConfigError
+    with file and line for a missing or unreadable file or a syntax error."""
+    p = Path(path)
+    text = read_yaml_text(p, what)
     doc = LocatedYAML.from_text(text, str(p))
     if not isinstance(doc.data, dict):
         raise ConfigError(f"{p}: expected a mapping of keys at the top level, got {type(doc.data).__name__}")

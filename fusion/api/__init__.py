@@ -10,7 +10,8 @@ Modules: ``state`` (StateLayout, Belief), ``messages`` (Message, Observation, Fi
 Estimate), ``gates`` (GateDecision, GateRun: a gate's verdict, and its state and counts in one run),
 ``components`` (the bases of every kind), ``capabilities`` (the optional capabilities, one Protocol each),
 ``importing`` (the importer kind); the errors live in fusion.errors. Everything is importable from
-``fusion.api`` itself.
+``fusion.api`` itself, also ``OutputFile`` (fusion.outputs: how a sink writes its file, atomically, in
+place for a FIFO or device, errors as one line; docs/writing-plugins.md, "A sink").
 """
 from __future__ import annotations
 
@@ -35,11 +36,19 @@ from .state import Belief, Block, BlockKind, StateLayout
 _SIMULATION = ("SensorSimulator", "SimContext", "SensorOutput", "SimParams", "sample_times")
 
 
+#: The output helpers (``fusion.outputs``) a sink writes its file with; loaded on first use (start-up).
+_OUTPUTS = ("OutputFile", "StdoutClosed", "is_stream")
+
+
 def __getattr__(name: str):
     if name in _SIMULATION:
         from fusion.simulate import base
 
         return getattr(base, name)
+    if name in _OUTPUTS:
+        from fusion import outputs
+
+        return getattr(outputs, name)
     raise AttributeError(f"module 'fusion.api' has no attribute {name!r}")
 
 
@@ -55,5 +64,5 @@ __all__ = [
     "UsesInput", "PseudoMeasurement", "PredictsInputRuns", "HasThreshold", "KeepsGateState", "ReadsBelief",
     "ReportsInfo", "Opens", "Closes", "ReportsIdle", "ReportsStatus", "ReceivesEvents", "CAPABILITIES",
     "CapabilityWarning", "has", "capabilities_of", "near_misses",
-    *_SIMULATION,
+    *_SIMULATION, *_OUTPUTS,
 ]

@@ -312,6 +312,15 @@ class Source(Component[P]):
         first = next(iter(type(self.params).model_fields), None)
         return str(getattr(self.params, first, self.name)) if first else self.name
 
+    def input_paths(self) -> tuple[str, ...]:
+        """The local files this source reads (default: none), as paths. ``fusion run`` and ``fusion tui``
+        refuse an output (``--output``, ``--summary-json``, ``--plot``, ``--record``) that is one of them,
+        also through a link, ``--force`` or not: an output never replaces an input. A source that reads a
+        file (a recording, a capture a plugin replays, however its URL names it: ``file://PATH``,
+        ``pcap:///PATH``) returns its path; one that reads a port, a socket or standard input returns ().
+        Called before the source is opened."""
+        return ()
+
     def lines(self):  # -> Iterator[str]
         raise NotImplementedError
 

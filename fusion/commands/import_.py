@@ -102,7 +102,11 @@ def run(args: argparse.Namespace) -> int:
     if src.is_dir():
         raise InputError(f"{src}: is a folder, not a log file")
     if args.map and not Path(args.map).is_file():
-        raise InputError(f"{args.map}: no such mapping file")
+        if not Path(args.map).exists():
+            raise InputError(f"{args.map}: no such mapping file")
+        what = "a folder" if Path(args.map).is_dir() else "a device, FIFO or socket"
+        raise InputError(f"--map {args.map}: {what}, not a readable regular file; give a mapping file "
+                         "(YAML, docs/import.md)")
     cls = choose_importer(default_registry(), str(src), args.format)
     sensors = _sensors(args.sensors)
     if sensors is not None and cls.sensors:

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from fusion.errors import ConfigError
+from fusion.errors import ConfigError, FusionError
 
 if TYPE_CHECKING:
     from fusion.api import Event
@@ -35,7 +35,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--smooth-lag", metavar="SECONDS", type=float, default=None,
                    help="fixed-lag smoother: each estimate SECONDS late, smoothed over that window")
     p.add_argument("--force", action="store_true", help="replace output files that exist")
-    p.add_argument("--quiet", "-q", action="store_true", help="no table on stdout")
+    p.add_argument("--quiet", "-q", action="store_true",
+                   help="no table on stdout (on stderr when an output is '-', so stdout holds only that output)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -79,21 +80,24 @@ def run(args: argparse.Namespace) -> int:
     from fusion.sinks.summary import write_summary_json
     from fusion.sources.select import open_sink, open_source
 
+    refuse_empty(args, "--input", "--output", "--summary-json", "--plot")
     override = filter_override(args.config, args.filter, args.filter_param)
     system = load_system(args.config, filter_override=override)
-    source = args.input or system.recording
+    source = system.recording if args.input is None else args.input
     if source is None:
         raise ConfigError(f"{args.config}: no 'recording:' in the config; give one with --input LOG")
     from fusion.outputs import check_outputs
 
+    src = open_source(str(source), system.registry)
+    # the files the source reads, by their paths (a file:// URL, a plugin's scheme): never an output
     check_outputs({"--output": args.output, "--summary-json": args.summary_json, "--plot": args.plot},
-                  [args.config, source], force=args.force)
+                  [args.config, source, *src.input_paths()], force=args.force)
     if args.plot:
         from fusion.sinks.plot import plot_format
 
         plot_format(args.plot)
-    src = open_source(str(source), system.registry)
-    sinks = [open_sink(args.output, system.layout, system.registry)] if args.output else []
+    guarded = [guard_sink(open_sink(args.output, system.layout, system.registry))] if args.output else []
+    sinks = guarded
     plot = None
     if args.plot:
         from fusion.sinks.plot_recorder import PlotRecorder
@@ -115,13 +119,18 @@ def run(args: argparse.Namespace) -> int:
     if args.summary_json:
         write_summary_json(args.summary_json, summary)
     if not args.quiet:
-        report.print_summary({k: v for k, v in summary.items() if k != "smoothed"})
+        # with an output on stdout ('-'), the table goes to stderr: stdout holds only that output
+        console = summary_console(stderr="-" in (args.output, args.summary_json, args.plot))
+        report.print_summary({k: v for k, v in summary.items() if k != "smoothed"}, console=console)
         if "smoothed" in summary:
             from fusion.smoothing.report import print_smoothed
 
-            print_smoothed(summary)
+            print_smoothed(summary, console=console)
     if plot is not None:
         plot.write(args.plot, system, result.stats, title=f"{system.spec.name} ({system.filter.name})")
+    for sink in guarded:
+        if sink.error is not None:  # the output failed (disk full): after the summary, one line, exit 2
+            raise sink.error
     if result.interrupted:
         print("fusion run: interrupted; the summary covers what was read", file=sys.stderr)
         return 130
@@ -134,6 +143,87 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 3
     return 0
+
+
+def summary_console(stderr: bool = False):
+    """The rich Console of the summary table: on stdout (stderr when an output is ``-``). A closed stdout
+    (``fusion run | head -2``) raises BrokenPipeError, which the CLI ends quietly (exit 141), where rich's
+    own Console would exit 1."""
+    from rich.console import Console
+
+    class _Console(Console):
+        def on_broken_pipe(self) -> None:
+            self.quiet = True
+            raise BrokenPipeError
+
+    return _Console(stderr=stderr)
+
+
+def refuse_empty(args: argparse.Namespace, *options: str) -> None:
+    """ConfigError for an option given as the empty text (``--input "$LOG"`` with LOG unset): never read
+    as "not given", which would silently replay the config's own recording or drop an output."""
+    for option in options:
+        if getattr(args, option.lstrip("-").replace("-", "_"), None) == "":
+            raise ConfigError(f"{option} '': empty (an unset shell variable?); give a path, or leave {option} out")
+
+
+class _KeepSinkError:
+    """A sink of the run whose FusionError (a write that failed: disk full, ``/dev/full``) is kept instead of
+    ending the run: the sink is closed (the estimates sink has already removed its cut temporary file) and
+    gets nothing more, the run goes on, its summary is written and printed, and ``run`` raises the kept
+    error last (one line naming the path, exit 2). A closed standard output (fusion.outputs.StdoutClosed)
+    still ends the run at once."""
+
+    def __init__(self, sink: Any):
+        self.sink = sink
+        self.error: FusionError | None = None
+
+    def _keep(self, exc: FusionError) -> None:
+        from fusion.outputs import StdoutClosed
+
+        if isinstance(exc, StdoutClosed):
+            raise exc
+        self.error = exc
+        try:
+            self.sink.close()
+        except FusionError:
+            pass
+
+    def on_estimate(self, estimate) -> None:
+        if self.error is None:
+            try:
+                self.sink.on_estimate(estimate)
+            except FusionError as exc:
+                self._keep(exc)
+
+    def close(self) -> None:
+        if self.error is None:
+            try:
+                self.sink.close()
+            except FusionError as exc:
+                from fusion.outputs import StdoutClosed
+
+                if isinstance(exc, StdoutClosed):
+                    raise
+                self.error = exc
+
+
+class _KeepSinkErrorEvents(_KeepSinkError):
+    """``_KeepSinkError`` of a sink that takes events too (fusion.api.ReceivesEvents)."""
+
+    def on_event(self, event) -> None:
+        if self.error is None:
+            try:
+                self.sink.on_event(event)
+            except FusionError as exc:
+                self._keep(exc)
+
+
+def guard_sink(sink: Any) -> _KeepSinkError:
+    """``sink`` wrapped so that its write errors are reported after the summary (``_KeepSinkError``)."""
+    from fusion.api import ReceivesEvents, has
+
+    return _KeepSinkErrorEvents(sink) if has(sink, ReceivesEvents) else _KeepSinkError(sink)
 
 
 def _smoothing(args: argparse.Namespace, system) -> dict[str, Any] | None:

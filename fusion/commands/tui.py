@@ -98,9 +98,10 @@ def _per_sensor(values: list[str], option: str, unit: str) -> dict[str, float]:
 def build_app(args: argparse.Namespace):
     """The app the arguments describe; every usage, config and input error is raised here, before the UI
     takes the terminal."""
-    from fusion.commands.run import filter_override
+    from fusion.commands.run import filter_override, refuse_empty
     from fusion.tui.app import make_app
 
+    refuse_empty(args, "--input", "--port", "--record")   # "$LOG" unset: never the config's own recording
     if args.record and not args.port:
         raise ConfigError("--record tees a live --port to a file; a replayed recording is already on disk")
     if args.port and args.speed is not None:
@@ -137,6 +138,10 @@ def build_app(args: argparse.Namespace):
         if not args.no_reconnect:
             options["reconnect"] = True
         source = open_source(args.port, device=True, **options)
+    if args.record:   # never a file the run reads (the config; a plugin's port reading a file), nor in no folder
+        from fusion.outputs import check_outputs
+
+        check_outputs({"--record": args.record}, [config, *source.input_paths()], force=True)
     speed = 1.0 if args.speed is None else args.speed
     return make_app(config, source, speed=speed, refresh_hz=args.refresh, filter_override=override, udp=args.udp,
                     expected_rates=rates, limits=limits, smooth_lag=lag)

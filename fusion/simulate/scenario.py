@@ -173,13 +173,10 @@ class Scenario(_Model):
 # --------------------------------------------------------------------------- loading and errors
 def load_scenario(path: str | Path) -> tuple[Scenario, str]:
     """Read and validate a scenario file; returns (scenario, its YAML text). Raises ConfigError."""
+    from fusion.yamlsource import read_yaml_text
+
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(f"{p}: no such scenario file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{p}: cannot read: {exc}") from None
+    text = read_yaml_text(p, "scenario file")  # a regular file, bounded: never /dev/zero into memory
     return parse_scenario(text, str(p)), text
 
 

@@ -8,7 +8,9 @@ stops at once leaves a valid file); JSON Lines has one object per line with the 
 numbers as ``null``. The file is line-buffered: every row is on disk as soon as it is written, under a
 temporary name beside the target (``.NAME.XXXX.tmp``) that is renamed to NAME when the run ends, so a
 run that crashes keeps everything it produced and a finished file is never half-written. ``-``, a FIFO or
-a device is written in place (fusion.outputs).
+a device is written in place (fusion.outputs). Every write goes through fusion.outputs.OutputFile: a failed
+one (a full disk, ``/dev/full``) removes the temporary file and is a FusionError naming the path (exit 2);
+standard output closed by its reader (``-o - | head``) is fusion.outputs.StdoutClosed.
 
 Built directly as ``EstimateWriter(path, layout)`` or from a config as the registered sink
 ``estimates`` (``EstimateWriter(params, context)`` with ``Params(path=..)`` and ``context.layout``).
@@ -16,11 +18,9 @@ Built directly as ``EstimateWriter(path, layout)`` or from a config as the regis
 from __future__ import annotations
 
 import csv
-import io
 import json
 import math
 import os
-import sys
 from pathlib import Path
 from typing import Literal
 
@@ -77,13 +77,12 @@ class EstimateWriter(Sink):
         self.layout = layout
         self.rows = 0
         self._columns: list[str] | None = None
-        self._file: io.TextIOBase | None = None
         self._owns = self.path != "-"
         # A regular file is written under a temporary name and renamed when the run closes it; a FIFO,
-        # device or '-' is written in place (fusion.outputs).
-        self._out = OutputFile(self.path, "w", what="estimates", line_buffered=True)
-        self._file = self._out.file
-        self._csv = csv.writer(self._file, lineterminator="\n") if self.format == "csv" else None
+        # device or '-' is written in place (fusion.outputs). Rows are written through the OutputFile, whose
+        # write() turns an OSError into one line naming the path and drops the cut temporary file.
+        self._out: OutputFile | None = OutputFile(self.path, "w", what="estimates", line_buffered=True)
+        self._csv = csv.writer(self._out, lineterminator="\n") if self.format == "csv" else None
         if layout is not None:
             self._start(layout.names)
 
@@ -96,13 +95,13 @@ class EstimateWriter(Sink):
 
     def _flush(self) -> None:
         # line buffering flushes on newline already; stdout may be block-buffered when piped
-        if not self._owns and self._file is not None:
-            self._file.flush()
+        if not self._owns and self._out is not None:
+            self._out.flush()
 
     @property
     def writing(self) -> str:
         """The file being written now: the temporary name until ``close()``, or the path of a stream."""
-        return self._out.temporary or self.path
+        return (self._out.temporary if self._out is not None else None) or self.path
 
     @property
     def columns(self) -> list[str] | None:
@@ -110,7 +109,7 @@ class EstimateWriter(Sink):
         return self._columns
 
     def on_estimate(self, estimate: Estimate) -> None:
-        if self._file is None:
+        if self._out is None:
             raise ValueError(f"estimate writer {self.path} is closed")
         b = estimate.belief
         x = b.x.tolist()
@@ -126,15 +125,14 @@ class EstimateWriter(Sink):
             vals = [estimate.t, *x, *sd]
             obj = {k: (v if math.isfinite(v) else None) for k, v in zip(self._columns, vals)}
             obj["reason"], obj["sensor"] = estimate.reason, estimate.sensor
-            self._file.write(json.dumps(obj) + "\n")
+            self._out.write(json.dumps(obj) + "\n")
         self.rows += 1
         self._flush()
 
     def close(self) -> None:
-        if self._file is None:
-            return
-        self._file = None
-        self._out.close()
+        out, self._out = self._out, None
+        if out is not None:
+            out.close()
 
     def __enter__(self) -> "EstimateWriter":
         return self

@@ -120,7 +120,18 @@ class RecordingSource(Source):
 
     @classmethod
     def from_url(cls, url: str, **options) -> "RecordingSource":
-        return cls(cls.Params(path=url[len("file://"):] if url.startswith("file://") else url, **options))
+        """``file:///abs/path``, ``file://localhost/abs/path``, ``file://rel/path`` (the scheme in any case),
+        ``-`` or a plain path."""
+        path = url
+        if url[:7].lower() == "file://":
+            path = url[7:]
+            if path[:10].lower() == "localhost/":
+                path = path[9:]
+        return cls(cls.Params(path=path, **options))
+
+    def input_paths(self) -> tuple[str, ...]:
+        """The recording's path (``file://PATH`` already resolved to PATH); none for standard input."""
+        return () if self.params.path == "-" else (self.params.path,)
 
     def lines(self) -> Iterator[str]:
         return open_lines(self.params.path)

@@ -7,6 +7,7 @@ import csv
 import io
 import math
 import os
+import stat
 from pathlib import Path
 from typing import Any, Iterable
 
@@ -27,11 +28,24 @@ def check_output(output: str, inputs: list[str]) -> None:
         raise ConfigError(f"-o {output}: results file must end in .csv or .parquet")
     if out.exists() and out.is_dir():
         raise ConfigError(f"-o {output}: is a directory")
+    _refuse_irregular(out, "-o ")
     if not out.parent.is_dir():
         raise ConfigError(f"-o {output}: no such directory {str(out.parent)!r}")
     for i in inputs:
         if out.exists() and Path(i).exists() and out.samefile(i):
             raise ConfigError(f"-o {output}: is the input {i} (it would be overwritten); use another file")
+
+
+def _refuse_irregular(path: Path, option: str = "") -> None:
+    """ConfigError when ``path`` exists (through a link) and is not a regular file: a device (/dev/zero
+    would fill the memory when resumed from), a FIFO (reading it waits for a writer), a socket."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return
+    if not stat.S_ISREG(mode) and not stat.S_ISDIR(mode):
+        raise ConfigError(f"{option}{path}: not a regular file (a device, FIFO or socket); a results file is a "
+                          ".csv or .parquet file the sweep appends to and resumes from: give a file name")
 
 
 def columns(param_keys: Iterable[str], sensors: Iterable[str], smooth: bool) -> list[str]:
@@ -68,6 +82,7 @@ def read_rows(path: str | Path) -> list[dict[str, Any]]:
     p = Path(path)
     if not p.exists():
         return []
+    _refuse_irregular(p)
     if p.suffix == ".parquet":
         pq = _pyarrow()
         if p.stat().st_size == 0:
@@ -110,7 +125,9 @@ class CsvWriter:
     def __init__(self, path: str | Path, cols: list[str]):
         self.path = Path(path)
         self.cols = cols
-        exists = self.path.exists() and self.path.stat().st_size > 0
+        _refuse_irregular(self.path)
+        existed = self.path.exists()
+        exists = existed and self.path.stat().st_size > 0
         if exists and _cut_header(self.path, cols):
             # an interrupted first write: part of this sweep's header and no row, so nothing to keep
             self.path.write_text("", encoding="utf-8")
@@ -125,19 +142,58 @@ class CsvWriter:
             self.fh = open(self.path, "a", newline="", encoding="utf-8")
         except OSError as exc:
             raise ConfigError(f"{self.path}: cannot write the results there ({exc.strerror})") from None
-        if exists and not _ends_with_newline(self.path):
-            self.fh.write("\n")       # a row cut by an interrupted sweep stays a line of its own (skipped)
+        self._created = not existed   # a failed write removes a file this sweep created
+        self._good = self.fh.tell()   # size up to the last complete row: a failed write is cut back to it
         self.w = csv.DictWriter(self.fh, fieldnames=cols, extrasaction="ignore")
+        if exists and not _ends_with_newline(self.path):
+            self._guarded(lambda: self.fh.write("\n"))  # a row cut by an interrupted sweep: a line of its own
         if not exists:
-            self.w.writeheader()
+            self._guarded(self.w.writeheader)
+
+    def _guarded(self, write) -> None:
+        """``write()`` then flush; on an OSError (disk full) the file is cut back to its last complete row
+        (removed when this sweep created it and no row was written) and ConfigError names it (exit 2)."""
+        try:
+            write()
             self.fh.flush()
+        except OSError as exc:
+            self._undo()
+            kept = "; the complete rows are kept, a rerun resumes from them" if self.path.exists() else ""
+            raise ConfigError(f"{self.path}: cannot write the results there ({exc.strerror or exc}){kept}") from None
+        self._good = self.fh.tell()
+
+    def _undo(self) -> None:
+        fh, self.fh = self.fh, None
+        try:
+            fh.close()
+        except OSError:
+            pass
+        try:
+            if self._created and self._good <= len(self._header()):
+                os.unlink(self.path)
+            else:
+                os.truncate(self.path, self._good)
+        except OSError:
+            pass
+
+    def _header(self) -> bytes:
+        buf = io.StringIO()
+        csv.DictWriter(buf, fieldnames=self.cols).writeheader()
+        return buf.getvalue().encode("utf-8")
 
     def write(self, row: dict[str, Any]) -> None:
-        self.w.writerow({k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in row.items()})
-        self.fh.flush()
+        if self.fh is None:
+            raise ConfigError(f"{self.path}: the results file is closed (a write failed)")
+        self._guarded(lambda: self.w.writerow({k: ("" if isinstance(v, float) and math.isnan(v) else v)
+                                               for k, v in row.items()}))
 
     def close(self) -> None:
-        self.fh.close()
+        if self.fh is not None:
+            try:
+                self.fh.close()
+            except OSError:
+                pass
+            self.fh = None
 
 
 def _cut_header(path: Path, cols: list[str]) -> bool:
@@ -175,6 +231,14 @@ def write_parquet(path: str | Path, rows: list[dict[str, Any]], cols: list[str])
     tmp = Path(str(path) + ".tmp")
     try:
         pq.write_table(table, tmp)
+        if os.path.exists(path):   # the rewritten results keep the file's permission bits
+            os.chmod(tmp, stat.S_IMODE(os.stat(path).st_mode))
         os.replace(tmp, path)
     except OSError as exc:
         raise ConfigError(f"{path}: cannot write the results there ({exc.strerror or exc})") from None
+    finally:
+        if tmp.exists():   # a failed write (disk full) leaves no temporary file beside the results
+            try:
+                tmp.unlink()
+            except OSError:
+                pass
