@@ -60,20 +60,22 @@ from fusion.api import Event, Message
 __all__ = ["ClockGuard"]
 
 
-_BLOCK = 8  # positive gaps of a sensor per spacing estimate (one median)
+_BLOCK = 8  # positive gaps of a sensor per spacing estimate (one median); the first blocks: 1, 2, 4
 
 
 class _Cadence:
     """A message spacing learned online: ``last`` the newest stamp fed (s), ``allow`` how far past it the
     next may be (s): ``k`` x the larger median of the last two blocks of gaps + the floor, at most
-    ``future_s``; the floor alone until a block is complete."""
+    ``future_s``; the floor alone before the first gap. Blocks of 1, 2 and 4 gaps, then ``_BLOCK``, so a
+    start-up is bounded from its first gap on."""
 
-    __slots__ = ("last", "allow", "gaps", "median")
+    __slots__ = ("last", "allow", "gaps", "due", "median")
 
     def __init__(self, floor: float):
         self.last = -math.inf
         self.allow = floor
         self.gaps: list[float] = []
+        self.due = 1          # gaps in the block being gathered
         self.median = 0.0
 
 
@@ -121,7 +123,7 @@ class ClockGuard:
         if gap > 0.0:
             if gap < math.inf:
                 c.gaps.append(gap)
-                if len(c.gaps) == _BLOCK:
+                if len(c.gaps) == c.due:
                     self._learn(c)
             c.last = t
         c = self._stream
@@ -129,7 +131,7 @@ class ClockGuard:
         if gap > 0.0:
             if gap < math.inf:
                 c.gaps.append(gap)
-                if len(c.gaps) == _BLOCK:
+                if len(c.gaps) == c.due:
                     self._learn(c)
             c.last = t
         return True
@@ -230,13 +232,14 @@ class ClockGuard:
             if gap > 0.0:
                 if gap < math.inf:
                     c.gaps.append(gap)
-                    if len(c.gaps) == _BLOCK:
+                    if len(c.gaps) == c.due:
                         self._learn(c)
                 c.last = t
 
     def _learn(self, c: _Cadence) -> None:
-        median = sorted(c.gaps)[_BLOCK // 2]
+        median = sorted(c.gaps)[c.due // 2]
         c.gaps = []
+        c.due = min(2 * c.due, _BLOCK)
         c.allow = min(self.cadence_k * max(median, c.median) + self.floor, self.future_s)
         c.median = median
 
