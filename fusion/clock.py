@@ -60,23 +60,26 @@ from fusion.api import Event, Message
 __all__ = ["ClockGuard"]
 
 
-_BLOCK = 8  # positive gaps of a sensor per spacing estimate (one median); the first blocks: 1, 2, 4
+_BLOCK = 16   # messages per spacing sample once started (the first samples: 2, 4 and 8 messages)
+_SAMPLES = 3  # spacing samples kept; the spacing is their median
 
 
 class _Cadence:
     """A message spacing learned online: ``last`` the newest stamp fed (s), ``allow`` how far past it the
-    next may be (s): ``k`` x the larger median of the last two blocks of gaps + the floor, at most
-    ``future_s``; the floor alone before the first gap. Blocks of 1, 2 and 4 gaps, then ``_BLOCK``, so a
-    start-up is bounded from its first gap on."""
+    next may be (s): ``k`` x the spacing + the floor, at most ``future_s`` (the floor alone until a first
+    sample). The spacing is the median of the last ``_SAMPLES`` block spacings, each the mean spacing of a
+    block of messages (2, 4, 8, then ``_BLOCK``): robust to a dropout or a burst (one block), bounded
+    memory, a few operations a message, bounded from the third message of a start-up on."""
 
-    __slots__ = ("last", "allow", "gaps", "due", "median")
+    __slots__ = ("last", "allow", "n", "due", "mark", "spans", "spacing")
 
     def __init__(self, floor: float):
         self.last = -math.inf
         self.allow = floor
-        self.gaps: list[float] = []
-        self.due = 1          # gaps in the block being gathered
-        self.median = 0.0
+        self.n = self.due = 1     # messages left in the block being counted, and its length
+        self.mark = -math.inf     # the stamp its counting started after
+        self.spans: list[float] = []
+        self.spacing = 0.0        # s, 0 until a first sample
 
 
 @dataclass
@@ -104,36 +107,26 @@ class ClockGuard:
         self._alive_by: dict[str, int] = {}   # sensor -> _alive when it was last admitted on the base
         self.busy = False                     # something held or an offset set (the scheduler's fast path)
         self.cadence_k = float(cadence_k)
-        self.floor = float(cadence_floor_s)
+        self.floor = min(float(cadence_floor_s), self.future_s)
         self.window_s = float(window_s)
         self._cad: dict[str, _Cadence] = {s: _Cadence(self.floor) for s in sensors} if self.cadence_k > 0 else {}
-        self._stream = _Cadence(self.floor)  # the stream's newest time, as one sensor
+        self._stream_allow = self.floor      # s the stream's newest time may step (its sensors' rates summed)
         self._near: dict[str, tuple[Message, float]] = {}  # sensor -> (message, t) held by the cadence bound
 
     def steady(self, sensor: str, t: float, newest: float) -> bool:
         """The scheduler's fast path (nothing held, no offset, no reorder window): True when the message of
-        ``sensor`` stamped ``t`` needs no decision (it is noted as fed), False when it must go to ``admit``."""
+        ``sensor`` stamped ``t`` needs no decision (it is noted as fed), False when it must go to ``admit``
+        (held, or far: past ``future_s``, which no ``allow`` passes)."""
         c = self._cad.get(sensor)
         if c is None:
             return t <= newest + self.future_s
-        d = t - newest - self.window_s
-        if d > self.floor and (d > self._stream.allow or t - c.last > c.allow) or t > newest + self.future_s:
+        d = t - newest
+        if d > self.floor and (d > self._stream_allow or t - c.last > c.allow):
             return False
-        gap = t - c.last            # what _fed does, inline: the fast path runs at the input's rate
-        if gap > 0.0:
-            if gap < math.inf:
-                c.gaps.append(gap)
-                if len(c.gaps) == c.due:
-                    self._learn(c)
-            c.last = t
-        c = self._stream
-        gap = t - c.last
-        if gap > 0.0:
-            if gap < math.inf:
-                c.gaps.append(gap)
-                if len(c.gaps) == c.due:
-                    self._learn(c)
-            c.last = t
+        c.last = t                  # what _fed does, inline: the fast path runs at the input's rate
+        c.n -= 1
+        if not c.n:
+            self._learn(c, t)
         return True
 
     def admit(self, sensor: str, msg: Message, t: float, newest: float) -> tuple[list[tuple[Message, float]], list[Event]]:
@@ -183,7 +176,7 @@ class ClockGuard:
                 events += self._drop(sensor, f"the next {sensor} message is on the stream's time again")
             if c is not None and newest != -math.inf:
                 d = tc - newest - self.window_s
-                if d > self.floor and (d > self._stream.allow or tc - c.last > c.allow):
+                if d > self.floor and (d > self._stream_allow or tc - c.last > c.allow):
                     self._near[sensor] = (msg, tc)     # off the cadence: its next message decides
                     self.busy = True
                     return out, events
@@ -227,21 +220,38 @@ class ClockGuard:
         self._alive_by[sensor] = self._alive
         if c is None:
             return
-        for c in (c, self._stream):
-            gap = t - c.last
-            if gap > 0.0:
-                if gap < math.inf:
-                    c.gaps.append(gap)
-                    if len(c.gaps) == c.due:
-                        self._learn(c)
-                c.last = t
+        if c is not None and t >= c.last:
+            c.last = t
+            c.n -= 1
+            if not c.n:
+                self._learn(c, t)
 
-    def _learn(self, c: _Cadence) -> None:
-        median = sorted(c.gaps)[c.due // 2]
-        c.gaps = []
-        c.due = min(2 * c.due, _BLOCK)
-        c.allow = min(self.cadence_k * max(median, c.median) + self.floor, self.future_s)
-        c.median = median
+    def _learn(self, c: _Cadence, t: float) -> None:
+        """A block of ``c.due`` messages ends at ``t``: a spacing sample, and the next block. The stream's
+        spacing is that of the sensors' messages merged, 1 / (the sum of their rates), over the sensors on
+        their cadence at ``t`` (one that fell silent no longer counts)."""
+        due = c.due
+        span = (t - c.mark) / due
+        c.mark = t
+        if due < _BLOCK:
+            c.due = due = 2 * due
+        c.n = due
+        if span == math.inf:
+            return
+        spans = c.spans
+        spans.append(span)
+        if len(spans) > _SAMPLES:
+            del spans[0]
+        c.spacing = sorted(spans)[len(spans) // 2]
+        k, floor, fut = self.cadence_k, self.floor, self.future_s
+        allow = k * c.spacing + floor
+        c.allow = allow if allow < fut else fut
+        rate = 0.0
+        for x in self._cad.values():
+            if x.spacing > 0.0 and t - x.last <= x.allow:
+                rate += 1.0 / x.spacing
+        allow = k / rate + floor if rate > 0.0 else floor
+        self._stream_allow = allow if allow < fut else fut
 
     def _wild(self, sensor: str, m: Message, th: float, t_next: float) -> Event:
         if self.on_drop is not None:
