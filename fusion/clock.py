@@ -18,34 +18,39 @@ the base and goes on as usual (a little late is the scheduler's late policy). A 
   ahead by more than ``max_gap_s`` (the scheduler's ``max_predict_s``, longer than any model is
   predicted over) is taken as every clock jumping together: each sensor is re-synchronised as above.
 
-**Cadence** (``cadence_k``, ``cadence_floor_s``: the scheduler's settings). A stamp inside ``future_s`` can
-still be wild: a bit flip 1 s ahead, taken as real, moves the stream's newest time 1 s on and the correct
-messages of the other sensors that follow are late. So each sensor fed to the filter has a learned
-spacing (the larger median of its last two blocks of ``_BLOCK`` positive gaps between its stamps: robust
-to dropouts and bursts, bounded memory, quick to loosen after a rate change), and so has the stream as a
-whole (its newest time's steps). With ``d`` how far a stamp is past the stream's newest time plus the
-reorder window (``max_latency``), the message is **held** when ``d > cadence_floor_s`` and it is ahead of
+**Cadence** (the scheduler's ``cadence_k``, default 2, and ``cadence_floor_s``, default 0.02 s). A stamp
+inside ``future_s`` can still be wild: a bit flip 1 s ahead, taken as real, moves the stream's newest
+time 1 s on and the correct messages of the other sensors that follow are late. So each sensor fed to
+the filter has a learned spacing: the median of its last ``_SAMPLES`` block spacings, each the mean
+spacing of a block of its messages (2, 4, 8, then ``_BLOCK``): robust to a dropout or a burst (one
+block), bounded memory, a few float operations a message. The stream's spacing is that of the sensors'
+messages merged, 1 / (the sum of their rates), over the sensors on their cadence (one that fell silent
+no longer counts). With ``d`` how far a stamp (corrected as above) is past the stream's newest time plus
+the reorder window (``max_latency``), the message is **held** when ``d > cadence_floor_s`` and it is
 
-- its sensor's newest stamp by more than ``cadence_k`` x that sensor's spacing + ``cadence_floor_s``, or
-- the stream's newest time by more than ``cadence_k`` x the stream's spacing + ``cadence_floor_s`` (it
-  would overtake the next message of the fastest sensor, which would then be late).
+- ahead of its own sensor's newest stamp by more than ``cadence_k`` x that sensor's spacing +
+  ``cadence_floor_s``, or
+- past the window by more than ``cadence_k`` x the stream's spacing + ``cadence_floor_s`` (it would
+  overtake the next messages of the fastest sensors, which would then be late).
 
-Before a spacing is known (start-up) its bound is ``cadence_floor_s``. A stamp past the window by less
-than the floor is never held (nothing it overtakes becomes late; sensors' clocks jitter), whatever gap
-came before it: a GPS back from a dropout while the IMU went on is on the stream's time and goes on. A
-held message never moves the horizon and delays no other sensor's message; it is decided by
+Before a spacing is known (start-up: a sensor's first message, the first blocks) its bound is
+``cadence_floor_s``. A stamp past the window by at most the floor is never held (sensors' clocks jitter
+by that much), whatever gap came before it: a GPS back from a dropout while the IMU went on is on the
+stream's time and goes on at once. A held message never moves the horizon and delays no other sensor's
+message; it is decided by
 
-- the sensor's next message stamped before it: it was wild; dropped and counted malformed, ``time`` event;
-- the sensor's next message stamped at or after it (the sensor goes on from it: a real gap, a rate
-  change, an irregular sensor), or any other sensor's message at or after its time (the stream reached
-  it): it is released at its own time, just before that message (the order of the messages is the
-  recording's, so outputs are those of an unguarded run);
+- its sensor's next message stamped before it: it was wild; dropped and counted malformed, ``time`` event;
+- its sensor's next message stamped at or after it (the sensor goes on from it: a real gap, a rate
+  change, an irregular or event-driven sensor), or any other sensor's message at or after its time (the
+  stream reached it): it is released at its own time, just before that message, so the messages go on
+  in the recording's order and the outputs are those of an unguarded run;
 - the end of the input: released (nothing contradicted it).
 
-A real pause of the whole stream shorter than ``future_s`` is such a gap: each sensor's first message
-after it is held until its next message or the stream reaches it. Nothing the bound holds is lost unless
-its own sensor's next stamp goes back before it; a wild stamp ahead by less than the bound is taken as
-real (what it overtakes is late), as before.
+A pause of the whole stream shorter than ``future_s`` is such a gap: each sensor's first message after
+it is held until its next message or the stream reaches it. Nothing the bound holds is lost unless its
+own sensor's next stamp goes back before it (a sensor whose stamps jitter by more than its spacing,
+``max_latency`` and the floor together); a wild stamp ahead by less than the bound is taken as real, as
+before (what it overtakes by more than ``max_latency`` is late). ``cadence_k: 0`` turns the bound off.
 
 ``admit`` returns the messages to feed now, each with its corrected time, and the events to report;
 ``steady`` is the scheduler's fast path for a message that needs no decision.
