@@ -18,7 +18,42 @@ the base and goes on as usual (a little late is the scheduler's late policy). A 
   ahead by more than ``max_gap_s`` (the scheduler's ``max_predict_s``, longer than any model is
   predicted over) is taken as every clock jumping together: each sensor is re-synchronised as above.
 
-``admit`` returns the messages to feed now, each with its corrected time, and the events to report.
+**Cadence** (the scheduler's ``cadence_k``, default 2, and ``cadence_floor_s``, default 0.02 s). A stamp
+inside ``future_s`` can still be wild: a bit flip 1 s ahead, taken as real, moves the stream's newest
+time 1 s on and the correct messages of the other sensors that follow are late. So each sensor fed to
+the filter has a learned spacing: the median of its last ``_SAMPLES`` block spacings, each the mean
+spacing of a block of its messages (2, 4, 8, then ``_BLOCK``): robust to a dropout or a burst (one
+block), bounded memory, a few float operations a message. The stream's spacing is that of the sensors'
+messages merged, 1 / (the sum of their rates), over the sensors on their cadence (one that fell silent
+no longer counts). With ``d`` how far a stamp (corrected as above) is past the stream's newest time plus
+the reorder window (``max_latency``), the message is **held** when ``d > cadence_floor_s`` and it is
+
+- ahead of its own sensor's newest stamp by more than ``cadence_k`` x that sensor's spacing +
+  ``cadence_floor_s``, or
+- past the window by more than ``cadence_k`` x the stream's spacing + ``cadence_floor_s`` (it would
+  overtake the next messages of the fastest sensors, which would then be late).
+
+Before a spacing is known (start-up: a sensor's first message, the first blocks) its bound is
+``cadence_floor_s``. A stamp past the window by at most the floor is never held (sensors' clocks jitter
+by that much), whatever gap came before it: a GPS back from a dropout while the IMU went on is on the
+stream's time and goes on at once. A held message never moves the horizon and delays no other sensor's
+message; it is decided by
+
+- its sensor's next message stamped before it: it was wild; dropped and counted malformed, ``time`` event;
+- its sensor's next message stamped at or after it (the sensor goes on from it: a real gap, a rate
+  change, an irregular or event-driven sensor), or any other sensor's message at or after its time (the
+  stream reached it): it is released at its own time, just before that message, so the messages go on
+  in the recording's order and the outputs are those of an unguarded run;
+- the end of the input: released (nothing contradicted it).
+
+A pause of the whole stream shorter than ``future_s`` is such a gap: each sensor's first message after
+it is held until its next message or the stream reaches it. Nothing the bound holds is lost unless its
+own sensor's next stamp goes back before it (a sensor whose stamps jitter by more than its spacing,
+``max_latency`` and the floor together); a wild stamp ahead by less than the bound is taken as real, as
+before (what it overtakes by more than ``max_latency`` is late). ``cadence_k: 0`` turns the bound off.
+
+``admit`` returns the messages to feed now, each with its corrected time, and the events to report;
+``steady`` is the scheduler's fast path for a message that needs no decision.
 """
 from __future__ import annotations
 
@@ -30,6 +65,28 @@ from fusion.api import Event, Message
 __all__ = ["ClockGuard"]
 
 
+_BLOCK = 16   # messages per spacing sample once started (the first samples: 2, 4 and 8 messages)
+_SAMPLES = 3  # spacing samples kept; the spacing is their median
+
+
+class _Cadence:
+    """A message spacing learned online: ``last`` the newest stamp fed (s), ``allow`` how far past it the
+    next may be (s): ``k`` x the spacing + the floor, at most ``future_s`` (the floor alone until a first
+    sample). The spacing is the median of the last ``_SAMPLES`` block spacings, each the mean spacing of a
+    block of messages (2, 4, 8, then ``_BLOCK``): robust to a dropout or a burst (one block), bounded
+    memory, a few operations a message, bounded from the third message of a start-up on."""
+
+    __slots__ = ("last", "allow", "n", "due", "mark", "spans", "spacing")
+
+    def __init__(self, floor: float):
+        self.last = -math.inf
+        self.allow = floor
+        self.n = self.due = 1     # messages left in the block being counted, and its length
+        self.mark = -math.inf     # the stamp its counting started after
+        self.spans: list[float] = []
+        self.spacing = 0.0        # s, 0 until a first sample
+
+
 @dataclass
 class _Held:
     items: list[tuple[Message, float]] = field(default_factory=list)  # (message, stamp before correction)
@@ -39,9 +96,12 @@ class _Held:
 
 class ClockGuard:
     """See the module. ``future_s``: s a stamp may be away from the newest accepted time; ``agree``:
-    messages of a sensor that must agree on a new time base before it is taken."""
+    messages of a sensor that must agree on a new time base before it is taken; ``sensors``: the names
+    whose stamps the cadence bound checks (those fed to the filter; 0 ``cadence_k``: none), ``window_s``
+    the reorder window (s, the scheduler's ``max_latency``)."""
 
-    def __init__(self, future_s: float = 5.0, agree: int = 3, on_drop=None, max_gap_s: float = math.inf):
+    def __init__(self, future_s: float = 5.0, agree: int = 3, on_drop=None, max_gap_s: float = math.inf,
+                 cadence_k: float = 0.0, cadence_floor_s: float = 0.02, window_s: float = 0.0, sensors=()):
         self.max_gap_s = float(max_gap_s)  # a stream-wide jump ahead by more is a clock jump, not a gap
         self.on_drop = on_drop  # called (sensor, n) when n held messages are dropped as wild
         self.future_s = float(future_s)
@@ -51,11 +111,63 @@ class ClockGuard:
         self._alive = 0                       # messages admitted on the base so far (any sensor)
         self._alive_by: dict[str, int] = {}   # sensor -> _alive when it was last admitted on the base
         self.busy = False                     # something held or an offset set (the scheduler's fast path)
+        self.cadence_k = float(cadence_k)
+        self.floor = min(float(cadence_floor_s), self.future_s)
+        self.window_s = float(window_s)
+        self._cad: dict[str, _Cadence] = {s: _Cadence(self.floor) for s in sensors} if self.cadence_k > 0 else {}
+        self._stream_allow = self.floor      # s the stream's newest time may step (its sensors' rates summed)
+        self._near: dict[str, tuple[Message, float]] = {}  # sensor -> (message, t) held by the cadence bound
+
+    def steady(self, sensor: str, t: float, newest: float) -> bool:
+        """The scheduler's fast path (nothing held, no offset, no reorder window): True when the message of
+        ``sensor`` stamped ``t`` needs no decision (it is noted as fed), False when it must go to ``admit``
+        (held, or far: past ``future_s``, which no ``allow`` passes)."""
+        c = self._cad.get(sensor)
+        if c is None:
+            return t <= newest + self.future_s
+        d = t - newest
+        if d > self.floor and (d > self._stream_allow or t - c.last > c.allow):
+            return False
+        c.last = t                  # what _fed does, inline: the fast path runs at the input's rate
+        c.n -= 1
+        if not c.n:
+            self._learn(c, t)
+        return True
 
     def admit(self, sensor: str, msg: Message, t: float, newest: float) -> tuple[list[tuple[Message, float]], list[Event]]:
         """Decide about ``msg`` of ``sensor`` stamped ``t`` (s, after its time_offset) given the stream's
-        newest accepted time. Returns ``([(message, corrected t), ...], [events])``; held messages that
-        turned out wild are reported by an event and counted through ``on_drop``."""
+        newest accepted time. Returns ``([(message, corrected t), ...], [events])`` in the order to feed
+        them (other sensors' messages held by the cadence bound that the stream reached come first); held
+        messages that turned out wild are reported by an event and counted through ``on_drop``."""
+        c = self._cad.get(sensor)
+        if c is None:
+            return self._admit(sensor, msg, t, newest, None, [], [])
+        out: list[tuple[Message, float]] = []
+        events: list[Event] = []
+        near = self._near.pop(sensor, None)
+        if near is not None:     # this message decides the one held by the cadence bound
+            m0, th = near
+            if t - self.offsets.get(sensor, 0.0) < th:
+                events.append(self._wild(sensor, m0, th, t))
+            else:
+                out.append((m0, th))
+                self._fed(sensor, c, th)
+                newest = max(newest, th)
+            self.busy = bool(self._held or self.offsets or self._near)
+        out, events = self._admit(sensor, msg, t, newest, c, out, events)
+        if self._near and out:
+            upto = max(tf for _, tf in out)
+            ripe = [s for s, (_, th) in self._near.items() if th <= upto]
+            if ripe:             # the stream reached them: released at their own times, first
+                caught = [self._near.pop(s) for s in ripe]
+                for s, (_, th) in zip(ripe, caught):
+                    self._fed(s, self._cad[s], th)
+                out = sorted(caught + out, key=lambda mt: mt[1])
+                self.busy = bool(self._held or self.offsets or self._near)
+        return out, events
+
+    def _admit(self, sensor: str, msg: Message, t: float, newest: float, c: _Cadence | None,
+               out: list[tuple[Message, float]], events: list[Event]) -> tuple[list[tuple[Message, float]], list[Event]]:
         off = self.offsets.get(sensor, 0.0)
         tc = t - off
         fut = self.future_s
@@ -65,12 +177,18 @@ class ClockGuard:
             off = self.offsets[sensor] = t - newest
             tc = newest
         if newest == -math.inf or (newest - fut <= tc <= newest + fut):
-            events = self._drop(sensor, f"the next {sensor} message is on the stream's time again") if self._held else []
-            self._alive += 1
-            self._alive_by[sensor] = self._alive
-            return [(msg, tc)], events
+            if self._held:
+                events += self._drop(sensor, f"the next {sensor} message is on the stream's time again")
+            if c is not None and newest != -math.inf:
+                d = tc - newest - self.window_s
+                if d > self.floor and (d > self._stream_allow or tc - c.last > c.allow):
+                    self._near[sensor] = (msg, tc)     # off the cadence: its next message decides
+                    self.busy = True
+                    return out, events
+            out.append((msg, tc))
+            self._fed(sensor, c, tc)
+            return out, events
         held = self._held.get(sensor)
-        events: list[Event] = []
         if held is not None:
             last_t = held.items[-1][1]
             if not (0.0 <= t - last_t <= fut):  # not the same new base: the earlier ones were wild
@@ -81,7 +199,7 @@ class ClockGuard:
         held.items.append((msg, t))
         self.busy = True
         if len(held.items) < self.agree:
-            return [], events
+            return out, events
         del self._held[sensor]
         first_t = held.items[0][1]
         others_alive = any(n > held.alive for s, n in self._alive_by.items() if s != sensor)
@@ -89,17 +207,63 @@ class ClockGuard:
         if ahead and not others_alive and first_t - off - held.newest <= self.max_gap_s:
             events.append(Event(first_t - off, "clock", sensor, f"stream time jumped {first_t - off - newest:+.3f} s "
                                 f"(no sensor on the old time); taken as a gap, prediction over it bounded"))
-            out = [(m, ts - off) for m, ts in held.items]
+            out += [(m, ts - off) for m, ts in held.items]
         else:
             new_off = first_t - held.newest  # the first held message lands where the stream was then
             self.offsets[sensor] = new_off
             events.append(Event(newest, "clock", sensor, f"{sensor} clock jumped {new_off - off:+.3f} s "
                                 f"({len(held.items)} messages agree); re-synchronised to the stream's time"))
-            out = [(m, ts - new_off) for m, ts in held.items]
+            out += [(m, ts - new_off) for m, ts in held.items]
+        self.busy = bool(self._held or self.offsets or self._near)
+        for _, tf in out[-len(held.items):]:
+            self._fed(sensor, c, tf)
+        return out, events
+
+    def _fed(self, sensor: str, c: _Cadence | None, t: float) -> None:
+        """``sensor``'s message goes on at ``t``: it is on the base, and its spacing and the stream's learn."""
         self._alive += 1
         self._alive_by[sensor] = self._alive
-        self.busy = bool(self._held or self.offsets)
-        return out, events
+        if c is None:
+            return
+        if c is not None and t >= c.last:
+            c.last = t
+            c.n -= 1
+            if not c.n:
+                self._learn(c, t)
+
+    def _learn(self, c: _Cadence, t: float) -> None:
+        """A block of ``c.due`` messages ends at ``t``: a spacing sample, and the next block. The stream's
+        spacing is that of the sensors' messages merged, 1 / (the sum of their rates), over the sensors on
+        their cadence at ``t`` (one that fell silent no longer counts)."""
+        due = c.due
+        span = (t - c.mark) / due
+        c.mark = t
+        if due < _BLOCK:
+            c.due = due = 2 * due
+        c.n = due
+        if span == math.inf:
+            return
+        spans = c.spans
+        spans.append(span)
+        if len(spans) > _SAMPLES:
+            del spans[0]
+        c.spacing = sorted(spans)[len(spans) // 2]
+        k, floor, fut = self.cadence_k, self.floor, self.future_s
+        allow = k * c.spacing + floor
+        c.allow = allow if allow < fut else fut
+        rate = 0.0
+        for x in self._cad.values():
+            if x.spacing > 0.0 and t - x.last <= x.allow:
+                rate += 1.0 / x.spacing
+        allow = k / rate + floor if rate > 0.0 else floor
+        self._stream_allow = allow if allow < fut else fut
+
+    def _wild(self, sensor: str, m: Message, th: float, t_next: float) -> Event:
+        if self.on_drop is not None:
+            self.on_drop(sensor, 1)
+        return Event(math.nan, "time", sensor, f"line {m.line}: stamp {m.t!r} s was ahead of the stream's time and "
+                     f"off {sensor}'s cadence; it was dropped (the next {sensor} message, stamped {t_next!r} s, "
+                     f"is before it)")
 
     def on_base(self, sensor: str) -> None:
         """Note a message of ``sensor`` known to be on the base with nothing held and no offset (the
@@ -111,7 +275,7 @@ class ClockGuard:
         held = self._held.pop(sensor, None)
         if held is None:
             return []
-        self.busy = bool(self._held or self.offsets)
+        self.busy = bool(self._held or self.offsets or self._near)
         if self.on_drop is not None:
             self.on_drop(sensor, len(held.items))
         m, t = held.items[0]
@@ -120,11 +284,18 @@ class ClockGuard:
                       f"{'it was' if n == 1 else f'{n} messages were'} dropped ({why})")]
 
     def held(self) -> int:
-        return sum(len(h.items) for h in self._held.values())
+        return sum(len(h.items) for h in self._held.values()) + len(self._near)
 
     def flush(self) -> list[Event]:
-        """End of input: what is still held is dropped (never fed)."""
+        """End of input: what is still held far from the stream's time is dropped (never fed)."""
         events: list[Event] = []
         for sensor in list(self._held):
             events += self._drop(sensor, "the input ended before later messages could confirm it")
         return events
+
+    def release(self) -> list[tuple[Message, float]]:
+        """End of input: the messages held by the cadence bound, in time order (nothing contradicted them)."""
+        out = sorted(self._near.values(), key=lambda mt: mt[1])
+        self._near.clear()
+        self.busy = bool(self._held or self.offsets)
+        return out

@@ -127,6 +127,23 @@ class SchedulerSpec(_Strict):
                                                    "before its clock is re-synchronised")
     max_predict_s: float = Field(60.0, gt=0.0, allow_inf_nan=False,
                                  description="longest prediction over a gap, s; a longer gap is bounded to it")
+    cadence_k: float = Field(2.0, ge=0.0, le=1000.0, allow_inf_nan=False,
+                             description="a stamp past the stream's newest time (+ max_latency) by more than "
+                                         "cadence_floor_s and ahead of its sensor's newest stamp, or of the stream's "
+                                         "newest time, by more than cadence_k x their learned message spacing + "
+                                         "cadence_floor_s is held until its sensor's next message (fusion.clock); "
+                                         "0: off")
+    cadence_floor_s: float = Field(0.02, gt=0.0, allow_inf_nan=False,
+                                   description="s a stamp may always be past the stream's newest time (+ max_latency) "
+                                               "and past its sensor's cadence (clock jitter; the whole bound before a "
+                                               "spacing is learned); less than future_s")
+
+    @model_validator(mode="after")
+    def _floor_inside_future(self) -> "SchedulerSpec":
+        if self.cadence_floor_s >= self.future_s:
+            raise ValueError(f"cadence_floor_s ({self.cadence_floor_s:g} s) must be less than future_s "
+                             f"({self.future_s:g} s): a stamp farther than future_s is held anyway")
+        return self
 
 
 class OutputSpec(_Strict):

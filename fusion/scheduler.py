@@ -64,8 +64,9 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         self.max_latency = spec.scheduler.max_latency
         self.late_policy = spec.scheduler.late_policy
         self.clock = ClockGuard(spec.scheduler.future_s, spec.scheduler.resync_after, on_drop=self._count_wild,
-                                max_gap_s=spec.scheduler.max_predict_s)
-        self._future = spec.scheduler.future_s
+                                max_gap_s=spec.scheduler.max_predict_s, cadence_k=spec.scheduler.cadence_k,
+                                cadence_floor_s=spec.scheduler.cadence_floor_s, window_s=self.max_latency,
+                                sensors=self.sensors)
         self.max_predict = spec.scheduler.max_predict_s
         self.output_dt = 1.0 / spec.output.rate_hz if spec.output.rate_hz else None
         self.on_update = spec.output.on_update
@@ -136,6 +137,8 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
     def finish(self) -> Iterator[Estimate | Event]:
         """Release everything still buffered (end of input)."""
         yield from self.clock.flush()
+        for m, t in self.clock.release():  # held by the cadence bound, never contradicted
+            yield from self._accept(self.sensors[m.sensor], m, t)
         yield from self._release(math.inf, flush=False)
         # What the preprocessors still gather comes before the last input samples are integrated, so a
         # final fix is not older than the belief.

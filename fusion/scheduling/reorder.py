@@ -40,8 +40,8 @@ class Reordering:
                 t = item.t
                 if (sensor.role == "input" and self._batch and not sensor.time_offset and not self._buffer
                         and self.max_latency == 0.0 and t >= self._horizon and t < self._next_output
-                        and t <= self._newest + self._future and not self.clock.busy
-                        and len(self._pending) < _BATCH_MAX - 1):
+                        and not self.clock.busy and len(self._pending) < _BATCH_MAX - 1
+                        and self.clock.steady(item.sensor, t, self._newest)):
                     sensor.counters["received"] += 1
                     self._horizon = self._newest = t
                     self._pending.append(item)
@@ -71,8 +71,8 @@ class Reordering:
         sensor.counters["received"] += 1
         admitted, events = self.clock.admit(sensor.name, msg, msg.t + sensor.time_offset, self._newest)
         yield from events
-        for m, t in admitted:
-            yield from self._accept(sensor, m, t)
+        for m, t in admitted:  # other sensors' held messages the stream reached come first
+            yield from self._accept(sensor if m.sensor == msg.sensor else self.sensors[m.sensor], m, t)
 
     def _accept(self, sensor: SensorRuntime, msg: Message, t: float) -> Iterator[Estimate | Event]:
         """A message on the stream's time base, stamped ``t`` (s, offsets applied)."""

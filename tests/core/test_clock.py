@@ -7,6 +7,8 @@ benchmarks/)."""
 from __future__ import annotations
 
 import json
+import math
+import random
 from pathlib import Path
 
 import pytest
@@ -15,7 +17,7 @@ from fusion import pipeline
 from fusion.api import Message
 from fusion.cli import main
 from fusion.clock import ClockGuard
-from fusion.config import load_system
+from fusion.config import SchedulerSpec, load_system
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "configs" / "example_2d.yaml"
@@ -132,3 +134,166 @@ def test_a_plugin_failing_on_one_message_is_counted_and_the_run_goes_on(referenc
     s = _run(LINES)
     uwb, ref = s["sensors"]["uwb"], reference["sensors"]["uwb"]
     assert uwb["malformed"] == 1 and uwb["used"] == ref["used"] - 1 and s["events"]["malformed"] == 1
+
+
+# ---------------------------------------------------------------- the cadence bound (inside future_s)
+
+def _feed(stream, inputs=("imu",), **kw):
+    """``(sensor, t)`` pairs through a ClockGuard driven as the scheduler drives it (``steady`` for the
+    input sensors while nothing is held, else ``admit``; the stream's newest time is the newest fed
+    stamp): returns what is fed, in order, as ``(sensor, t)``, and the events."""
+    spec = SchedulerSpec()
+    kw = dict(cadence_k=spec.cadence_k, cadence_floor_s=spec.cadence_floor_s) | kw
+    g = ClockGuard(spec.future_s, spec.resync_after, sensors={s for s, _ in stream}, **kw)
+    newest, fed, events = -math.inf, [], []
+    for s, t in stream:
+        if s in inputs and not g.busy and g.steady(s, t, newest):
+            out, ev = [(Message(t, s, (1.0,)), t)], []
+        else:
+            out, ev = g.admit(s, Message(t, s, (1.0,)), t, newest)
+        events += ev
+        for m, tc in out:
+            assert tc >= newest - 1e-12, f"{m.sensor} at {tc} fed behind the newest time {newest}: late"
+            fed.append((m.sensor, tc))
+            newest = max(newest, tc)
+    for m, tc in g.release():
+        fed.append((m.sensor, tc))
+    return fed, events
+
+
+def _merge(*streams):
+    return sorted((p for s in streams for p in s), key=lambda p: p[1])
+
+
+def _every(sensor, t0, t1, dt):
+    return [(sensor, round(t0 + k * dt, 9)) for k in range(int(round((t1 - t0) / dt)))]
+
+
+@pytest.mark.parametrize("ahead", [0.2, 1.0, 4.0])
+def test_cadence_a_wild_stamp_ahead_inside_future_s_is_dropped_and_the_rest_fed(ahead):
+    real = _merge(_every("imu", 0.0, 20.0, 0.01), _every("abps", 0.007, 20.0, 0.06))
+    k = real.index(("abps", 0.007 + 0.06 * 150))
+    wild = real[:k] + [("abps", real[k][1] + ahead)] + real[k + 1:]
+    fed, events = _feed(wild)
+    assert fed == real[:k] + real[k + 1:]                     # every other message, in order, none late
+    assert [e.kind for e in events] == ["time"] and "dropped" in events[0].detail
+
+
+def test_cadence_a_wild_stamp_of_a_lone_sensor_is_dropped():
+    real = _every("uwb", 0.0, 10.0, 0.05)
+    wild = real[:100] + [("uwb", real[100][1] + 1.0)] + real[101:]
+    fed, events = _feed(wild)
+    assert fed == real[:100] + real[101:] and [e.kind for e in events] == ["time"]
+
+
+def test_cadence_start_up_a_wild_first_stamp_is_dropped_and_a_real_first_gap_kept():
+    """The fuzz case of issue 10 item 9: the ABPS's first range stamped 1 s ahead, nothing learned yet."""
+    real = _merge(_every("imu", 0.0, 5.0, 0.01), _every("abps", 0.007, 5.0, 0.06))
+    k = real.index(("abps", 0.007))
+    fed, events = _feed(real[:k] + [("abps", 1.007)] + real[k + 1:])
+    assert fed == real[:k] + real[k + 1:] and [e.kind for e in events] == ["time"]
+    # a sensor whose first messages come after a pause of the whole stream, and a slow lone sensor starting
+    for stream in (_every("imu", 0.0, 0.05, 0.01) + _every("imu", 3.0, 5.0, 0.01),
+                   _every("us", 0.1, 10.0, 0.225),
+                   [("imu", 0.0), ("gps", 0.0)] + _merge(_every("imu", 0.01, 5.0, 0.01), _every("gps", 1.0, 5.0, 1.0))):
+        assert _feed(stream) == (stream, [])
+
+
+@pytest.mark.parametrize("alone", [True, False])
+def test_cadence_a_real_gap_of_several_seconds_loses_nothing(alone):
+    gps = _every("gps", 0.0, 10.0, 0.2) + _every("gps", 13.0, 20.0, 0.2)     # 3 s without a fix
+    stream = gps if alone else _merge(_every("imu", 0.0, 20.0, 0.01), gps)
+    assert _feed(stream) == (stream, [])
+    # the whole stream paused 3 s (inside future_s), IMU and GPS alike
+    paused = [(s, t + 3.0 if t > 10.0 else t) for s, t in _merge(_every("imu", 0.0, 20.0, 0.01), _every("gps", 0.0, 20.0, 0.2))]
+    assert _feed(paused) == (paused, [])
+
+
+@pytest.mark.parametrize("alone", [True, False])
+def test_cadence_a_sensor_with_irregular_spacing_loses_nothing(alone):
+    rng = random.Random(3)
+    t, ev = 0.0, []
+    for _ in range(400):            # event-driven: exponential spacing, mean 0.3 s, and 1-4 s silences
+        t += rng.expovariate(1 / 0.3) if rng.random() > 0.05 else rng.uniform(1.0, 4.0)
+        ev.append(("door", round(t, 6)))
+    stream = ev if alone else _merge(_every("imu", 0.0, t + 0.5, 0.01), ev)
+    fed, events = _feed(stream)
+    assert fed == stream and events == []
+
+
+@pytest.mark.parametrize("alone", [True, False])
+def test_cadence_a_rate_change_10_to_50_hz_and_back_loses_nothing(alone):
+    uwb = _every("uwb", 0.0, 10.0, 0.1) + _every("uwb", 10.0, 20.0, 0.02) + _every("uwb", 20.0, 30.0, 0.1)
+    stream = uwb if alone else _merge(_every("imu", 0.0, 30.0, 0.01), uwb)
+    assert _feed(stream) == (stream, [])
+
+
+def test_cadence_holds_delay_no_other_sensor_and_never_move_the_horizon():
+    real = _merge(_every("imu", 0.0, 4.0, 0.01), _every("gps", 0.5, 4.0, 1.0))
+    wild = [(s, t + 2.0 if (s, t) == ("gps", 1.5) else t) for s, t in real]
+    spec = SchedulerSpec()
+    g = ClockGuard(spec.future_s, spec.resync_after, cadence_k=spec.cadence_k, cadence_floor_s=spec.cadence_floor_s,
+                   sensors={"imu", "gps"})
+    newest, k = -math.inf, wild.index(("gps", 3.5))
+    for i, (s, t) in enumerate(wild):
+        out, events = g.admit(s, Message(t, s, (1.0,)), t, newest)
+        if i == k:
+            assert g.held() == 1 and out == [] and g.busy
+        elif s == "imu":                        # fed at once while the GPS stamp is held
+            assert [(m.sensor, tc) for m, tc in out] == [(s, t)]
+        elif t == 2.5:                          # the next GPS fix, before it: it was wild
+            assert [e.kind for e in events] == ["time"] and g.held() == 0 and not g.busy
+        newest = max([newest] + [tc for _, tc in out])
+        assert newest < 3.5 or t >= 3.5          # the held stamp never moved the stream's time
+
+
+def test_cadence_settings_are_validated():
+    from pydantic import ValidationError
+
+    assert SchedulerSpec().cadence_k == 2.0 and SchedulerSpec().cadence_floor_s == 0.02
+    for bad in ({"cadence_k": -1}, {"cadence_floor_s": 0.0}, {"cadence_floor_s": 6.0}, {"cadence_k": float("nan")}):
+        with pytest.raises(ValidationError):
+            SchedulerSpec(**bad)
+    off = _merge(_every("imu", 0.0, 5.0, 0.01), [("abps", 2.5)])     # cadence_k 0: off, as before
+    assert _feed(off, cadence_k=0.0)[0] == off
+
+
+def _abps(lines, sensor, k, fn):
+    """``lines`` with the ``k``-th line of ``sensor`` re-stamped by ``fn``."""
+    idx = [i for i, ln in enumerate(lines) if f",{sensor}," in ln][k]
+    out = lines[:]
+    t, rest = out[idx].split(",", 1)
+    out[idx] = f"{fn(float(t))!r},{rest}"
+    return out
+
+
+@pytest.fixture(scope="module")
+def abps_lines():
+    return (ROOT / "recordings" / "abps_mine.log").read_text().splitlines()
+
+
+@pytest.fixture(scope="module")
+def abps_reference(abps_lines):
+    return _run(abps_lines, ABPS)
+
+
+@pytest.mark.parametrize("k, ahead", [(0, 1.0), (300, 1.0), (300, 0.4), (700, 3.0)])
+def test_cadence_abps_a_range_stamped_ahead_loses_no_imu_sample(abps_lines, abps_reference, k, ahead):
+    """Issue 10 item 9 (k 0: the fuzz case, the first range): IMU samples after it used to be late."""
+    s = _run(_abps(abps_lines, "abps", k, lambda t: t + ahead), ABPS)
+    ref = abps_reference["sensors"]
+    assert s["sensors"]["imu"]["used"] == ref["imu"]["used"] and s["sensors"]["imu"]["late"] == 0
+    assert s["sensors"]["abps"]["malformed"] == 1 and s["sensors"]["abps"]["late"] == ref["abps"]["late"]
+    assert s["events"]["time"] == 1
+
+
+def test_cadence_abps_real_gaps_lose_nothing(abps_lines, abps_reference):
+    """The ranges silent 4 s while the IMU goes on; then the whole stream paused 3 s (inside future_s)."""
+    silent = [ln for ln in abps_lines if not (",abps," in ln and 50.0 < float(ln.split(",", 1)[0]) < 54.0)]
+    s = _run(silent, ABPS)
+    assert s["sensors"]["imu"]["used"] == abps_reference["sensors"]["imu"]["used"]
+    assert s["sensors"]["abps"]["late"] == 0 and s["sensors"]["abps"]["malformed"] == 0 and "time" not in s["events"]
+    paused = _run(_retime(abps_lines, lambda t: t + 3.0 if t > 60.0 else t), ABPS)
+    assert paused["sensors"]["imu"]["used"] == abps_reference["sensors"]["imu"]["used"]
+    assert paused["sensors"]["abps"]["received"] == abps_reference["sensors"]["abps"]["received"]
+    assert paused["sensors"]["abps"]["late"] == 0 and paused["sensors"]["abps"]["malformed"] == 0

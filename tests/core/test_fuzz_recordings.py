@@ -67,12 +67,9 @@ def test_mutated_values_of_range_recordings_run_to_the_end(workdir, case):
     check(workdir, case, values_only=True)
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="exit 0 always now; but a time stamp bit-flipped 1 s ahead is inside scheduler.future_s "
-                          "(5 s, issue 10: 'a few seconds') and taken as real, so the samples it overtakes are late: "
-                          "a per-sensor cadence check would catch it (not done)")
 @FUZZ
 @given(case=mutation(ALL_TARGETS))
 def test_any_mutated_line_of_any_recording_runs_to_the_end(workdir, case):
-    """Any field mutated, the time stamp too, in every shipped recording."""
+    """Any field mutated, the time stamp too, in every shipped recording (a stamp bit-flipped 1 s ahead, inside
+    scheduler.future_s, is held by the cadence bound of fusion/clock.py and dropped, not taken as real)."""
     check(workdir, case, values_only=False)

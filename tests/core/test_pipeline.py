@@ -178,8 +178,8 @@ def test_observation_hooks_see_every_estimate_event_and_the_end(tmp_path):
     _, registry = make_plugin_manager(extra_plugins=[watcher])
     log = tmp_path / "bad.log"
     lines = (ROOT / "recordings" / "example_2d.log").read_text().splitlines()
-    lines.insert(40, "1.5,uwb,B1,notanumber")
-    lines.insert(41, "1.6,mystery,1.0")
+    lines.insert(40, "0.49,uwb,B1,notanumber")   # stamped in its place (1.5 s: a wild stamp, dropped for its time)
+    lines.insert(41, "0.49,mystery,1.0")
     log.write_text("\n".join(lines) + "\n")
     system = load_system(EXAMPLE, registry=registry)
     kept = pipeline.Collect()
