@@ -132,7 +132,7 @@ class SchedulerSpec(_Strict):
                                          "cadence_floor_s and ahead of its sensor's newest stamp, or of the stream's "
                                          "newest time, by more than cadence_k x their learned message spacing + "
                                          "cadence_floor_s is held until its sensor's next message (fusion.clock); "
-                                         "0: off")
+                                         "0: off; off with late_policy replay, which expects arrival jitter")
     cadence_floor_s: float = Field(0.02, gt=0.0, allow_inf_nan=False,
                                    description="s a stamp may always be past the stream's newest time (+ max_latency) "
                                                "and past its sensor's cadence (clock jitter; the whole bound before a "

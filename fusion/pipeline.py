@@ -178,6 +178,8 @@ class Run:
                 m = m._replace(t=t)
             if comp is not None:
                 comp.add_truth(m)
+            else:
+                self._unnamed[m.sensor] = self._unnamed.get(m.sensor, 0) + 1
             if self.on_truth is not None and m.sensor == "truth":
                 self.on_truth(m)
 

@@ -63,8 +63,12 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         spec = system.spec
         self.max_latency = spec.scheduler.max_latency
         self.late_policy = spec.scheduler.late_policy
+        # The cadence bound tells a wild stamp from a message that merely arrives early only by what its
+        # sensor sends next, so it would take arrival jitter for wild stamps; a replaying scheduler expects
+        # jitter (it rewinds for late messages), so the bound is off there.
+        cadence_k = spec.scheduler.cadence_k if self.late_policy != "replay" else 0.0
         self.clock = ClockGuard(spec.scheduler.future_s, spec.scheduler.resync_after, on_drop=self._count_wild,
-                                max_gap_s=spec.scheduler.max_predict_s, cadence_k=spec.scheduler.cadence_k,
+                                max_gap_s=spec.scheduler.max_predict_s, cadence_k=cadence_k,
                                 cadence_floor_s=spec.scheduler.cadence_floor_s, window_s=self.max_latency,
                                 sensors=self.sensors)
         self.max_predict = spec.scheduler.max_predict_s
