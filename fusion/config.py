@@ -24,11 +24,12 @@ from typing import Annotated, Any, Literal, Union
 import warnings
 
 import numpy as np
-from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator,
-                      model_validator)
+from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, ValidationInfo,
+                      field_validator, model_validator)
 
 from fusion.api import (Aligns, BuildContext, CapabilityWarning, Component, ConfigError, Decoder, Filter, Gate,
                         MeasurementModel, ProcessModel, Solver, has, near_misses)
+from fusion.api.components import reject_bool_numbers
 from fusion.recovery import RecoverySpec
 from fusion.registry import Registry, default_registry
 from fusion.yamlsource import LocatedYAML, load_yaml, pydantic_errors
@@ -53,9 +54,15 @@ Coordinate = Annotated[float, BeforeValidator(_not_bool)]
 
 
 class _Strict(BaseModel):
-    """Unknown keys are errors; every float (nested ones too) must be finite, NaN and inf are errors."""
+    """Unknown keys are errors; every float (nested ones too) must be finite, NaN and inf are errors; a
+    YAML true/false is no number."""
 
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _no_bool_numbers(cls, value: Any, info: ValidationInfo) -> Any:
+        return reject_bool_numbers(cls, value, info.field_name)
 
 
 #: Largest initial standard deviation (in the block's SI unit: m, m/s, rad, ...). The first update leaves a

@@ -3,7 +3,8 @@ decoders, solvers, sources, sinks, simulators) and the ``Params`` base of their 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Generic, Mapping, TypeVar
+import types
+from typing import Annotated, Any, ClassVar, Generic, Literal, Mapping, TypeVar, Union, get_args, get_origin
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, ValidationInfo, field_validator
@@ -49,6 +50,36 @@ def _nonfinite(value: Any, path: str, allow_inf: bool) -> str | None:
     return None
 
 
+def _leaf_types(ann: Any) -> set:
+    """The element types an annotation admits (``object`` where it admits anything, a Literal, a mapping)."""
+    origin = get_origin(ann)
+    if origin is Annotated:
+        return _leaf_types(get_args(ann)[0])
+    if origin is None:
+        return {ann}
+    if origin in (list, tuple, set, frozenset, Union, types.UnionType):
+        out: set = set()
+        for a in get_args(ann):
+            out |= _leaf_types(a)
+        return out
+    return {object}
+
+
+def _numbers_only(ann: Any) -> bool:
+    leaves = _leaf_types(ann) - {type(None), Ellipsis}
+    return bool(leaves) and leaves <= {int, float}
+
+
+def reject_bool_numbers(model: type[BaseModel], value: Any, field_name: str | None) -> Any:
+    """A YAML ``true``/``false`` (alone or in a list) where the field takes only numbers is an error; pydantic
+    would read it as 1 or 0 (``sd: true`` a noise of 1). Used by ``Params`` and the config's own models."""
+    if isinstance(value, bool) or (isinstance(value, (list, tuple)) and any(isinstance(v, bool) for v in value)):
+        f = model.model_fields.get(field_name) if field_name else None
+        if f is not None and _numbers_only(f.annotation):
+            raise ValueError(f"a number is needed, got {str(value).lower()} (YAML true/false)")
+    return value
+
+
 class Params(BaseModel):
     """Base of every plugin's Params model: unknown keys are errors, and every float (nested in lists,
     tuples and dicts too, typed or not: ``dict``, ``list``, ``Any``, numpy arrays) must be finite: NaN or inf
@@ -56,6 +87,11 @@ class Params(BaseModel):
     in with ``Field(..., allow_inf_nan=True)``: inf is then accepted, NaN still is not."""
 
     model_config = ConfigDict(extra="forbid", arbitrary_types_allowed=True, allow_inf_nan=False)
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _no_bool_numbers(cls, value: Any, info: ValidationInfo) -> Any:
+        return reject_bool_numbers(cls, value, info.field_name)
 
     @field_validator("*", mode="after")
     @classmethod

@@ -35,3 +35,25 @@ def test_nan_anywhere_and_inf_where_not_opted_in_are_errors_naming_the_field(kwa
         P(**kwargs)
     assert message in str(exc.value)
     assert exc.value.errors()[0]["loc"][0] == next(iter(kwargs))
+
+
+@pytest.mark.parametrize("old, new, where", [
+    ("noise: {sd: 0.1}", "noise: {sd: true}", "sensors.uwb.noise.sd"),
+    ("noise: {sd: 0.1}", "noise: {sd: [false]}", "sensors.uwb.noise.sd"),
+    ("spectral_density: 0.2", "spectral_density: yes", "process.spectral_density"),
+    ("alpha: 0.5", "alpha: true", "filter.alpha"),
+])
+def test_a_yaml_boolean_is_no_number(tmp_path, old, new, where):
+    """pydantic would read true as 1.0 (a noise sd of 1 m from a typo); a number field refuses it, naming it."""
+    from pathlib import Path
+
+    from fusion.api import ConfigError
+    from fusion.config import load_system
+
+    root = Path(__file__).resolve().parents[2]
+    text = (root / "configs" / "uwb_pv_ukf.yaml").read_text().replace("../recordings", str(root / "recordings"))
+    assert old in text
+    path = tmp_path / "c.yaml"
+    path.write_text(text.replace(old, new))
+    with pytest.raises(ConfigError, match=rf"c.yaml:\d+: {where}: .*a number is needed, got"):
+        load_system(path)
