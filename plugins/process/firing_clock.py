@@ -18,15 +18,41 @@ With ``attitude_sd_deg`` the state gains the attitude ``q:4`` (quaternion, body-
 constant up to a random walk of that many degrees per firing about each body axis (the process of
 ``static_orientation``, sec. 5.2): one pose filter for position and orientation (``direction`` with
 ``arrival: true`` measures both from each pulse).
+
+With ``direction_error_sd_deg`` (and the attitude) the state also gains, per beacon b, a block
+``dir_err_<b>`` of ``2 * direction_error_slots`` elements: the discretisation error of b's measured
+direction (rad, the tangent plane of the receiver's normal) in each of ``direction_error_slots`` slots,
+one slot per colour of a proper colouring of the receiver cells (``direction`` with ``error_state: true``
+picks the slot of the receiver that heard the pulse: adjacent cells never share one). Each element is a
+first-order Gauss-Markov process, discretised exactly over the elapsed time dt (s)::
+
+    e(k+1) = exp(-dt / tau) e(k) + w,   Var w = sd^2 (1 - exp(-2 dt / tau))
+
+(sd: the discretisation's RMS per tangent axis; tau: the time the error of a direction inside one cell
+takes to decorrelate as the direction moves, 2 sd^2 / (its angular variance rate per axis): the error's
+increments are the direction's own, so its variance grows at that rate until the cell bounds it).
 """
 from __future__ import annotations
 
 import numpy as np
 from pydantic import Field, field_validator
 
-from fusion.api import Block, Params, ProcessModel, StateLayout
+from fusion.api import Block, ConfigError, Params, ProcessModel, StateLayout
 
 from .static_orientation import attitude_noise
+
+
+class DirectionErrorBlock(Block):
+    """A vector block of a beacon's direction-error slots, elements ``<name>_0 .. <name>_<size-1>`` (slot k,
+    tangent axis a at element 2 k + a)."""
+
+    def element_names(self) -> tuple[str, ...]:
+        return tuple(f"{self.name}_{i}" for i in range(self.size))
+
+
+def direction_error_block(beacon: str) -> str:
+    """Name of the state block of ``beacon``'s direction-discretisation error (``dir_err_<beacon>``)."""
+    return f"dir_err_{beacon}"
 
 
 class FiringClock(ProcessModel):
@@ -35,7 +61,9 @@ class FiringClock(ProcessModel):
     Params: ``position_sd``: random-walk sd per firing (m, one value or one per axis: "of the same order as
     the maximum movement anticipated in each axis in one time step"); ``period_sd``: drift of T per firing
     (s; temperature of the beacon electronics, the receiver's time base); ``clock_sd``: jitter of the firing
-    time itself per firing (s; 0 in the paper)."""
+    time itself per firing (s; 0 in the paper); with the attitude, ``direction_error_sd_deg`` (deg),
+    ``direction_error_tau_s`` (s), ``direction_error_slots`` and ``direction_error_beacons``: the blocks
+    ``dir_err_<beacon>`` of the directions' discretisation error (module docstring)."""
 
     name = "firing_clock"
 
@@ -47,6 +75,17 @@ class FiringClock(ProcessModel):
                                               "walk of this many deg per firing about each axis (None: no "
                                               "attitude)")
         norm_sd: float = Field(1e-3, gt=0.0, description="with attitude: sd along q itself per firing")
+        direction_error_sd_deg: float | None = Field(None, gt=0.0, le=90.0, description="with attitude: add "
+                                                     "per beacon the Gauss-Markov discretisation error of its "
+                                                     "measured direction, stationary sd (deg per tangent axis; "
+                                                     "None: no error state)")
+        direction_error_tau_s: float = Field(130.0, gt=0.0, le=1e9, description="correlation time (s) of "
+                                             "the direction error (module docstring)")
+        direction_error_slots: int = Field(4, ge=1, le=64, description="slots per beacon: the colours of the "
+                                           "receiver cells (4 for the truncated icosahedron, paper 003 "
+                                           "sec. 3)")
+        direction_error_beacons: list[str] | None = Field(None, description="beacons with an error block "
+                                                          "(default: all config beacons)")
 
         @field_validator("position_sd")
         @classmethod
@@ -64,6 +103,20 @@ class FiringClock(ProcessModel):
         if self.attitude:
             blocks.append(Block("q", 4, "quaternion"))
             self._qa = np.deg2rad(p.attitude_sd_deg) ** 2
+        self._ge = None                        # slice of the direction-error blocks (all beacons, contiguous)
+        if p.direction_error_sd_deg is not None:
+            if not self.attitude:
+                raise ConfigError("firing_clock: direction_error_sd_deg needs attitude_sd_deg (the pose state)")
+            names = (p.direction_error_beacons if p.direction_error_beacons is not None
+                     else list(self.context.beacons))
+            bad = [b for b in names if b not in self.context.beacons]
+            if bad or not names or len(set(names)) != len(names):
+                raise ConfigError(f"firing_clock: direction_error_beacons {names} must be distinct beacons of the "
+                                  f"config ({sorted(self.context.beacons)})")
+            start = sum(b.size for b in blocks)
+            blocks += [DirectionErrorBlock(direction_error_block(b), 2 * p.direction_error_slots) for b in names]
+            self._ge = slice(start, start + 2 * p.direction_error_slots * len(names))
+            self._evar = np.deg2rad(p.direction_error_sd_deg) ** 2
         self.layout = StateLayout(blocks)
         self.n = self.layout.n
         self._qp = np.broadcast_to(np.asarray(p.position_sd, float) ** 2, (3,)).copy()
@@ -79,11 +132,20 @@ class FiringClock(ProcessModel):
     def f(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
         out = np.array(x, dtype=float, copy=True)
         out[..., 4] += self.firings(x, dt) * out[..., 3]
+        if self._ge is not None:
+            out[..., self._ge] *= self._decay(dt)
         return out
+
+    def _decay(self, dt: float) -> float:
+        """exp(-dt / tau): the direction errors' mean factor over dt (s)."""
+        return float(np.exp(-max(dt, 0.0) / self.params.direction_error_tau_s))
 
     def jacobian(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
         F = np.eye(self.n)
         F[4, 3] = float(self.firings(x, dt))      # Phi^n (n held: T moves n only at a rounding boundary)
+        if self._ge is not None:
+            i = np.arange(self._ge.start, self._ge.stop)
+            F[i, i] = self._decay(dt)
         return F
 
     def Q(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
@@ -94,7 +156,10 @@ class FiringClock(ProcessModel):
         Q[3, 4] = Q[4, 3] = self._qT * n * (n - 1) / 2
         Q[4, 4] = self._qT * (n - 1) * n * (2 * n - 1) / 6 + n * self._qt
         if self.attitude:
-            Q[5:, 5:] = attitude_noise(np.asarray(x, float)[5:9], n * self._qa, n * self.params.norm_sd ** 2)
+            Q[5:9, 5:9] = attitude_noise(np.asarray(x, float)[5:9], n * self._qa, n * self.params.norm_sd ** 2)
+        if self._ge is not None:
+            i = np.arange(self._ge.start, self._ge.stop)
+            Q[i, i] = self._evar * -np.expm1(-2.0 * max(dt, 0.0) / self.params.direction_error_tau_s)
         return Q
 
     # normalize: ProcessModel's (the layout's unit quaternion block q, when there is one)
