@@ -97,6 +97,7 @@ def main(argv=None) -> int:
     ap.add_argument("--first-seed", type=int, default=100)
     ap.add_argument("--vary-trajectory", action="store_true", help="a new walk for every seed too")
     ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--verbose", action="store_true", help="one line a seed")
     args = ap.parse_args(argv)
     todo = [(args.config, s, args.vary_trajectory) for s in range(args.first_seed, args.first_seed + args.seeds)]
     if args.jobs > 1:
@@ -104,6 +105,10 @@ def main(argv=None) -> int:
             rows = list(ex.map(_one, todo))
     else:
         rows = [_one(t) for t in todo]
+    if args.verbose:
+        for (_, seed, _), r in zip(todo, rows):
+            print(f"  seed {seed}: NEES {r['nees_f']:.2f} -> {r['nees_s']:.2f}, attitude {r['att_f']:.2f} -> {r['att_s']:.2f}, "
+                  f"RMSE {r['rmse_f']:.4f} -> {r['rmse_s']:.4f} m, {r['att_rmse_f']:.2f} -> {r['att_rmse_s']:.2f} deg")
     m = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
     print(f"{Path(args.config).name}: {len(rows)} seeds from {args.first_seed}, "
           f"{'walk drawn per seed' if args.vary_trajectory else 'the scenario walk'}")

@@ -197,16 +197,16 @@ class Direction(MeasurementModel):
         self._e = self._Tr = None
         if p.error_state:
             colours = _colours(p.receivers if isinstance(p.receivers, str) else tuple(map(tuple, p.receivers)))
-            need = 2 * (int(colours.max()) + 1)
+            need = 3 * (int(colours.max()) + 1)
             for b in names:
                 blk = f"dir_err_{b}"
                 if blk not in lay or lay[blk].stop - lay[blk].start < need:
                     raise ConfigError(f"direction: error_state: true needs the state block {blk!r} of at least "
-                                      f"{need} elements ({need // 2} receiver colours x 2 axes): firing_clock with "
-                                      f"direction_error_sd_deg and direction_error_slots >= {need // 2}")
+                                      f"{need} elements ({need // 3} receiver colours x 3 axes): firing_clock with "
+                                      f"direction_error_sd_deg and direction_error_slots >= {need // 3}")
             if receiver is not None and bound is not None:
-                start = lay[f"dir_err_{bound}"].start + 2 * int(colours[receiver - 1])
-                self._e = slice(start, start + 2)
+                start = lay[f"dir_err_{bound}"].start + 3 * int(colours[receiver - 1])
+                self._e = slice(start, start + 3)
                 self._Tr = tangent_basis(self.normals[receiver - 1][None])[0]
         ndir = 2 if p.error_state else 3
         self.dim = (1 if p.arrival else 0) + ndir + (self._M is not None)
@@ -233,7 +233,7 @@ class Direction(MeasurementModel):
         u, r = self._los(x)
         q = x[..., self._q] * _FLIP                                 # conj(q): C_n^b
         dirs = quat.rotate(q, np.broadcast_to(u, q.shape[:-1] + (3,)))
-        parts = [dirs if self._e is None else dirs @ self._Tr.T + x[..., self._e]]
+        parts = [dirs if self._e is None else (dirs + x[..., self._e]) @ self._Tr.T]
         if self._t is not None:
             parts.insert(0, x[..., self._t, None] + r / self.params.speed_of_sound)
         if self._M is not None:
@@ -263,7 +263,7 @@ class Direction(MeasurementModel):
             H[k:k + 3] = J
         else:                                                                   # tangent coordinates + error
             H[k:k + 2] = self._Tr @ J
-            H[k:k + 2, self._e] = np.eye(2)
+            H[k:k + 2, self._e] = self._Tr
         if self._M is not None:
             dirs = quat.rotate(qc, u)
             v = self._M @ dirs
@@ -299,6 +299,14 @@ class Direction(MeasurementModel):
         if rec != int(rec) or not 1 <= rec <= len(self.normals):
             raise MalformedMessage(f"receiver must be 1-{len(self.normals)}, got {v!r}")
         return int(rec)
+
+
+def receiver_cells(receivers) -> tuple[np.ndarray, np.ndarray]:
+    """(normals (k, 3) unit, colours (k,)) of ``receivers`` (an array kind, or a list of normals)."""
+    key = receivers if isinstance(receivers, str) else tuple(map(tuple, receivers))
+    colours = _colours(key)
+    normals = receiver_normals(key) if isinstance(key, str) else np.asarray(key, float)
+    return normals / np.linalg.norm(normals, axis=1, keepdims=True), colours
 
 
 @lru_cache(maxsize=8)
