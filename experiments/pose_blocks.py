@@ -39,6 +39,32 @@ def block_nees(estimates, truth: Truth, layout) -> dict:
     return {"p": float(np.mean(pos)), "attitude": float(np.mean(att)) if att else float("nan")}
 
 
+def variant(config, sets: list[str], out) -> str:
+    """Write ``config`` with overrides ``process.KEY=VALUE`` / ``model.KEY=VALUE`` (the us sensor's model) /
+    ``sd.BLOCK=VALUE`` (initial sd) (YAML values; ``DEL`` removes the key) to the file ``out`` beside it (so
+    its relative recording path holds); returns the path."""
+    from pathlib import Path
+
+    import yaml
+
+    d = yaml.safe_load(Path(config).read_text())
+    for kv in sets:
+        key, value = kv.split("=", 1)
+        sec, name = key.split(".", 1)
+        tgt = {"process": d["process"], "model": d["sensors"]["us"]["model"], "sd": d["initial"]["sd"]}[sec]
+        v = yaml.safe_load(value)
+        if v == "DEL":
+            tgt.pop(name, None)
+        else:
+            tgt[name] = v
+    if "direction_error_sd_deg" in d["process"]:
+        for b in d["beacons"]:
+            d["initial"]["sd"].setdefault(f"dir_err_{b}", float(np.deg2rad(d["process"]["direction_error_sd_deg"])))
+    path = Path(config).parent / out
+    path.write_text(yaml.safe_dump(d, sort_keys=False))
+    return str(path)
+
+
 def run_seed(config, seed: int, vary_trajectory: bool, tmp) -> dict:
     """One seed of ``config`` on the walk scenario: the summary's filtered and smoothed scores and the block
     NEES of both. ``vary_trajectory``: the walk itself is drawn with the seed too (experiments/
@@ -98,19 +124,28 @@ def main(argv=None) -> int:
     ap.add_argument("--vary-trajectory", action="store_true", help="a new walk for every seed too")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--verbose", action="store_true", help="one line a seed")
+    ap.add_argument("--set", action="append", default=[], metavar="SEC.KEY=VALUE",
+                    help="override process.KEY, model.KEY (the us model) or sd.BLOCK (initial sd); repeatable")
     args = ap.parse_args(argv)
+    if args.set:
+        import os
+        args.config = variant(args.config, args.set, f"_pose_blocks_{os.getpid()}.yaml")
     todo = [(args.config, s, args.vary_trajectory) for s in range(args.first_seed, args.first_seed + args.seeds)]
-    if args.jobs > 1:
-        with ProcessPoolExecutor(args.jobs) as ex:
-            rows = list(ex.map(_one, todo))
-    else:
-        rows = [_one(t) for t in todo]
+    try:
+        if args.jobs > 1:
+            with ProcessPoolExecutor(args.jobs) as ex:
+                rows = list(ex.map(_one, todo))
+        else:
+            rows = [_one(t) for t in todo]
+    finally:
+        if args.set:
+            Path(args.config).unlink()
     if args.verbose:
         for (_, seed, _), r in zip(todo, rows):
             print(f"  seed {seed}: NEES {r['nees_f']:.2f} -> {r['nees_s']:.2f}, attitude {r['att_f']:.2f} -> {r['att_s']:.2f}, "
                   f"RMSE {r['rmse_f']:.4f} -> {r['rmse_s']:.4f} m, {r['att_rmse_f']:.2f} -> {r['att_rmse_s']:.2f} deg")
     m = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
-    print(f"{Path(args.config).name}: {len(rows)} seeds from {args.first_seed}, "
+    print(f"{Path(args.config).name} {' '.join(args.set)}: {len(rows)} seeds from {args.first_seed}, "
           f"{'walk drawn per seed' if args.vary_trajectory else 'the scenario walk'}")
     print(f"  NEES (dof {m['dof']:.0f}): filtered {m['nees_f']:.2f} (in 95% {m['in95_f']:.3f}), "
           f"smoothed {m['nees_s']:.2f} (in 95% {m['in95_s']:.3f})")
