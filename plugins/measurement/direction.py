@@ -25,18 +25,16 @@ direction components become the two tangent-plane coordinates at the receiver's 
 :func:`tangent_basis`, rows t1 t2 orthonormal and normal to n_r), z = [0, 0] and
 
 .. math::
-    h = T_r\, C_b^n(q)^T u + e_{b, c(r)}
+    h = T_r\\, (C_b^n(q)^T u + e_{b, c(r)})
 
-with ``e_{b,c}`` (rad, 2) the slot c of the beacon's block ``dir_err_<b>`` of the ``firing_clock`` process
-(a Gauss-Markov process: the error stays correlated while the direction stays near one normal), c(r) the
-colour of receiver r in a proper colouring of the cells (:func:`receiver_colours`: adjacent cells get
-different slots, so crossing a cell edge moves to another slot and crossing back finds the error that cell
-left). No reset and no memory of the previous receiver is needed: the slot a pulse uses follows from its
-own receiver. ``sd_deg`` is then the white part only (what one pulse adds afresh). The measured normal
-being constant while the true direction moves inside the cell is what the Gauss-Markov error absorbs: its
-increments are the direction's own, so its correlation time is the cell's (2 sd^2 / the direction's
-variance rate), and the smoother, which knows the errors on both sides of a time are the same process,
-does not average them as independent.
+(n_r = u + e: the normal is the true direction plus its discretisation error). ``e_{b,c}`` (rad, 3, body
+frame) is the slot c of the beacon's block ``dir_err_<b>`` of the ``firing_clock`` process (a Gauss-Markov
+process, optionally coupled to the attitude noise and reset on entering a new cell of its colour: that
+module's docstring), c(r) the colour of receiver r in a proper colouring of the cells
+(:func:`receiver_colours`): adjacent cells get different slots, so crossing a cell edge moves to another
+slot and crossing back finds the error that cell left. ``sd_deg`` is then the white part only (what one
+pulse adds afresh). Measured on the paper-003 walk (experiments/pose_blocks.py, issue 17): not better than
+the white model of the shipped config; see configs/ultrasonic_3d_pose.yaml.
 """
 from __future__ import annotations
 
