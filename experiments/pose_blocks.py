@@ -41,8 +41,8 @@ def block_nees(estimates, truth: Truth, layout) -> dict:
 
 def variant(config, sets: list[str], out) -> str:
     """Write ``config`` with overrides ``process.KEY=VALUE`` / ``model.KEY=VALUE`` (the us sensor's model) /
-    ``sd.BLOCK=VALUE`` (initial sd) (YAML values; ``DEL`` removes the key) to the file ``out`` beside it (so
-    its relative recording path holds); returns the path."""
+    ``sd.BLOCK=VALUE`` (initial sd) (YAML values; ``DEL`` removes the key) to the file ``out`` (its recording
+    path made absolute); returns the path."""
     from pathlib import Path
 
     import yaml
@@ -60,7 +60,9 @@ def variant(config, sets: list[str], out) -> str:
     if "direction_error_sd_deg" in d["process"]:
         for b in d["beacons"]:
             d["initial"]["sd"].setdefault(f"dir_err_{b}", float(np.deg2rad(d["process"]["direction_error_sd_deg"])))
-    path = Path(config).parent / out
+    if "recording" in d:
+        d["recording"] = str((Path(config).parent / d["recording"]).resolve())
+    path = Path(out)
     path.write_text(yaml.safe_dump(d, sort_keys=False))
     return str(path)
 
@@ -129,7 +131,9 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.set:
         import os
-        args.config = variant(args.config, args.set, f"_pose_blocks_{os.getpid()}.yaml")
+        import tempfile
+        args.config = variant(args.config, args.set, os.path.join(tempfile.gettempdir(),
+                                                                  f"pose_blocks_{os.getpid()}.yaml"))
     todo = [(args.config, s, args.vary_trajectory) for s in range(args.first_seed, args.first_seed + args.seeds)]
     try:
         if args.jobs > 1:
