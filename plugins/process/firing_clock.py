@@ -36,7 +36,11 @@ inside a cell the normal n_r stays while u moves, so ``e`` moves by minus the di
 evaluated at the mean), and ``w_0`` independent noise for the rest of ``sd^2 (1 - a^2)`` (0 when tau is
 2 sd^2 over the direction's variance rate, the principle; the decay a stands in for the cell's bound).
 Then z = n_r stays put in a cell in the model as in truth, and carries no information on the attitude's
-motion there. ``none``: w independent of the state's noise, Cov w = sd^2 (1 - a^2) I.
+motion there. ``none``: w independent of the state's noise, Cov w = sd^2 (1 - a^2) I. A slot resets
+(``direction_error_reset``: mean 0, variance sd^2, no correlation) when the beacon's direction enters a
+cell of the slot's colour other than the one the slot holds (the colour-c normal closest to u + e_c).
+Measured on the paper-003 walk (issue 17, experiments/pose_blocks.py): not better than the shipped
+config's white model, which does not use it.
 """
 from __future__ import annotations
 
