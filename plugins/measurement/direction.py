@@ -19,6 +19,22 @@ every other receiver C with ``m_C = unit(n_r - n_C)`` (the great circles bisecti
 One more component, ``h_cell = min(0, min_C m_C . u)`` with z = 0: zero (and no information) inside the
 cell, the angular distance to the violated edge outside, so a prediction outside the cell is pulled onto its
 edge. Its residual is clipped (Huber) at ``cell_clip_sigma`` sd so a far prediction is pulled, not gated out.
+
+``error_state`` (not in the paper) models the discretisation error as state instead of white noise: the
+direction components become the two tangent-plane coordinates at the receiver's normal n_r (basis
+:func:`tangent_basis`, rows t1 t2 orthonormal and normal to n_r), z = [0, 0] and
+
+.. math::
+    h = T_r\\, (C_b^n(q)^T u + e_{b, c(r)})
+
+(n_r = u + e: the normal is the true direction plus its discretisation error). ``e_{b,c}`` (rad, 3, body
+frame) is the slot c of the beacon's block ``dir_err_<b>`` of the ``firing_clock`` process (a Gauss-Markov
+process, optionally coupled to the attitude noise and reset on entering a new cell of its colour: that
+module's docstring), c(r) the colour of receiver r in a proper colouring of the cells
+(:func:`receiver_colours`): adjacent cells get different slots, so crossing a cell edge moves to another
+slot and crossing back finds the error that cell left. ``sd_deg`` is then the white part only (what one
+pulse adds afresh). Measured on the paper-003 walk (experiments/pose_blocks.py, issue 17): not better than
+the white model of the shipped config; see configs/ultrasonic_3d_pose.yaml.
 """
 from __future__ import annotations
 
@@ -43,6 +59,47 @@ def receiver_normals(kind: str) -> np.ndarray:
     receiver r at row r - 1."""
     from fusion_plugins.simulators.arrival import truncated_icosahedron_normals
     return truncated_icosahedron_normals()
+
+
+def tangent_basis(normals: np.ndarray) -> np.ndarray:
+    """Orthonormal tangent bases (k, 2, 3) of unit normals (k, 3): rows t1, t2 with t1 x t2 = n
+    (t1 from the axis least aligned with n; deterministic)."""
+    n = np.asarray(normals, float)
+    axis = np.eye(3)[np.argmin(np.abs(n), axis=1)]
+    t1 = np.cross(n, axis)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(n, t1)
+    return np.stack([t1, t2], axis=1)
+
+
+def adjacent_receivers(normals: np.ndarray, samples: int = 20000, tie_deg: float = 1.0) -> np.ndarray:
+    """Adjacency (k, k) bool of the receivers' cells: r and s share an edge when some direction of a
+    Fibonacci lattice of ``samples`` points has them as its two closest normals within ``tie_deg``
+    (deterministic)."""
+    k = np.arange(samples) + 0.5
+    z = 1.0 - 2.0 * k / samples
+    phi = np.pi * (1.0 + 5 ** 0.5) * k
+    s = np.sqrt(1.0 - z * z)
+    d = np.c_[s * np.cos(phi), s * np.sin(phi), z]
+    ang = np.arccos(np.clip(d @ np.asarray(normals, float).T, -1.0, 1.0))
+    order = np.argsort(ang, axis=1)[:, :2]
+    a = np.take_along_axis(ang, order, axis=1)
+    tie = a[:, 1] - a[:, 0] < np.deg2rad(tie_deg)
+    adj = np.zeros((len(normals), len(normals)), bool)
+    adj[order[tie, 0], order[tie, 1]] = True
+    return adj | adj.T
+
+
+def receiver_colours(normals: np.ndarray) -> np.ndarray:
+    """Colour (k,) int >= 0 of each receiver, a proper colouring of the cells (adjacent cells differ):
+    greedy in the order of most neighbours first (ties by index; deterministic). 4 colours for the
+    truncated icosahedron, as paper 003 sec. 3 colours its receivers."""
+    adj = adjacent_receivers(normals)
+    colour = np.full(len(normals), -1)
+    for r in sorted(range(len(normals)), key=lambda i: (-int(adj[i].sum()), i)):
+        used = set(colour[adj[r]].tolist())
+        colour[r] = next(c for c in range(len(normals)) if c not in used)
+    return colour
 
 
 def discretisation_sd(normals: np.ndarray, samples: int = 20000) -> float:
@@ -93,6 +150,9 @@ class Direction(MeasurementModel):
         position_from_direction: bool = Field(False, description="let the directions update the position "
                                               "too (dh/dp in the Jacobian); False: the position estimate "
                                               "only feeds the direction model")
+        error_state: bool = Field(False, description="the discretisation error as state (module docstring): "
+                                  "needs the firing_clock blocks dir_err_<beacon>; the direction is then 2 "
+                                  "tangent components (rad) and sd_deg their white part")
 
     def __init__(self, params=None, context=None, bound: str | None = None, position=None,
                  receiver: int | None = None):
@@ -123,14 +183,32 @@ class Direction(MeasurementModel):
             raise ConfigError(f"direction: unknown, 2-D or no beacon(s) {bad}; the config defines "
                               f"{sorted(ctx.beacons)}")
         self._known = tuple(names)
+        if p.error_state and p.sd_deg is None:
+            raise ConfigError("direction: error_state: true needs sd_deg, the white part of the direction's error "
+                              "(deg per tangent axis; the discretisation itself is the state)")
         self.sd = np.deg2rad(p.sd_deg) if p.sd_deg is not None else _default_sd(p.receivers, self.normals)
         self.receiver = receiver
         self._M = None
         if p.cell and receiver is not None:      # inward unit normals of the cell's bisecting great circles
             M = self.normals[receiver - 1] - np.delete(self.normals, receiver - 1, axis=0)
             self._M = M / np.linalg.norm(M, axis=1, keepdims=True)
-        self.dim = (4 if p.arrival else 3) + (self._M is not None)
-        self.R = np.diag(([p.arrival_sd ** 2] if p.arrival else []) + [self.sd ** 2] * 3
+        self._e = self._Tr = None
+        if p.error_state:
+            colours = _colours(p.receivers if isinstance(p.receivers, str) else tuple(map(tuple, p.receivers)))
+            need = 3 * (int(colours.max()) + 1)
+            for b in names:
+                blk = f"dir_err_{b}"
+                if blk not in lay or lay[blk].stop - lay[blk].start < need:
+                    raise ConfigError(f"direction: error_state: true needs the state block {blk!r} of at least "
+                                      f"{need} elements ({need // 3} receiver colours x 3 axes): firing_clock with "
+                                      f"direction_error_sd_deg and direction_error_slots >= {need // 3}")
+            if receiver is not None and bound is not None:
+                start = lay[f"dir_err_{bound}"].start + 3 * int(colours[receiver - 1])
+                self._e = slice(start, start + 3)
+                self._Tr = tangent_basis(self.normals[receiver - 1][None])[0]
+        ndir = 2 if p.error_state else 3
+        self.dim = (1 if p.arrival else 0) + ndir + (self._M is not None)
+        self.R = np.diag(([p.arrival_sd ** 2] if p.arrival else []) + [self.sd ** 2] * ndir
                          + ([np.deg2rad(p.cell_sd_deg) ** 2] if self._M is not None else []))
         self._clip = p.cell_clip_sigma * np.deg2rad(p.cell_sd_deg)
         self.bound = bound
@@ -153,7 +231,7 @@ class Direction(MeasurementModel):
         u, r = self._los(x)
         q = x[..., self._q] * _FLIP                                 # conj(q): C_n^b
         dirs = quat.rotate(q, np.broadcast_to(u, q.shape[:-1] + (3,)))
-        parts = [dirs]
+        parts = [dirs if self._e is None else (dirs + x[..., self._e]) @ self._Tr.T]
         if self._t is not None:
             parts.insert(0, x[..., self._t, None] + r / self.params.speed_of_sound)
         if self._M is not None:
@@ -171,17 +249,24 @@ class Direction(MeasurementModel):
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         u, r = self._los(x)
         qc = x[self._q] * _FLIP
-        H = np.zeros((self.dim, x.shape[-1]))
+        n = x.shape[-1]
+        H = np.zeros((self.dim, n))
         k = 1 if self._t is not None else 0
-        H[k:k + 3, self._q] = quat.rotate_jacobian(qc, u) * _FLIP             # d(C(q*) u)/dq
+        J = np.zeros((3, n))                                                    # d(C(q*) u)/dx
+        J[:, self._q] = quat.rotate_jacobian(qc, u) * _FLIP
         if self._p is not None and self.params.position_from_direction:
             C = quat.to_matrix(qc)
-            H[k:k + 3, self._p] = -C @ (np.eye(3) - np.outer(u, u)) / max(float(r[0]), 1e-12)
+            J[:, self._p] = -C @ (np.eye(3) - np.outer(u, u)) / max(float(r[0]), 1e-12)
+        if self._e is None:
+            H[k:k + 3] = J
+        else:                                                                   # tangent coordinates + error
+            H[k:k + 2] = self._Tr @ J
+            H[k:k + 2, self._e] = self._Tr
         if self._M is not None:
             dirs = quat.rotate(qc, u)
             v = self._M @ dirs
             j = int(np.argmin(v))
-            H[-1] = self._M[j] @ H[k:k + 3] if v[j] < 0.0 else 0.0
+            H[-1] = self._M[j] @ J if v[j] < 0.0 else 0.0
         if self._t is not None:
             H[0, self._p] = -u / self.params.speed_of_sound
             H[0, self._t] = 1.0
@@ -197,12 +282,12 @@ class Direction(MeasurementModel):
             raise MalformedMessage("direction expects 'beacon arrival receiver'")
         label, arrival = parse_arrival(message, self._known)
         rec = self._receiver(vals[2])
-        n = self.normals[rec - 1]
+        n = self.normals[rec - 1] if not self.params.error_state else np.zeros(2)
         z = np.r_[arrival, n] if self._t is not None else n.copy()
-        if not self.params.cell:
+        if not (self.params.cell or self.params.error_state):
             return Observation(message.t, z, self._bind(label), self.R)
         model = self._bind(label, rec)
-        return Observation(message.t, np.r_[z, 0.0], model, model.R)
+        return Observation(message.t, np.r_[z, 0.0] if self.params.cell else z, model, model.R)
 
     def _receiver(self, v) -> int:
         try:
@@ -212,6 +297,22 @@ class Direction(MeasurementModel):
         if rec != int(rec) or not 1 <= rec <= len(self.normals):
             raise MalformedMessage(f"receiver must be 1-{len(self.normals)}, got {v!r}")
         return int(rec)
+
+
+def receiver_cells(receivers) -> tuple[np.ndarray, np.ndarray]:
+    """(normals (k, 3) unit, colours (k,)) of ``receivers`` (an array kind, or a list of normals)."""
+    key = receivers if isinstance(receivers, str) else tuple(map(tuple, receivers))
+    colours = _colours(key)
+    normals = receiver_normals(key) if isinstance(key, str) else np.asarray(key, float)
+    return normals / np.linalg.norm(normals, axis=1, keepdims=True), colours
+
+
+@lru_cache(maxsize=8)
+def _colours(receivers) -> np.ndarray:
+    """receiver_colours of ``receivers`` (an array kind, or a tuple of normals), cached."""
+    normals = receiver_normals(receivers) if isinstance(receivers, str) else np.asarray(receivers, float)
+    normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
+    return receiver_colours(normals)
 
 
 @lru_cache(maxsize=4)
