@@ -3,11 +3,12 @@ line naming it, never a read that fills the memory (/dev/zero) or waits forever 
 file on a full disk: one line, exit 2, and nothing left that was not there."""
 from __future__ import annotations
 
-import errno
 import os
 from pathlib import Path
 
 import pytest
+
+from fusion.testing.faults import FullAfter
 
 from fusion.cli import main
 
@@ -74,21 +75,7 @@ def _full_after(monkeypatch, nbytes: int):
     import fusion.sweep.results as results
 
     real_open = open
-
-    class Full:
-        def __init__(self, f):
-            self._f, self._n = f, 0
-
-        def write(self, data):
-            self._n += len(data)
-            if self._n > nbytes:
-                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-            return self._f.write(data)
-
-        def __getattr__(self, name):
-            return getattr(self._f, name)
-
-    monkeypatch.setattr(results, "open", lambda *a, **k: Full(real_open(*a, **k)) if "a" in a[1:2] else
+    monkeypatch.setattr(results, "open", lambda *a, **k: FullAfter(real_open(*a, **k), nbytes) if "a" in a[1:2] else
                         real_open(*a, **k), raising=False)
 
 

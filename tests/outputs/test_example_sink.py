@@ -3,11 +3,12 @@ fusion.api.OutputFile: --force replaces, a link to a device is written in place,
 (exit 2) and leaves no cut or temporary file."""
 from __future__ import annotations
 
-import errno
 import os
 from pathlib import Path
 
 import pytest
+
+from fusion.testing.faults import full_disk_after
 
 from fusion.cli import main
 
@@ -55,27 +56,7 @@ def test_tsv_on_a_full_disk_is_one_line_and_leaves_nothing(installed_example, cf
         assert main(["run", str(cfg), "-q", "-o", str(link)]) == 2
         err = capsys.readouterr().err
         assert "cannot write the track to" in err and "No space left on device" in err and "internal" not in err
-    import fusion.outputs as outputs
-
-    real_fdopen = os.fdopen
-
-    class Full:
-        def __init__(self, f):
-            self._f = f
-
-        def write(self, data):
-            if len(data) and not data.startswith("t\t"):
-                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-            return self._f.write(data)
-
-        def __getattr__(self, name):
-            return getattr(self._f, name)
-
-    def fdopen(fd, mode="r", *args, **kwargs):  # only the temporary files OutputFile writes
-        f = real_fdopen(fd, mode, *args, **kwargs)
-        return Full(f) if mode.startswith("w") else f
-
-    monkeypatch.setattr(outputs.os, "fdopen", fdopen)
+    full_disk_after(monkeypatch, 40)            # the header fits, the first rows do not
     out = tmp_path / "t.tsv"
     assert main(["run", str(cfg), "-q", "-o", str(out)]) == 2
     assert "cannot write the track to" in capsys.readouterr().err

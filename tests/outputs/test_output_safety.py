@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 
+from fusion.testing.faults import full_disk_after
+
 from fusion.api import Params, Source
 from fusion.cli import main
 
@@ -139,30 +141,9 @@ def test_an_empty_input_or_output_is_exit_2_never_the_configs_own_recording(work
 
 # --------------------------------------------------------------------------- 2. write errors, full disks
 def _enospc_after(monkeypatch, nbytes: int):
-    """Make every temporary output file (fusion.outputs) fail with ENOSPC once ``nbytes`` are written:
-    a full disk without root (a real tmpfs of 64k behaves the same)."""
-    import fusion.outputs as outputs
-
-    real_fdopen = os.fdopen
-
-    class Full:
-        def __init__(self, f):
-            self._f, self._n = f, 0
-
-        def write(self, data):
-            self._n += len(data)
-            if self._n > nbytes:
-                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-            return self._f.write(data)
-
-        def __getattr__(self, name):
-            return getattr(self._f, name)
-
-    def fdopen(fd, mode="r", *args, **kwargs):  # only the temporary files OutputFile writes
-        f = real_fdopen(fd, mode, *args, **kwargs)
-        return Full(f) if mode.startswith("w") else f
-
-    monkeypatch.setattr(outputs.os, "fdopen", fdopen)
+    """Every temporary output file (fusion.outputs) fails with ENOSPC once ``nbytes`` are written: a full
+    disk without root (a real tmpfs of 64k behaves the same)."""
+    full_disk_after(monkeypatch, nbytes)
 
 
 def test_a_full_device_is_one_line_exit_2_after_the_summary(work, capsys):
@@ -258,12 +239,15 @@ def test_dash_output_is_only_csv_and_the_summary_goes_to_stderr(work):
     assert b"Errors against truth" in err
 
 
-@pytest.mark.parametrize("argv", [("-o", "-", "-q"), ()])
-def test_a_closed_stdout_ends_quietly_with_141(work, argv):
+@pytest.mark.parametrize("argv, codes", [(("-o", "-", "-q"), {141}), ((), {0, 141})])
+def test_a_closed_stdout_ends_quietly_with_141(work, argv, codes):
+    """The CSV on stdout is far beyond a pipe's buffer: its reader's exit is always seen (141). The summary
+    table alone (a few kB) may fit in the pipe before ``head`` exits: then nothing fails (0); either way no
+    message and no traceback."""
     tmp, cfg, rec = work
     code, out, err = _fusion("run", str(cfg), *argv, head=2)
     assert len(out.splitlines()) == 2
-    assert code == 141 and err == b"", err.decode()
+    assert code in codes and err == b"", (code, err.decode())
 
 
 class _PrintingSink:

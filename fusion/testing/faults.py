@@ -1,0 +1,62 @@
+"""A full disk without root, for testing what a sink or an output does when a write fails.
+
+``full_disk_after(monkeypatch, nbytes)`` makes every temporary file that :class:`fusion.outputs.OutputFile`
+writes (every built-in output, and a plugin's sink that writes through it) fail with ``ENOSPC`` once
+``nbytes`` have been written to it, as a real full file system would::
+
+    from fusion.testing.faults import full_disk_after
+
+    def test_my_sink_on_a_full_disk(tmp_path, monkeypatch):
+        full_disk_after(monkeypatch, 100)
+        assert main(["run", "my.yaml", "-q", "-o", str(tmp_path / "out.tsv")]) == 2
+        assert not (tmp_path / "out.tsv").exists()
+
+:class:`FullAfter` is the file wrapper itself, for a file opened some other way.
+"""
+from __future__ import annotations
+
+import errno
+import os
+from typing import Any
+
+__all__ = ["FullAfter", "full_disk_after"]
+
+
+class FullAfter:
+    """A text or binary file object whose writes raise ``OSError(ENOSPC)`` once ``nbytes`` characters (or
+    bytes) have been written in all; everything else is the wrapped file's."""
+
+    def __init__(self, f: Any, nbytes: int):
+        self._f, self._left = f, int(nbytes)
+
+    def write(self, data: Any) -> int:
+        self._left -= len(data)
+        if self._left < 0:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return self._f.write(data)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._f, name)
+
+    def __enter__(self) -> "FullAfter":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self._f.close()
+
+    def __iter__(self):
+        return iter(self._f)
+
+
+def full_disk_after(monkeypatch: Any, nbytes: int) -> None:
+    """With pytest's ``monkeypatch``: the temporary files ``fusion.outputs`` opens for writing become
+    :class:`FullAfter` ``nbytes``."""
+    import fusion.outputs as outputs
+
+    real_fdopen = os.fdopen
+
+    def fdopen(fd: int, mode: str = "r", *args: Any, **kwargs: Any) -> Any:
+        f = real_fdopen(fd, mode, *args, **kwargs)
+        return FullAfter(f, nbytes) if mode.startswith("w") else f
+
+    monkeypatch.setattr(outputs.os, "fdopen", fdopen)
