@@ -98,10 +98,14 @@ class ClockGuard:
     """See the module. ``future_s``: s a stamp may be away from the newest accepted time; ``agree``:
     messages of a sensor that must agree on a new time base before it is taken; ``sensors``: the names
     whose stamps the cadence bound checks (those fed to the filter; 0 ``cadence_k``: none), ``window_s``
-    the reorder window (s, the scheduler's ``max_latency``)."""
+    the reorder window (s, the scheduler's ``max_latency``); ``hold_start``: the first messages wait until
+    ``agree`` of them lie within ``future_s`` of one another, and one that does not is dropped as a wild
+    stamp instead of becoming the stream's time base (at most START_MAX wait; at the end of input,
+    ``release`` feeds what still waits)."""
 
     def __init__(self, future_s: float = 5.0, agree: int = 3, on_drop=None, max_gap_s: float = math.inf,
-                 cadence_k: float = 0.0, cadence_floor_s: float = 0.02, window_s: float = 0.0, sensors=()):
+                 cadence_k: float = 0.0, cadence_floor_s: float = 0.02, window_s: float = 0.0, sensors=(),
+                 hold_start: bool = False):
         self.max_gap_s = float(max_gap_s)  # a stream-wide jump ahead by more is a clock jump, not a gap
         self.on_drop = on_drop  # called (sensor, n) when n held messages are dropped as wild
         self.future_s = float(future_s)
@@ -117,6 +121,11 @@ class ClockGuard:
         self._cad: dict[str, _Cadence] = {s: _Cadence(self.floor) for s in sensors} if self.cadence_k > 0 else {}
         self._stream_allow = self.floor      # s the stream's newest time may step (its sensors' rates summed)
         self._near: dict[str, tuple[Message, float]] = {}  # sensor -> (message, t) held by the cadence bound
+        # Start-up: no time base yet. The first messages wait until ``agree`` of them lie within future_s of
+        # one another; one that does not (a wild first stamp) is dropped rather than becoming the base.
+        # (``hold_start``: the scheduler's guard does; a guard driven by hand admits its first message.)
+        self._start: list[tuple[str, Message, float]] | None = [] if hold_start else None
+        self.busy = bool(hold_start)
 
     def steady(self, sensor: str, t: float, newest: float) -> bool:
         """The scheduler's fast path (nothing held, no offset, no reorder window): True when the message of
@@ -139,6 +148,8 @@ class ClockGuard:
         newest accepted time. Returns ``([(message, corrected t), ...], [events])`` in the order to feed
         them (other sensors' messages held by the cadence bound that the stream reached come first); held
         messages that turned out wild are reported by an event and counted through ``on_drop``."""
+        if self._start is not None and sensor != "truth" and sensor != "reference":
+            return self._starting(sensor, msg, t)
         c = self._cad.get(sensor)
         if c is None:
             return self._admit(sensor, msg, t, newest, None, [], [])
@@ -164,6 +175,42 @@ class ClockGuard:
                     self._fed(s, self._cad[s], th)
                 out = sorted(caught + out, key=lambda mt: mt[1])
                 self.busy = bool(self._held or self.offsets or self._near)
+        return out, events
+
+    #: Messages the start waits for at most; then they go on as they came (no agreeing group in them).
+    START_MAX = 8
+
+    def _starting(self, sensor: str, msg: Message, t: float) -> tuple[list[tuple[Message, float]], list[Event]]:
+        start = self._start
+        assert start is not None
+        start.append((sensor, msg, t))
+        fut = self.future_s
+        members = [i for i, (_, _, ti) in enumerate(start) if abs(ti - t) <= fut]
+        if len(members) < self.agree and len(start) < self.START_MAX:
+            return [], []
+        self._start = None
+        self.busy = bool(self._held or self.offsets or self._near)
+        keep = set(members) if len(members) >= self.agree else set(range(len(start)))
+        events: list[Event] = []
+        for i, (s, m, ti) in enumerate(start):
+            if i not in keep:
+                if self.on_drop is not None:
+                    self.on_drop(s, 1)
+                events.append(Event(math.nan, "time", s, f"line {m.line}: stamp {ti!r} s is far from the stream's "
+                                    f"first messages, which agree on another time; it was dropped"))
+        return self._admit_in_order([start[i] for i in sorted(keep)], events)
+
+    def _admit_in_order(self, items: list[tuple[str, Message, float]],
+                        events: list[Event]) -> tuple[list[tuple[Message, float]], list[Event]]:
+        """``items`` through ``admit`` one after another, the stream's newest time advancing with them."""
+        out: list[tuple[Message, float]] = []
+        newest = -math.inf
+        for s, m, ti in items:
+            got, ev = self.admit(s, m, ti, newest)
+            out += got
+            events += ev
+            for _, tf in got:
+                newest = max(newest, tf)
         return out, events
 
     def _admit(self, sensor: str, msg: Message, t: float, newest: float, c: _Cadence | None,
@@ -284,7 +331,7 @@ class ClockGuard:
                       f"{'it was' if n == 1 else f'{n} messages were'} dropped ({why})")]
 
     def held(self) -> int:
-        return sum(len(h.items) for h in self._held.values()) + len(self._near)
+        return sum(len(h.items) for h in self._held.values()) + len(self._near) + len(self._start or ())
 
     def flush(self) -> list[Event]:
         """End of input: what is still held far from the stream's time is dropped (never fed)."""
@@ -294,8 +341,13 @@ class ClockGuard:
         return events
 
     def release(self) -> list[tuple[Message, float]]:
-        """End of input: the messages held by the cadence bound, in time order (nothing contradicted them)."""
-        out = sorted(self._near.values(), key=lambda mt: mt[1])
+        """End of input: the messages still waiting for the start (fewer than ``agree`` came: as they came),
+        then those held by the cadence bound, in time order (nothing contradicted them)."""
+        first: list[tuple[Message, float]] = []
+        if self._start is not None:
+            start, self._start = self._start, None
+            first, _ = self._admit_in_order(start, [])
+        out = first + sorted(self._near.values(), key=lambda mt: mt[1])
         self._near.clear()
         self.busy = bool(self._held or self.offsets)
         return out

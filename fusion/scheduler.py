@@ -70,7 +70,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         self.clock = ClockGuard(spec.scheduler.future_s, spec.scheduler.resync_after, on_drop=self._count_wild,
                                 max_gap_s=spec.scheduler.max_predict_s, cadence_k=cadence_k,
                                 cadence_floor_s=spec.scheduler.cadence_floor_s, window_s=self.max_latency,
-                                sensors=self.sensors)
+                                sensors=self.sensors, hold_start=True)
         self.max_predict = spec.scheduler.max_predict_s
         self.output_dt = 1.0 / spec.output.rate_hz if spec.output.rate_hz else None
         self.on_update = spec.output.on_update

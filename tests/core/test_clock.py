@@ -297,3 +297,40 @@ def test_cadence_abps_real_gaps_lose_nothing(abps_lines, abps_reference):
     assert paused["sensors"]["imu"]["used"] == abps_reference["sensors"]["imu"]["used"]
     assert paused["sensors"]["abps"]["received"] == abps_reference["sensors"]["abps"]["received"]
     assert paused["sensors"]["abps"]["late"] == 0 and paused["sensors"]["abps"]["malformed"] == 0
+
+
+def test_a_wild_first_stamp_does_not_become_the_time_base(tmp_path):
+    """The very first line stamped 1.7e9 s (a Unix time, a bit flip): the messages after it agree on the
+    recording's time, so it is the one dropped (counted malformed, a time event), and the run is the clean
+    run's, estimate for estimate."""
+    from pathlib import Path
+
+    from fusion import pipeline
+    from fusion.config import load_system
+
+    root = Path(__file__).resolve().parents[2]
+    lines = (root / "recordings" / "uwb_route1.log").read_text().splitlines()
+    body = next(i for i, ln in enumerate(lines) if not ln.startswith("#"))
+    wild = lines[:body] + ["1700000000.0,uwb,B1,4.4"] + lines[body:]
+    system = load_system(root / "configs" / "uwb_pv_ukf.yaml")
+    clean, dirty = pipeline.Collect(), pipeline.Collect()
+    ref = pipeline.run(system, [ln + "\n" for ln in lines], [clean])
+    events = []
+    got = pipeline.run(system, [ln + "\n" for ln in wild], [dirty], on_event=events.append)
+    assert got.summary["sensors"]["uwb"]["malformed"] == 1
+    assert got.summary["sensors"]["uwb"]["used"] == ref.summary["sensors"]["uwb"]["used"]
+    assert [e.t for e in dirty.estimates] == [e.t for e in clean.estimates]
+    assert any(e.kind == "time" and "1700000000.0" in e.detail for e in events)
+    assert not any(e.kind == "clock" for e in events)
+
+
+def test_fewer_messages_than_the_start_waits_for_still_run():
+    """Two messages in all (the start waits for three that agree): both are fed at the end of input."""
+    from fusion.api import Message
+
+    guard = ClockGuard(future_s=5.0, agree=3, hold_start=True)
+    assert guard.admit("a", Message(0.0, "a", (1.0,)), 0.0, -math.inf) == ([], [])
+    assert guard.admit("b", Message(0.1, "b", (1.0,)), 0.1, -math.inf) == ([], [])
+    assert guard.held() == 2
+    out = guard.release()
+    assert [t for _, t in out] == [0.0, 0.1] and guard.held() == 0 and not guard.busy
