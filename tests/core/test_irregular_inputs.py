@@ -117,7 +117,7 @@ def test_a_full_disk_from_the_sweep_command_is_exit_2(tmp_path, monkeypatch, cap
 
 
 def test_a_rewritten_parquet_keeps_its_mode_and_leaves_no_temporary(tmp_path):
-    pytest.importorskip("pyarrow")
+    import pyarrow  # noqa: F401  (a test dependency: pyproject [test])
     import stat
 
     from fusion.sweep.results import write_parquet
