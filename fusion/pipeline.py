@@ -33,11 +33,15 @@ import numpy as np
 from fusion.api import (Closes, Estimate, Event, FusionError, MalformedMessage, Message, Opens, ReceivesEvents,
                         Source, has)
 from fusion.config import System
-from fusion.logformat import ParsedStream, iter_messages
+from fusion.logformat import ParsedStream, iter_messages, parse_values
 from fusion.run_stats import COUNTERS, RunStats
 from fusion.scheduler import Scheduler
 
 __all__ = ["run", "Run", "RunResult", "RunStats", "Collect", "COUNTERS"]
+
+# Streams compared against, never fused: run() reads their plain-number lines with the values left as text
+# (fusion.logformat.iter_messages raw_streams), parsed only where truth is interpolated.
+_COMPARED = frozenset(("truth", "reference"))
 
 
 class Collect:
@@ -168,7 +172,7 @@ class Run:
             else:
                 self._unnamed[msg.sensor] = self._unnamed.get(msg.sensor, 0) + 1
             if self.on_truth is not None and msg.sensor == "truth":
-                self.on_truth(msg)
+                self.on_truth(msg._replace(values=parse_values(msg.values)))
             return
         admitted, events = clock.admit(msg.sensor, msg, t, newest)
         for ev in events:
@@ -181,7 +185,7 @@ class Run:
             else:
                 self._unnamed[m.sensor] = self._unnamed.get(m.sensor, 0) + 1
             if self.on_truth is not None and m.sensor == "truth":
-                self.on_truth(m)
+                self.on_truth(m._replace(values=parse_values(m.values)))
 
     def _on_nis(self, sensor: str, t: float, nis: float, dim: int, accepted: bool = True) -> None:
         self.stats.add_nis(sensor, t, nis, dim)
@@ -371,7 +375,7 @@ def run(system: System, source: Any, sinks: Sequence[Any] = (), *, on_event: Cal
     interrupted = False
     source_error = None
     try:
-        session.consume(iter_messages(_guarded(lines), session.parsed))
+        session.consume(iter_messages(_guarded(lines), session.parsed, raw_streams=_COMPARED))
     except KeyboardInterrupt:
         interrupted = True
     except _SourceLost as exc:

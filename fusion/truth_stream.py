@@ -26,11 +26,20 @@ from typing import Callable, Collection, Sequence
 import numpy as np
 
 from fusion.api import Estimate, Message
+from fusion.logformat import parse_values
 from fusion.metrics import interpolate_row
 
 __all__ = ["TruthWindow", "TruthComparison"]
 
 _KEEP_BEHIND = 64  # samples kept before the oldest time still needed (estimates slightly out of order)
+
+
+def _median(values: Collection[float]) -> float:
+    """np.median of a few floats (the same number: the middle one, or the mean of the middle two) without
+    np.median, whose first call imports numpy.ma (~10 ms of a run's start-up)."""
+    v = sorted(values)
+    n = len(v)
+    return float(v[n // 2]) if n % 2 else float((v[n // 2 - 1] + v[n // 2]) / 2.0)
 
 
 class TruthWindow:
@@ -87,26 +96,30 @@ class TruthWindow:
         """Take one truth message; False (and counted in ``skipped``) unless it has ``len(names)`` finite
         numbers."""
         vals = message.values
-        if len(vals) != len(self.names):
-            self.skipped += 1
-            return False
-        # Kept as the parsed tuple (a truth line arrives at every IMU sample, an estimate is compared far
-        # less often): converted to an array, quaternions normalised, only when interpolated (_Rows).
-        # The log parser already refuses NaN and inf; a label among the values is not a number.
-        try:
-            total = sum(vals)
-        except TypeError:  # a label among the values
-            self.skipped += 1
-            return False
-        if total - total != 0.0:  # a NaN or inf (from a caller other than the parser)
-            if not all(math.isfinite(float(v)) for v in vals):
+        if vals.__class__ is str:
+            # unparsed values text (fusion.logformat.iter_messages raw_streams): the parser has checked
+            # that it is len(names) finite numbers; parsed when interpolated (_Rows), or now to unwrap
+            if vals.count(",") + 1 != len(self.names):  # type: ignore[attr-defined]
                 self.skipped += 1
                 return False
-        row = vals
-        if self._angle_cols:
-            arr = np.array(vals, dtype=float)
-            self._unwrap_row(arr)
-            row = tuple(arr.tolist())
+            row = vals if not self._angle_cols else self._unwrapped(parse_values(vals))
+        else:
+            if len(vals) != len(self.names):
+                self.skipped += 1
+                return False
+            # Kept as the parsed tuple (a truth line arrives at every IMU sample, an estimate is compared far
+            # less often): converted to an array, quaternions normalised, only when interpolated (_Rows).
+            # The log parser already refuses NaN and inf; a label among the values is not a number.
+            try:
+                total = sum(vals)
+            except TypeError:  # a label among the values
+                self.skipped += 1
+                return False
+            if total - total != 0.0:  # a NaN or inf (from a caller other than the parser)
+                if not all(math.isfinite(float(v)) for v in vals):
+                    self.skipped += 1
+                    return False
+            row = vals if not self._angle_cols else self._unwrapped(vals)
         t = float(message.t)
         ts = self._t
         if ts and t < ts[-1]:  # out of order: insert in place
@@ -122,10 +135,15 @@ class TruthWindow:
             self.newest = t
         n = self.received = self.received + 1
         if n <= 64 or not n & 255:   # every 256th sample (the median of the intervals costs ~20 us)
-            self.period = float(np.median(self._intervals)) if self._intervals else 0.0
+            self.period = _median(self._intervals) if self._intervals else 0.0
         if len(ts) > self.max_samples:
             self._drop(len(ts) - self.max_samples)
         return True
+
+    def _unwrapped(self, vals: Sequence[float]) -> tuple:
+        arr = np.array(vals, dtype=float)
+        self._unwrap_row(arr)
+        return tuple(arr.tolist())
 
     def _unwrap_row(self, row: np.ndarray) -> None:
         """Unwrap the angle columns against the previous sample, as ``np.unwrap`` does along a column."""
@@ -172,7 +190,7 @@ class _Rows:
         self._v, self._quats = values, quaternions
 
     def __getitem__(self, i: int) -> np.ndarray:
-        row = np.array(self._v[i], dtype=float)
+        row = np.array(parse_values(self._v[i]), dtype=float)
         for cols in self._quats.values():
             # as Truth does it over all rows at once (the same reduction, so the same last bit)
             q = row[None, cols]
