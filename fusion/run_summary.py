@@ -32,6 +32,12 @@ def summary(stats: "RunStats", source: str, wall_s: float) -> dict[str, Any]:
         init = system.spec.initial
         why = (f"waiting for a first fix from {init.from_sensor!r} (initial.from_sensor)" if init.from_sensor
                else "no input reached the filter")
+        counts = out["sensors"]
+        if not any(counts.get(name, {}).get("received", 0) for name in sched.sensors):
+            # the likeliest cause by far: a log of other sensors (or another config's), said in so many words
+            why += f"; no message of the config's sensors ({', '.join(sched.sensors)}) was in the input"
+            if sched.unused:
+                why += f", which had {', '.join(sorted(sched.unused))}"
         out["not_started"] = f"no estimate was made: the filter was never initialised ({why})"
     if track.get("errors"):
         out["errors"] = track["errors"]

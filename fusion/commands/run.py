@@ -138,6 +138,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"fusion run: error: the input stopped early: {result.source_error}; the summary covers what was "
               "read", file=sys.stderr)
         return 2
+    if not result.stats.estimates:   # a log this config cannot use (or nothing in it): a user error
+        print(f"fusion run: error: {summary['not_started']}; the summary covers what was read", file=sys.stderr)
+        return 2
     if result.stats.estimates and not result.stats.last_finite:
         print("fusion run: the estimate ended non-finite (the filter diverged); see the summary's health",
               file=sys.stderr)
