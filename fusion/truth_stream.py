@@ -190,13 +190,16 @@ class _Rows:
         self._v, self._quats = values, quaternions
 
     def __getitem__(self, i: int) -> np.ndarray:
-        row = np.array(parse_values(self._v[i]), dtype=float)
+        vals = list(parse_values(self._v[i]))
         for cols in self._quats.values():
-            # as Truth does it over all rows at once (the same reduction, so the same last bit)
-            q = row[None, cols]
-            nrm = np.linalg.norm(q, axis=1, keepdims=True)
-            row[cols] = np.divide(q, nrm, out=q.copy(), where=nrm > 0)[0]
-        return row
+            # as Truth normalises all rows at once (np.linalg.norm over a row of 4 sums its squares in order,
+            # left to right: the same last bit, tests/core/test_raw_truth_values.py), in plain floats
+            w, x, y, z = vals[cols[0]], vals[cols[1]], vals[cols[2]], vals[cols[3]]
+            nrm = math.sqrt(w * w + x * x + y * y + z * z)
+            if nrm > 0.0:
+                for c in cols:
+                    vals[c] = vals[c] / nrm
+        return np.array(vals, dtype=float)
 
 
 class TruthComparison:

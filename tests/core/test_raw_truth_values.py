@@ -106,3 +106,26 @@ def test_median_is_numpys():
         v = (rng.standard_normal(n) * 10.0 ** rng.integers(-6, 6, n)).tolist()
         assert _median(v) == float(np.median(v))
     assert math.isclose(_median([1.0, 2.0]), 1.5)
+
+
+def test_window_rows_normalise_quaternions_as_numpy_does():
+    """_Rows normalises each quaternion in plain floats; the same last bit as np.linalg.norm and a divide
+    (what fusion.metrics.Truth does over all rows at once)."""
+    import numpy as np
+
+    rng = np.random.default_rng(7)
+    names = ["px", "qw", "qx", "qy", "qz", "bw"]
+    w = TruthWindow(names)
+    Q = rng.standard_normal((400, 6)) * rng.choice([1.0, 1e-3, 1e3], (400, 1))
+    Q[5, 1:5] = 0.0                                            # a zero quaternion is left as it is
+    for i, row in enumerate(Q):
+        w.add(pipeline.Message(float(i), "truth", tuple(row.tolist()), i))
+    from fusion.truth_stream import _Rows
+
+    rows = _Rows(w._v, w.quaternions)
+    for i, row in enumerate(Q):
+        q = row[None, 1:5]
+        nrm = np.linalg.norm(q, axis=1, keepdims=True)
+        want = row.copy()
+        want[1:5] = np.divide(q, nrm, out=q.copy(), where=nrm > 0)[0]
+        assert rows[i].tolist() == want.tolist()
