@@ -283,7 +283,19 @@ def truth_warnings(stats: RunStats, unnamed: dict[str, int], state_names: Sequen
                                 f"of the state, and the state's {' '.join(absent)} are not among the {stream} "
                                 "columns: those are not compared (a column is compared when it has the "
                                 "element's name)"))
+        w, compared = comp.window, comp.tracker.compared
+        if w.received >= 2 and w.period > COARSE_TRUTH_S and compared > 2 * w.received:
+            T = w.period
+            events.append(Event(math.nan, "warning", None, f"{stream} every {T:.3g} s, sparser than the estimates "
+                                f"({compared} compared against {w.received} {stream} samples): an error between "
+                                f"two {stream} samples includes the linear interpolation's own (a T^2/8 for an "
+                                f"acceleration a: {0.125 * T * T:.2g} m at 1 m/s^2)"))
     return events
+
+
+#: Truth sample period (s) beyond which the end of a run warns that errors between samples include the
+#: interpolation's: a T^2 / 8 at acceleration a, 5 mm at 1 m/s^2 for 0.2 s, the order of the best fixes here.
+COARSE_TRUTH_S = 0.2
 
 
 #: Distance (m) between a recording's declared beacon and the config's beyond which they disagree.
