@@ -259,7 +259,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             R = obs.R if obs.R is not None else sensor.R
             result = self.filter.update(self.belief, obs.model, obs.z, R, self.gates.get(sensor.name))
             self._tally(result)
-            if result.accepted:
+            if result.accepted and _finite(result.nis, result.belief):
                 self.belief = result.belief
                 sensor.counters["used"] += 1
             else:
@@ -391,6 +391,15 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                 self._tally(result)
         if self._filter_events:
             yield from self._take_filter_events()
+        if result.accepted and not _finite(result.nis, result.belief) and _finite(0.0, self.belief):
+            # DESIGN: never a NaN propagated silently. A model whose prediction (or Jacobian) is not finite
+            # at this state would make the belief NaN for the rest of the run, gate or no gate: refused.
+            sensor.counters["rejected"] += 1
+            if not self._replaying:
+                yield Event(obs.t, "rejected", sensor.name, f"model {obs.model.name!r}: the update is not finite "
+                            f"(NIS {result.nis}: its prediction or Jacobian at this state is NaN or inf); the "
+                            "belief is kept")
+            return
         if result.accepted:
             sensor.counters["used"] += 1
             self.belief = result.belief
@@ -407,3 +416,10 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                 yield Estimate(obs.t, self.belief, "update", sensor.name, result)
 
 
+def _finite(nis: float, belief: Belief | None) -> bool:
+    """NIS, mean and covariance (or its factor) all finite (one sum each: ~1 us an update)."""
+    if belief is None:
+        return True
+    m = belief.S if belief.S is not None else belief.P
+    total = (0.0 if nis is None else float(nis)) + float(belief.x.sum()) + (float(m.sum()) if m is not None else 0.0)
+    return total - total == 0.0
