@@ -74,3 +74,12 @@ def test_a_nan_prediction_is_refused_and_the_run_goes_on(filter_type):
     assert s["sensors"]["uwb"]["used"] > 0.95 * s["sensors"]["uwb"]["received"]
     assert s["errors"]["position_rmse_m"] < 0.5
     assert all(math.isfinite(v) for v in (s["consistency"].get("nees_mean", 0.0),))
+
+
+def test_the_contract_kit_catches_a_model_nan_at_rest():
+    from fusion.testing import check_measurement
+
+    layout = _system("ukf")[0].layout                              # p:2 v:2
+    with pytest.raises(AssertionError, match="h is not finite at rest"):
+        check_measurement(NanBelowSpeed, {"below": 0.9}, layout)
+    check_measurement(NanBelowSpeed, {"below": -1.0}, layout)      # never NaN: passes
