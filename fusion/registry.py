@@ -154,7 +154,24 @@ class Registry:
         provider = self.provider_of(cls)
         if prev is not None and prev.cls is not cls:
             raise ValueError(f"{kind} {nm!r} registered twice: by {prev.provider} and {provider}")
+        if kind in ("source", "sink"):
+            self._check_claims(kind, nm, cls, provider)
         self._entries[kind][nm] = Entry(kind, nm, cls, provider)
+
+    def _check_claims(self, kind: str, name: str, cls: type, provider: str) -> None:
+        """A URL scheme or file suffix already claimed by another source (sink) is refused, as a name
+        registered twice is: otherwise which one reads ``file://`` (writes ``.csv``) would depend on the
+        order plugins load in, and a plugin could silently take over a built-in's input."""
+        for other in self._entries[kind].values():
+            if other.cls is cls:
+                continue
+            for attr, fmt in (("schemes", "{}://"), ("suffixes", "{}")):
+                both = sorted(set(getattr(cls, attr, ())) & set(getattr(other.cls, attr, ())))
+                if both:
+                    claimed = ", ".join(fmt.format(s) for s in both)
+                    raise ValueError(f"{kind} {name!r} ({provider}) claims {claimed}, already {kind == 'source' and 'read' or 'written'} "
+                                     f"by {kind} {other.name!r} ({other.provider}): ambiguous, so {name!r} is not registered "
+                                     "(give it a scheme or suffix of its own)")
 
     def _add_lazy(self, kind: str, name: str, target: str) -> None:
         if kind not in self._lazy:

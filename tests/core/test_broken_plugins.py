@@ -52,6 +52,24 @@ def fusion_register_components(registry):
         registry.add_lazy("measurement", "lazy", "fusion_broken.plugin:Height")
     if MODE == "raises":
         raise RuntimeError("registration boom")
+    if MODE == "hijack":
+        from fusion.api import Sink, Source
+
+        class Hijack(Source):
+            """Claims the built-ins' schemes."""
+            name = "hijack"
+            schemes = ("file", "socket")
+
+            def lines(self):
+                return iter(())
+
+        class CsvToo(Sink):
+            """Claims .csv."""
+            name = "csv_too"
+            suffixes = (".csv",)
+
+        registry.add(Hijack)
+        registry.add(CsvToo)
     registry.add(Other)
 '''
 CONFIG = """\
@@ -169,3 +187,21 @@ def test_a_registration_hook_that_raises(broken):
     assert "fusion_register_components raised RuntimeError: registration boom" in ok.stderr
     bad = broken("raises", "validate", "other.yaml")
     assert bad.returncode == 2 and "unknown measurement 'other'" in bad.stderr and "registration boom" in bad.stderr
+
+
+def test_a_plugin_claiming_a_builtin_scheme_or_suffix(broken, tmp_path):
+    """A source claiming file:// and socket://, a sink claiming .csv (tester2 #9: before, the source silently
+    took over file:// inputs, the run read nothing and exited 0): refused like a name registered twice, the
+    built-ins keep theirs, and fusion plugins says so."""
+    listed = broken("hijack", "plugins")
+    assert listed.returncode == 2
+    lines = listed.stderr.splitlines()
+    assert any("source 'hijack'" in ln and "claims file://, already read by source 'recording'" in ln for ln in lines)
+    assert any("sink 'csv_too'" in ln and "claims .csv, already written by sink 'estimates'" in ln for ln in lines)
+    log = ROOT / "recordings" / "example_2d.log"
+    cfg = ROOT / "configs" / "example_2d.yaml"
+    out = tmp_path / "e.csv"
+    run = broken("hijack", "run", str(cfg), "--input", f"file://{log}", "-q", "-o", str(out))
+    assert run.returncode == 0 and out.read_text().count("\n") > 100      # read and written by the built-ins
+    closed = broken("hijack", "run", str(cfg), "--input", "socket://127.0.0.1:1", "-q")
+    assert closed.returncode == 2
