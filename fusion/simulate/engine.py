@@ -87,6 +87,7 @@ class SimParts:
 
 MAX_DURATION_S = 1e7      # s (~116 days) of one simulated recording
 MAX_SAMPLES = 5e7         # messages of one stream (a few GB of text)
+MAX_LINES = 1e7           # lines of one recording, all streams: held in memory (~300 B a line while formatted)
 
 
 def simulate_parts(sc: Scenario, seed: int | None = None, noise: bool = True, registry=None,
@@ -110,12 +111,21 @@ def simulate_parts(sc: Scenario, seed: int | None = None, noise: bool = True, re
     duration = float(sc.duration if sc.duration is not None else traj.duration)
     # every stream is held in memory before it is written: refuse sizes that cannot be, naming the field
     truth_rate = sc.truth.rate_hz or max((s.rate_hz() for s in sims.values()), default=10.0) or 10.0
-    for field_name, r in [*((f"sensors.{n}.rate_hz", sm.rate_hz()) for n, sm in sims.items()),
-                          ("truth.rate_hz", truth_rate)]:
+    rates = [*((f"sensors.{n}.rate_hz", sm.rate_hz()) for n, sm in sims.items()), ("truth.rate_hz", truth_rate)]
+    own = "" if sc.duration is not None else (
+        f" (the trajectory's own length: {duration / 86400.0:.3g} days from its waypoints, speed and max_accel "
+        f"{getattr(sc.trajectory, 'max_accel', '?')} m/s^2)" if duration > 86400.0 else " (the trajectory's own length)")
+    for field_name, r in rates:
         if r and duration * r > MAX_SAMPLES:
             raise _document(sc, where, text).error(
-                f"{field_name}: {r:g} Hz over {duration:g} s is {duration * r:.3g} samples; at most {MAX_SAMPLES:g} "
-                "in one recording (lower the rate or split the duration)")
+                f"{field_name}: {r:g} Hz over {duration:g} s{own} is {duration * r:.3g} samples; at most "
+                f"{MAX_SAMPLES:g} in one recording (lower the rate or split the duration)")
+    lines = duration * sum(r for _, r in rates if r)
+    if lines > MAX_LINES:
+        raise _document(sc, where, text).error(
+            f"duration: {duration:g} s{own} at {' + '.join(f'{r:g}' for _, r in rates if r)} Hz is {lines:.3g} "
+            f"lines; at most {MAX_LINES:g} in one recording (it is held in memory: give a shorter duration, or "
+            "simulate several with other seeds)")
     beacons = {k: np.array(v + [0.0] * (3 - len(v)), float) for k, v in sc.beacons.items()}
     origin = (sc.origin.lat_deg, sc.origin.lon_deg, sc.origin.alt_m) if sc.origin else None
     try:

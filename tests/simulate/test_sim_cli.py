@@ -128,3 +128,22 @@ def test_a_scenario_error_and_a_config_error_are_formatted_alike(tmp_path, capsy
                                                                          "sensors.u.bogus")
     assert (cfg.group(2), cfg.group(3), cfg.group(6), cfg.group(7)) == ("9", "sensors.u.model.dim", "10",
                                                                          "sensors.u.model.bogus")
+
+
+def test_a_trajectory_too_long_to_hold_is_refused_before_sampling(tmp_path, capsys):
+    """max_accel 1e-9 m/s^2 makes the example's route last 11.7 days: 2e7 lines, refused at once naming the
+    cause (tester2 #16: before, memory grew to 6 GB without a word). In a subprocess with a timeout, so a
+    regression fails instead of filling the machine."""
+    import subprocess
+    import sys
+
+    import yaml
+
+    d = yaml.safe_load(EXAMPLE.read_text())
+    d["trajectory"]["max_accel"] = 1e-9
+    sc = tmp_path / "tiny.yaml"
+    sc.write_text(yaml.safe_dump(d))
+    r = subprocess.run([sys.executable, "-m", "fusion.cli", "simulate", str(sc), "-o", str(tmp_path / "o.log")],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "11.7 days from its waypoints, speed and max_accel 1e-09" in r.stderr
+    assert "at most 1e+07 in one recording" in r.stderr and not (tmp_path / "o.log").exists()
