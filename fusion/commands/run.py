@@ -234,6 +234,9 @@ def _smoothing(args: argparse.Namespace, system) -> dict[str, Any] | None:
     smoothing). The command line wins over the config."""
     spec = getattr(system.spec, "smoother", None)
     lag = args.smooth_lag
+    if lag is not None and args.smooth:
+        raise ConfigError(f"--smooth and --smooth-lag {lag:g} exclude each other: --smooth is the full smoother "
+                          "(every estimate uses the whole recording), --smooth-lag S the fixed-lag one; give one")
     if lag is not None:
         if not (lag >= 0.0 and math.isfinite(lag)):
             raise ConfigError(f"--smooth-lag {lag:g}: expected a finite number of seconds >= 0")

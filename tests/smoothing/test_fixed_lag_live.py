@@ -50,3 +50,15 @@ def test_a_late_noted_estimate_is_placed_at_its_own_node():
     _, sink = pushed("example_2d.yaml", 1.0)
     assert sink.log.unmatched == 0
     assert sink.fixed.emitted > 100
+
+
+def test_smooth_and_smooth_lag_together_are_refused(capsys):
+    """Before, the fixed-lag smoother ran silently whichever order they came in (tester2 #17)."""
+    from pathlib import Path
+
+    from fusion.cli import main
+
+    cfg = str(Path(__file__).resolve().parents[2] / "configs" / "uwb_pv_ukf.yaml")
+    for argv in (["--smooth", "--smooth-lag", "2"], ["--smooth-lag", "2", "--smooth"]):
+        assert main(["run", cfg, "-q", *argv]) == 2
+        assert "--smooth and --smooth-lag 2 exclude each other" in capsys.readouterr().err
