@@ -200,7 +200,7 @@ class SystemSpec(_Strict):
             if len(pos) not in (2, 3):
                 raise ValueError(f"beacon {name!r} needs 2 or 3 coordinates, got {len(pos)}")
             if not BEACON_NAME.match(name) or name.lower() in ("nan", "inf", "infinity"):
-                raise ValueError(f"beacon {name!r} can never be named by a log line (a label: a letter or _, "
+                raise ValueError(f"beacon {name!r} can never be named by a log line (a label: an ASCII letter or _, "
                                  "then letters, digits, _ . : - /)")
             if any(abs(c) > MAX_BEACON_M for c in pos):
                 raise ValueError(f"beacon {name!r}: a coordinate beyond {MAX_BEACON_M:g} m ({pos})")
@@ -325,7 +325,7 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
         loc = ["sensors", sname]
         where = doc.where(loc) if doc else f"sensors.{sname}"
         if not SENSOR_NAME.match(sname):
-            raise ConfigError(f"{where}: {sname!r} can never name a log line's sensor (a letter or _, then letters, "
+            raise ConfigError(f"{where}: {sname!r} can never name a log line's sensor (an ASCII letter or _, then ASCII letters, "
                               "digits, _ . -)")
         if sname in RESERVED_SENSORS:
             raise ConfigError(f"{where}: {sname!r} lines are never fed to the filter (the log format reserves "
