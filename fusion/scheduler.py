@@ -302,11 +302,16 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             except Exception as exc:  # a plugin that fails on one message must not stop the run
                 yield self._bad(sensor, msg, _failed(sensor.decoder, exc))
                 continue
+            told = self._silence_told and msg.t > self._silence_last   # its silence already told: it ends now
             if sensor.max_gap is not None and self._last_input_t is not None and msg.t - self._last_input_t > sensor.max_gap:
-                yield Event(msg.t, "gap", msg.sensor, f"no {msg.sensor} sample for {msg.t - self._last_input_t:.3f} s "
-                            f"(limit {sensor.max_gap} s); prediction held the last sample")
+                if told:   # one gap, one "gap" event: its end is a "resumed" one, with the length
+                    yield Event(msg.t, "resumed", msg.sensor, f"{msg.sensor} samples again after "
+                                f"{msg.t - self._last_input_t:.3f} s; prediction held the last sample")
+                else:
+                    yield Event(msg.t, "gap", msg.sensor, f"no {msg.sensor} sample for {msg.t - self._last_input_t:.3f} "
+                                f"s (limit {sensor.max_gap} s); prediction held the last sample")
             self._last_input_t = msg.t
-            if self._silence_told and msg.t > self._silence_last:   # a new sample, not a held one
+            if told:   # a new sample, not a held one
                 self._silence_told = False
             good.append((msg.t, u))
         if good:
