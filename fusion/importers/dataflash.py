@@ -100,6 +100,11 @@ class DataflashImporter(Importer):
                 continue
             got = fn(rows, conv, request, notes)
             streams += [s for s in got if request.wants(s.sensor)]
+            absent = sorted(n for n in request.sensors or () if n.rstrip("0123456789") == fam and n != fam
+                            and n not in {s.sensor for s in got})
+            if absent:   # --sensors imu9 of a log with two IMUs: said, never a silent drop
+                raise InputError(f"{path}: --sensors {' '.join(absent)}: not in the log (its {fam} instances: "
+                                 f"{', '.join(s.sensor for s in got) or 'none'})")
             if not got:
                 missing.append(fam)
         utc = _start_utc(rows.get("GPS"))

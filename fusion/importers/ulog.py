@@ -91,6 +91,7 @@ class UlogImporter(Importer):
     name = "ulog"
     suffixes = (".ulg",)
     sensors = ("imu", "gps", "mag", "baro", "reference")
+    single_instance = True   # only multi_id 0 of a topic is read: ``--sensors imu2`` is refused by the command
 
     def read(self, path: str, request: ImportRequest) -> ImportedLog:
         ulog = _parse(path, request)

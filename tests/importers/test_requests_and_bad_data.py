@@ -1,0 +1,97 @@
+"""``fusion import`` on requests it cannot meet and on damaged or odd data (tester2's findings): a sensor
+asked for by name that the importer cannot write is one exit-2 line, never a silent drop; corrupt samples
+are skipped with a warning naming them; row order and the time span do not change what a CSV gives."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dataflash_builder import DataflashWriter
+from import_helpers import Recording, fusion_import, one_error_line
+from ulog_builder import UlogWriter
+
+
+def _ulog(path, n: int = 20, valid_from: dict | None = None, flags: dict | None = None, mag: str = "vehicle"):
+    """A 10 Hz ULog: vehicle_local_position (+ validity flags), vehicle_attitude, sensor_combined and a
+    magnetometer. ``valid_from``: flag -> first valid sample; ``flags``: (sample, flag) -> raw byte."""
+    valid_from = valid_from or {}
+    flags = flags or {}
+    w = UlogWriter(start_us=1_000_000)
+    w.info("sys_name", "PX4")
+    w.topic("sensor_combined", [("float[3]", "gyro_rad"), ("float[3]", "accelerometer_m_s2")])
+    w.topic("vehicle_attitude", [("float[4]", "q")])
+    w.topic("vehicle_local_position", [("float", "x"), ("float", "y"), ("float", "z"), ("float", "vx"),
+                                       ("float", "vy"), ("float", "vz"), ("bool", "xy_valid"), ("bool", "z_valid"),
+                                       ("bool", "v_xy_valid"), ("bool", "v_z_valid")])
+    mag_topic = "vehicle_magnetometer" if mag == "vehicle" else "sensor_mag"
+    if mag == "vehicle":
+        w.topic(mag_topic, [("float[3]", "magnetometer_ga")])
+    else:
+        w.topic(mag_topic, [("float", "x"), ("float", "y"), ("float", "z")])
+    for name in ("sensor_combined", "vehicle_attitude", "vehicle_local_position", mag_topic):
+        w.subscribe(name)
+    for k in range(n):
+        t = 1_000_000 + 100_000 * k
+        w.data("sensor_combined", timestamp=t + 1000, gyro_rad=[0.01, 0, 0], accelerometer_m_s2=[0, 0, -9.8])
+        c, s = np.cos(0.01 * k), np.sin(0.01 * k)
+        w.data("vehicle_attitude", timestamp=t + 2000, q=[c, 0, 0, s])
+        vals = {f: k >= valid_from.get(f, 0) for f in ("xy_valid", "z_valid", "v_xy_valid", "v_z_valid")}
+        w.data("vehicle_local_position", timestamp=t + 3000, x=0.1 * k, y=0.2 * k, z=-0.3 * k, vx=1.0, vy=2.0,
+               vz=-3.0, **vals)
+        if mag == "vehicle":
+            w.data(mag_topic, timestamp=t + 4000, magnetometer_ga=[0.2, 0.0, 0.4])
+        else:
+            w.data(mag_topic, timestamp=t + 4000, x=0.2, y=0.0, z=0.4)
+    buf = w.buf
+    if flags:   # a flag byte that is neither 0 nor 1: the sample is corrupt (struct's '?' cannot write one)
+        fields = w.formats["vehicle_local_position"]
+        size = {"uint64_t": 8, "float": 4, "bool": 1}
+        msg_id = w.ids[("vehicle_local_position", 0)]
+        pos, seen = 0, -1
+        while pos < len(buf):
+            if buf[pos:pos + 3] == b"ULo":
+                pos += 16
+                continue
+            length, kind = int.from_bytes(buf[pos:pos + 2], "little"), buf[pos + 2:pos + 3]
+            body = pos + 3
+            if kind == b"D" and int.from_bytes(buf[body:body + 2], "little") == msg_id:
+                seen += 1
+                off = body + 2
+                for typ, name in fields:
+                    if (seen, name) in flags:
+                        buf[off] = flags[(seen, name)] & 0xFF
+                    off += size[typ]
+            pos = body + length
+    w.save(path)
+
+
+# ----------------------------------------------------------------------------- finding 4: --sensors
+def test_ulog_numbered_sensor_is_one_error_alone_and_in_a_list(tmp_path, capsys):
+    _ulog(tmp_path / "a.ulg")
+    for names in (["imu2"], ["gps", "imu9"], ["mag2"]):
+        assert fusion_import(tmp_path / "a.ulg", "-o", tmp_path / "x.log", "--sensors", *names) == 2
+        line = one_error_line(capsys)
+        assert "reads only instance 0" in line and names[-1] in line and "empty" not in line, line
+    assert not (tmp_path / "x.log").exists()
+
+
+def _two_imus(path):
+    w = DataflashWriter()
+    for name in ("IMU", "GPS"):
+        w.declare(name)
+    for k in range(10):
+        t = 1_000_000 + 100_000 * k
+        for i in (0, 1):
+            w.write("IMU", TimeUS=t + i, I=i, AccZ=-9.8)
+        w.write("GPS", TimeUS=t, I=0, Status=3, NSats=10, Lat=-35.0, Lng=149.0, Alt=500.0, GWk=2300, GMS=1000 * k)
+    w.save(path)
+
+
+def test_dataflash_instance_not_in_the_log_is_one_error_alone_and_in_a_list(tmp_path, capsys):
+    _two_imus(tmp_path / "a.bin")
+    for names in (["imu9"], ["gps", "imu9"], ["imu", "imu3"]):
+        assert fusion_import(tmp_path / "a.bin", "-o", tmp_path / "x.log", "--sensors", *names) == 2
+        line = one_error_line(capsys)
+        assert "not in the log" in line and names[-1] in line and "imu, imu2" in line, line
+    assert fusion_import(tmp_path / "a.bin", "-o", tmp_path / "x.log", "--sensors", "gps", "imu2") == 0
+    assert set(Recording(tmp_path / "x.log").t) == {"gps", "imu2"}
