@@ -95,3 +95,43 @@ def test_dataflash_instance_not_in_the_log_is_one_error_alone_and_in_a_list(tmp_
         assert "not in the log" in line and names[-1] in line and "imu, imu2" in line, line
     assert fusion_import(tmp_path / "a.bin", "-o", tmp_path / "x.log", "--sensors", "gps", "imu2") == 0
     assert set(Recording(tmp_path / "x.log").t) == {"gps", "imu2"}
+
+
+# ----------------------------------------------------------------------------- finding 1: ULog validity flags
+def _reference_of(tmp_path, capsys, **kw):
+    _ulog(tmp_path / "r.ulg", **kw)
+    assert fusion_import(tmp_path / "r.ulg", "-o", tmp_path / "r.log", "--force") == 0
+    return Recording(tmp_path / "r.log"), capsys.readouterr().err
+
+
+def test_ulog_corrupt_validity_flags_skip_that_sample_only(tmp_path, capsys):
+    rec, err = _reference_of(tmp_path, capsys, flags={(7, "xy_valid"): -44, (7, "v_xy_valid"): 187})
+    assert rec.header.fields["reference"] == ("px", "py", "pz", "vx", "vy", "vz", "qw", "qx", "qy", "qz")
+    t = rec.times("reference")
+    assert len(t) == 19 and not np.any(np.isclose(t, 0.703))       # sample 7 (t 0.703 s) only
+    assert "sample 7 (t 0.703 s): xy_valid=-44, v_xy_valid=-69" in err, err   # 187 is int8 -69
+    np.testing.assert_allclose(rec.times("initial_attitude"), [0.002], atol=1e-9)   # the first attitude
+
+
+def test_ulog_element_valid_late_does_not_move_the_others_or_the_initial_attitude(tmp_path, capsys):
+    # a horizontal fix only in the last 5 of 20 samples: pz vz q over the whole log, px py vx vy left out, said
+    rec, err = _reference_of(tmp_path, capsys, valid_from={"xy_valid": 15, "v_xy_valid": 15})
+    assert rec.header.fields["reference"] == ("pz", "vz", "qw", "qx", "qy", "qz")
+    assert len(rec.times("reference")) == 20
+    assert "xy_valid only in 5 of 20" in err and "--start 1.503" in err, err
+    np.testing.assert_allclose(rec.times("initial_attitude"), [0.002], atol=1e-9)
+    np.testing.assert_allclose(rec.values("initial_attitude")[0], [1, 0, 0, 0], atol=1e-7)
+    # valid from sample 3: every element, from then on; the initial attitude stays the first one
+    rec, err = _reference_of(tmp_path, capsys, valid_from={"xy_valid": 3})
+    assert rec.header.fields["reference"][:3] == ("px", "py", "pz")
+    np.testing.assert_allclose(rec.times("reference")[0], 0.303, atol=1e-9)
+    assert "3 of 20 sample(s) at which not all of" in err
+    np.testing.assert_allclose(rec.times("initial_attitude"), [0.002], atol=1e-9)
+    np.testing.assert_allclose(rec.values("initial_attitude")[0], [1, 0, 0, 0], atol=1e-7)
+
+
+def test_ulog_raw_sensor_mag_is_warned_on_stderr(tmp_path, capsys):
+    _, err = _reference_of(tmp_path, capsys, mag="raw")
+    assert "no vehicle_magnetometer" in err and "sensor_mag" in err, err
+    _, err = _reference_of(tmp_path, capsys)
+    assert "no vehicle_magnetometer" not in err
