@@ -135,3 +135,35 @@ def test_ulog_raw_sensor_mag_is_warned_on_stderr(tmp_path, capsys):
     assert "no vehicle_magnetometer" in err and "sensor_mag" in err, err
     _, err = _reference_of(tmp_path, capsys)
     assert "no vehicle_magnetometer" not in err
+
+
+# ----------------------------------------------------------------------------- findings 7 and 19: CSV row order
+def _csv(tmp_path, order):
+    rows = [(k, 2.0 + 0.25 * k) for k in range(12)]          # t = 0.25 k s; value 2 + 0.25 k
+    body = "".join(f"2024-03-05T10:15:{2.25 + 0.25 * k:06.3f}Z,{v}\n" for k, v in (rows[i] for i in order))
+    (tmp_path / "r.csv").write_text("timestamp,r\n" + body)
+    (tmp_path / "m.yaml").write_text("time: {column: timestamp, unit: iso, zero: first}\n"
+                                     "sensors:\n  uwb: {fields: {range: r}}\n")
+    return tmp_path / "r.csv", tmp_path / "m.yaml"
+
+
+def test_csv_zero_first_is_the_earliest_time_whatever_the_row_order(tmp_path, capsys):
+    src, mp = _csv(tmp_path, [1, 0, *range(2, 12)])               # rows 1 and 2 swapped
+    assert fusion_import(src, "--map", mp, "-o", tmp_path / "o.log") == 0
+    err = capsys.readouterr().err
+    rec = Recording(tmp_path / "o.log")
+    np.testing.assert_allclose(rec.times("uwb"), 0.25 * np.arange(12), atol=1e-9)
+    np.testing.assert_allclose(rec.values("uwb")[:, 0], 2 + 0.25 * np.arange(12))
+    assert "r.csv: rows not in time order (line 3: 2024-03-05T10:15:02.250" in err, err
+    assert "t = 0 is the earliest time" in err
+    src, mp = _csv(tmp_path, list(range(12)))                     # in order: no note
+    assert fusion_import(src, "--map", mp, "-o", tmp_path / "o2.log") == 0
+    assert "time order" not in capsys.readouterr().err
+
+
+def test_csv_end_keeps_a_row_inside_the_span_written_after_a_later_one(tmp_path, capsys):
+    order = [0, *range(2, 9), 1, *range(9, 12)]                   # the row of t = 0.25 s after the t = 2.0 s row
+    src, mp = _csv(tmp_path, order)
+    assert fusion_import(src, "--map", mp, "-o", tmp_path / "o.log", "--end", "1") == 0
+    np.testing.assert_allclose(Recording(tmp_path / "o.log").times("uwb"), [0, 0.25, 0.5, 0.75, 1.0], atol=1e-9)
+    assert "rows not in time order (line 10" in capsys.readouterr().err
