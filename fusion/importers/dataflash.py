@@ -84,8 +84,8 @@ class DataflashImporter(Importer):
         types = sorted(t for t, fam in _FAMILY.items() if request.wants_family(fam)
                        or (t == "ATT" and request.wants_family("mag")))   # ATT: the field in NED (mag header)
         reader = open_log(path, request)
-        rows, units, vehicle, texts = collect(reader, path, types, request)
         log = ImportedLog()
+        rows, units, vehicle, texts = collect(reader, path, types, request, log.notes)
         log.meta["source"] = f"{os.path.basename(path)} (ArduPilot DataFlash, read by pymavlink)"
         if vehicle:
             log.meta["vehicle"] = vehicle
@@ -93,6 +93,8 @@ class DataflashImporter(Importer):
         conv = _Units(units)
         log.messages = texts
         notes = log.notes
+        if getattr(reader, "fusion_damage", None):   # --partial: what was skipped, said
+            notes.append(f"{reader.fusion_damage}: skipped, the messages around them read")
         streams: list[Stream] = []
         missing: list[str] = []
         for fam, fn in (("imu", _imu), ("gps", _gps), ("mag", _mag), ("baro", _baro)):

@@ -167,3 +167,64 @@ def test_csv_end_keeps_a_row_inside_the_span_written_after_a_later_one(tmp_path,
     assert fusion_import(src, "--map", mp, "-o", tmp_path / "o.log", "--end", "1") == 0
     np.testing.assert_allclose(Recording(tmp_path / "o.log").times("uwb"), [0, 0.25, 0.5, 0.75, 1.0], atol=1e-9)
     assert "rows not in time order (line 10" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------- finding 6: DataFlash damage
+def _ap(n: int = 40, mark: int | None = None):
+    """A 10 Hz DataFlash log of IMU + GPS; returns (bytes, offset of IMU message ``mark``)."""
+    w = DataflashWriter()
+    for name in ("IMU", "GPS"):
+        w.declare(name)
+    at = None
+    for k in range(n):
+        t = 1_000_000 + 100_000 * k
+        if k == mark:
+            at = len(w.buf)
+        w.write("IMU", TimeUS=t, I=0, AccZ=-9.8, GyrX=0.001 * k)
+        w.write("GPS", TimeUS=t, I=0, Status=3, NSats=10, Lat=-35.0, Lng=149.0, Alt=500.0, GWk=2300, GMS=1000 * k)
+    return bytearray(w.buf), at
+
+
+def test_dataflash_unknown_message_type_is_corruption_and_partial_reads_past_it(tmp_path, capsys):
+    data, at = _ap(mark=25)
+    data[at + 2] = 0xA9                                 # the type byte of IMU message 25: no FMT declares it
+    (tmp_path / "u.bin").write_bytes(bytes(data))
+    assert fusion_import(tmp_path / "u.bin", "-o", tmp_path / "u.log") == 2
+    line = one_error_line(capsys)
+    assert "corrupt: " in line and f"the first at byte {at}" in line and "0xa9" in line and "--partial" in line, line
+    assert not (tmp_path / "u.log").exists()
+    assert fusion_import(tmp_path / "u.bin", "-o", tmp_path / "u.log", "--partial") == 0
+    assert f"byte {at}" in capsys.readouterr().err
+    rec = Recording(tmp_path / "u.log")
+    t = 0.1 * np.arange(40) + 1.0
+    np.testing.assert_allclose(rec.times("imu"), np.delete(t, 25), atol=1e-9)   # all but the damaged one
+    np.testing.assert_allclose(rec.times("gps"), t, atol=1e-9)
+
+
+def test_dataflash_absurd_instance_or_time_is_skipped_and_said(tmp_path, capsys):
+    bad, at = _ap(mark=20)
+    # instance 190 and a time of 4.7e12 s in one IMU message (a flip that left its header valid)
+    bad[at + 3:at + 11] = (4_755_801_206_521_644_000).to_bytes(8, "little")
+    bad[at + 11] = 190
+    (tmp_path / "a.bin").write_bytes(bytes(bad))
+    assert fusion_import(tmp_path / "a.bin", "-o", tmp_path / "a.log") == 0
+    err = capsys.readouterr().err
+    assert f"IMU: 1 message(s) with an absurd time or instance number skipped as corrupt: byte {at}" in err, err
+    rec = Recording(tmp_path / "a.log")
+    assert set(rec.t) == {"imu", "gps"}
+    assert rec.times("imu").max() < 5.0 and len(rec.times("imu")) == 39
+
+
+def test_dataflash_log_concatenated_with_itself_is_said_and_not_doubled(tmp_path, capsys):
+    data, _ = _ap()
+    (tmp_path / "one.bin").write_bytes(bytes(data))
+    (tmp_path / "two.bin").write_bytes(bytes(data + data))
+    assert fusion_import(tmp_path / "one.bin", "-o", tmp_path / "one.log") == 0
+    capsys.readouterr()
+    assert fusion_import(tmp_path / "two.bin", "-o", tmp_path / "two.log") == 0
+    err = capsys.readouterr().err
+    assert "clock goes back from 4.900 s to 1.000 s" in err and "IMU 40" in err, err
+    one, two = Recording(tmp_path / "one.log"), Recording(tmp_path / "two.log")
+    for s in ("imu", "gps"):
+        np.testing.assert_array_equal(one.times(s), two.times(s))
+        np.testing.assert_array_equal(one.values(s), two.values(s))
