@@ -75,12 +75,13 @@ def _resync(reader) -> tuple[int, int] | None:
         if len(o) and mtype in fmts:
             end = max(end, int(max(o)) + fmts[mtype].len)
     data, n = reader.data_map, reader.data_len
-    if n - end < 3 or data[end:end + 2] != b"\xa3\x95":
-        return None
-    stop = (end, data[end + 2])
     head = b"\xa3\x95"
+    at = data.find(head, end) if n - end >= 3 else -1   # the stop (after bytes the indexer skipped, if any)
+    if at < 0 or at + 3 > n:
+        return None
+    stop = (at, data[at + 2])
     found: list[tuple[int, int]] = []
-    pos = end + 1
+    pos = at + 1
     synced = False
     fmt_type = 0x80
     while pos + 3 <= n:
