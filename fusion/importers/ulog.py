@@ -23,6 +23,7 @@ clock (``timestamp_sample`` where the topic has it).
 from __future__ import annotations
 
 import io
+import math
 import os
 from typing import Any
 
@@ -354,10 +355,10 @@ def _valid_attitude(att, tcol, notes: list[str]) -> tuple[np.ndarray, np.ndarray
     return t[ok], q[ok]
 
 
-def _choose(valid: dict[str, np.ndarray], sizes: dict[str, int], extra: int, n: int) -> list[str]:
+def _choose(valid: dict[str, np.ndarray], sizes: dict[str, int], extra: int, base: np.ndarray) -> list[str]:
     """The groups of elements to write: of those ever valid, the set that writes the most values
     (elements x samples at which all of them are valid; ``extra`` elements, the attitude, ride along with
-    every sample). Ties go to the larger set. The log format has one column set a stream, so an element
+    every sample of ``base``, the usable samples in the span). Ties go to the larger set. The log format has one column set a stream, so an element
     valid only late either shortens the whole reference or is left out, whichever loses less."""
     import itertools
 
@@ -365,7 +366,7 @@ def _choose(valid: dict[str, np.ndarray], sizes: dict[str, int], extra: int, n: 
     best, best_score = [], (-1, -1)
     for r in range(len(names), -1, -1):
         for combo in itertools.combinations(names, r):
-            keep = np.ones(n, bool)
+            keep = base.copy()
             for g in combo:
                 keep &= valid[g]
             width = sum(sizes[g] for g in combo) + extra
@@ -410,32 +411,36 @@ def _reference(lpos, att, tcol, request: ImportRequest, notes: list[str]) -> tup
             notes.append(f"reference: {len(idx)} of {n} vehicle_local_position sample(s) skipped as corrupt "
                          f"(a validity flag neither 0 nor 1): {_named(idx, t, said)}")
         ok = ~corrupt
+        span = in_span(t, request)   # the column set is chosen by the samples to be written
         valid = {}
         for names, src, flag in groups:
             v = (np.asarray(data[flag]) == 1) if flag in data else np.ones(n, bool)
-            valid[names] = v & ok
+            valid[names] = v & ok & span
         sizes = {g: len(g.split()) for g in valid}
-        chosen = _choose(valid, sizes, 4 if t_att is not None else 0, n)
+        base = ok & span
+        m = int(base.sum())
+        chosen = _choose(valid, sizes, 4 if t_att is not None else 0, base)
         fields: list[str] = []
         cols: list[np.ndarray] = []
-        keep = ok.copy()
+        keep = base.copy()
         for names, src, flag in groups:
             if not valid[names].any():
                 notes.append(f"reference: the EKF never flags {flag}: no {names}")
                 continue
             if names not in chosen:
                 first = np.flatnonzero(valid[names])[0]
-                notes.append(f"reference: the EKF flags {flag} only in {int(valid[names].sum())} of {n} sample(s) "
-                             f"(from t {t[first]:.3f} s): no {names}, so that the other elements are written over "
-                             f"the whole log (import with --start {t[first]:.3f} for all of them)")
+                since = math.floor(t[first] * 1000.0) / 1000.0   # a --start that includes it
+                notes.append(f"reference: the EKF flags {flag} only in {int(valid[names].sum())} of {m} sample(s) "
+                             f"(from t {since:.3f} s): no {names}, so that the other elements are written over "
+                             f"the whole span (import with --start {since:.3f} for all of them)")
                 continue
             fields += names.split()
             cols += [np.asarray(data[c], float) for c in src]
             keep &= valid[names]
         if fields:
-            dropped = int(np.sum(ok & ~keep))
+            dropped = int(np.sum(base & ~keep))
             if dropped:
-                notes.append(f"reference: {dropped} of {n} sample(s) at which not all of {' '.join(fields)} are "
+                notes.append(f"reference: {dropped} of {m} sample(s) at which not all of {' '.join(fields)} are "
                              "valid dropped")
             if t_att is not None:
                 q = slerp_to(t_att, q_att, t)

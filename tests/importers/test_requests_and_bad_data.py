@@ -118,7 +118,11 @@ def test_ulog_element_valid_late_does_not_move_the_others_or_the_initial_attitud
     rec, err = _reference_of(tmp_path, capsys, valid_from={"xy_valid": 15, "v_xy_valid": 15})
     assert rec.header.fields["reference"] == ("pz", "vz", "qw", "qx", "qy", "qz")
     assert len(rec.times("reference")) == 20
-    assert "xy_valid only in 5 of 20" in err and "--start 1.503" in err, err
+    assert "xy_valid only in 5 of 20" in err and "--start 1.50" in err, err
+    start = err.split("--start ")[1].split()[0]
+    assert fusion_import(tmp_path / "r.ulg", "-o", tmp_path / "s.log", "--start", start) == 0
+    assert Recording(tmp_path / "s.log").header.fields["reference"][:2] == ("px", "py")   # as the note says
+    capsys.readouterr()
     np.testing.assert_allclose(rec.times("initial_attitude"), [0.002], atol=1e-9)
     np.testing.assert_allclose(rec.values("initial_attitude")[0], [1, 0, 0, 0], atol=1e-7)
     # valid from sample 3: every element, from then on; the initial attitude stays the first one
