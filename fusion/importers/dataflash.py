@@ -21,6 +21,11 @@ is not the expected one (or a known conversion of it) is refused. Logs without `
 
 Time: ``t = TimeUS / 1e6`` s, the autopilot's boot clock (as in MAVExplorer and Mission Planner); ``TimeMS``
 in older logs.
+
+Damage (fusion.importers.dataflash_tables): a message of an unknown type ends pymavlink's index, so the
+reader resyncs past it and the skipped bytes are corruption (exit 2 unless ``--partial``); messages that
+parse but are absurd (instance number, time) are skipped and said; byte-identical repeats after the clock
+goes back (a log concatenated with itself) are dropped and said.
 """
 from __future__ import annotations
 
