@@ -319,8 +319,9 @@ def _show_time(ta: float, spec: TimeSpec) -> str:
 def _read_file(path: Path, tspec: TimeSpec, opts: CsvOptions, specs: dict[str, SensorMap], request: ImportRequest,
                zero: float | None, out: dict[str, tuple[list[float], list[Any]]], notes: list[str]) -> float | None:
     """Read the mapped columns of ``path`` into ``out``; the zero (s) it used. ``zero: first`` is the earliest
-    time in the column, not the first row's: when a row earlier than the first one turns up, the file is read
-    again with that zero (rows out of time order are said in a note, and sorted by the caller)."""
+    time in the column, not the first row's: when a row earlier than the first one turns up, the times read
+    are shifted to that zero, or with --start/--end the file is read again (rows out of time order are said
+    in a note, and sorted by the caller)."""
     zero_here = zero is None and tspec.zero == "first"
     z, earliest, disorder, incomplete = _read_pass(path, tspec, opts, specs, request, zero, out)
     if disorder is not None:
@@ -330,9 +331,19 @@ def _read_file(path: Path, tspec: TimeSpec, opts: CsvOptions, specs: dict[str, S
                      + (f", and t = 0 is the earliest time, {_show_time(earliest, tspec)}" if zero_here
                         and z is not None and earliest < z else ""))
     if zero_here and z is not None and earliest < z:
-        for sname in specs:
-            out.pop(sname, None)
-        z, _, _, incomplete = _read_pass(path, tspec, opts, specs, request, earliest, out)
+        if (request.start is None and request.end is None) or not path.is_file():
+            for sname in specs:   # no span to redo (or a stream that cannot be read twice): shift the times
+                ts = out[sname][0]
+                if len(ts):
+                    np.frombuffer(ts, float)[:] += z - earliest
+            if request.start is not None or request.end is not None:
+                notes.append(f"{path.name}: --start/--end were applied with t = 0 at the first row (the input "
+                             "cannot be read twice)")
+        else:   # the span is on the new time axis: read again
+            for sname in specs:
+                out.pop(sname, None)
+            z, _, _, incomplete = _read_pass(path, tspec, opts, specs, request, earliest, out)
+        z = earliest
     for sname, n in incomplete.items():
         notes.append(f"{sname}: {n} row(s) of {path.name} with some but not all of its columns dropped")
     return z

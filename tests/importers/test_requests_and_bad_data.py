@@ -160,6 +160,9 @@ def test_csv_zero_first_is_the_earliest_time_whatever_the_row_order(tmp_path, ca
     np.testing.assert_allclose(rec.values("uwb")[:, 0], 2 + 0.25 * np.arange(12))
     assert "r.csv: rows not in time order (line 3: 2024-03-05T10:15:02.250" in err, err
     assert "t = 0 is the earliest time" in err
+    assert fusion_import(src, "--map", mp, "-o", tmp_path / "s.log", "--start", "0.25", "--end", "1") == 0   # re-read
+    np.testing.assert_allclose(Recording(tmp_path / "s.log").times("uwb"), [0.25, 0.5, 0.75, 1.0], atol=1e-9)
+    capsys.readouterr()
     src, mp = _csv(tmp_path, list(range(12)))                     # in order: no note
     assert fusion_import(src, "--map", mp, "-o", tmp_path / "o2.log") == 0
     assert "time order" not in capsys.readouterr().err
