@@ -109,6 +109,11 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         self._align_u: list[np.ndarray] = []
         self._align_t0: float | None = None
         self._last_input_t: float | None = None
+        # The input sensor whose silence is reported while the other sensors go on (its max_gap)
+        gaps = [(n, s.max_gap) for n, s in self.sensors.items() if s.role == "input" and s.max_gap is not None]
+        self._input_gap = gaps[0] if gaps else None
+        self._silence_told = False
+        self._silence_last = -math.inf   # the input's last sample time when its silence was told
         # Preprocessors that read the belief (fusion.api.ReadsBelief), bound once here.
         self._deferred: list[Estimate | Event] = []
         for sensor in self.sensors.values():
@@ -158,8 +163,20 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                 yield from self._drain_solver_events(sensor)
         if self._pending:
             yield from self._flush_inputs()
+        if self._input_gap is not None and not self._silence_told and self._newest > -math.inf:
+            yield from self._input_silence(self._newest, "at the end of the input")
 
     # ------------------------------------------------------------------ internals
+
+    def _input_silence(self, t: float, where: str) -> Iterator[Event]:
+        """One ``gap`` event when the input sensor has been silent for more than its max_gap at ``t`` (s):
+        a sensor that dies is reported while the others go on, not only when (if ever) it comes back."""
+        name, max_gap = self._input_gap  # type: ignore[misc]
+        last = self._pending[-1].t if self._pending else self._last_input_t
+        if last is not None and t - last > max_gap:
+            self._silence_told, self._silence_last = True, last
+            yield Event(t, "gap", name, f"no {name} sample for {t - last:.3f} s (limit {max_gap} s) {where}; the "
+                        "prediction holds the last sample")
 
     def _process(self, msg: Message) -> Iterator[Estimate | Event]:
         if not self._replaying:
@@ -168,6 +185,8 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         if sensor.role == "input":
             yield from self._inputs([msg])
             return
+        if self._input_gap is not None and not self._silence_told:
+            yield from self._input_silence(msg.t, f"while {msg.sensor} goes on")
         users = self._input_users.get(msg.sensor)
         if users or (self.belief is None and msg.sensor in self._aligners):
             # integrate the inputs up to this message first: a UsesInput component reads the latest sample,
@@ -259,7 +278,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             R = obs.R if obs.R is not None else sensor.R
             result = self.filter.update(self.belief, obs.model, obs.z, R, self.gates.get(sensor.name))
             self._tally(result)
-            if result.accepted:
+            if result.accepted and _finite(result.nis, result.belief):
                 self.belief = result.belief
                 sensor.counters["used"] += 1
             else:
@@ -287,6 +306,8 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                 yield Event(msg.t, "gap", msg.sensor, f"no {msg.sensor} sample for {msg.t - self._last_input_t:.3f} s "
                             f"(limit {sensor.max_gap} s); prediction held the last sample")
             self._last_input_t = msg.t
+            if self._silence_told and msg.t > self._silence_last:   # a new sample, not a held one
+                self._silence_told = False
             good.append((msg.t, u))
         if good:
             self._last_u = good[-1][1]
@@ -391,6 +412,15 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                 self._tally(result)
         if self._filter_events:
             yield from self._take_filter_events()
+        if result.accepted and not _finite(result.nis, result.belief) and _finite(0.0, self.belief):
+            # DESIGN: never a NaN propagated silently. A model whose prediction (or Jacobian) is not finite
+            # at this state would make the belief NaN for the rest of the run, gate or no gate: refused.
+            sensor.counters["rejected"] += 1
+            if not self._replaying:
+                yield Event(obs.t, "rejected", sensor.name, f"model {obs.model.name!r}: the update is not finite "
+                            f"(NIS {result.nis}: its prediction or Jacobian at this state is NaN or inf); the "
+                            "belief is kept")
+            return
         if result.accepted:
             sensor.counters["used"] += 1
             self.belief = result.belief
@@ -407,3 +437,10 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                 yield Estimate(obs.t, self.belief, "update", sensor.name, result)
 
 
+def _finite(nis: float, belief: Belief | None) -> bool:
+    """NIS, mean and covariance (or its factor) all finite (one sum each: ~1 us an update)."""
+    if belief is None:
+        return True
+    m = belief.S if belief.S is not None else belief.P
+    total = (0.0 if nis is None else float(nis)) + float(belief.x.sum()) + (float(m.sum()) if m is not None else 0.0)
+    return total - total == 0.0

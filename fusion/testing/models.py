@@ -98,6 +98,7 @@ def check_measurement(cls: type[MeasurementModel], params: Mapping[str, Any] | N
         model = obs.model
     assert model.dim >= 1, f"{model!r}: dim is {model.dim}"
     X = random_states(layout, 9, seed=5, scale=scale) if states is None else np.asarray(states, dtype=float)
+    _check_finite_h(model, layout, X)
     report["vectorised"] = check_measurement_vectorised(model, X)
     report["jacobian"] = check_measurement_jacobian(model, X[0], tol=tol)
     if model.linear:
@@ -107,6 +108,19 @@ def check_measurement(cls: type[MeasurementModel], params: Mapping[str, Any] | N
         assert _worst(mid, 0.3 * model.h(X[0]) + 0.7 * model.h(X[1])) <= 1e-9, \
             f"{model!r}: declares linear = True but h is not affine"
     return report
+
+
+def _check_finite_h(model: MeasurementModel, layout: StateLayout, X: np.ndarray) -> None:
+    """h finite at the states X and at rest (zeros, identity quaternions: where most filters start): the
+    run refuses an update whose prediction is not finite, so a model NaN there is never used there."""
+    rest = np.zeros(layout.n)
+    for b in layout.blocks:
+        if b.kind == "quaternion":
+            rest[layout[b.name].start] = 1.0
+    for where, x in [("at rest (zeros, identity quaternions)", rest)] + [(f"at state {i}", x) for i, x in enumerate(X)]:
+        with np.errstate(all="ignore"):
+            y = np.asarray(model.h(x), dtype=float)
+        assert np.all(np.isfinite(y)), f"{model!r}: h is not finite {where}: {y.tolist()} for x = {x.tolist()}"
 
 
 def _central_batch(fun, x: np.ndarray, difference=None) -> np.ndarray:

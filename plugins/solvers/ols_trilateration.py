@@ -23,6 +23,7 @@ from fusion_plugins.solvers.range_fix import NoFix
 from fusion_plugins.solvers.trilateration import pack_fix, trilaterate, unpack_fix  # noqa: F401 (re-exported)
 
 REASONS = ("too_few_beacons", "degenerate", "inconsistent", "ambiguous")
+REACQUIRE_AFTER = 3  # compensated cycles refused in a row after which a cycle is solved without the belief
 MAX_SD_M = 1e6   # m (m/s^2 for accel_sd): its square must stay finite through the fix covariance; no sensor is worse
 __all__ = ["NoFix", "trilaterate", "pack_fix", "unpack_fix", "OlsParams", "OlsTrilateration"]
 
@@ -137,6 +138,7 @@ class OlsTrilateration(Solver):
         if self.min_beacons < p.dim + 1:
             raise ConfigError(f"ols_trilateration: min_beacons {self.min_beacons} < {p.dim + 1} needed for a {p.dim}-D fix")
         self._v: slice | None = None
+        self._refused = 0   # compensated cycles refused as inconsistent in a row (REACQUIRE_AFTER)
         self._p: slice | None = None
         self._q: slice | None = None
         self._arm = np.asarray(p.lever_arm, dtype=float) if p.lever_arm is not None else np.zeros(3)
@@ -220,31 +222,38 @@ class OlsTrilateration(Solver):
         t_m = float(times.sum()) / len(times)
         t_fix, age = t_m, 0.0
         v, Pv, start = None, None, None
-        if len(names) >= self.min_beacons and p.motion_compensation:
+        B0 = B
+        compensated = len(names) >= self.min_beacons and p.motion_compensation
+        if compensated:
             v, Pv, t_fix, start = self._velocity(t_m)
             age = t_fix - t_m
             dt = times - t_m
             B = B - dt[:, None] * v
             # the velocity at t_fix bridges the age too (the position model's p - v age), so it is exact there
         elif len(names) >= self.min_beacons and len(names) > 1:
-            # not compensated: the receiver moved at an unknown velocity (sd prior_speed_sd) between the
-            # ranges; their offsets from t_m carry that as correlated range errors (an honest covariance)
-            Pv = np.diag([p.prior_speed_sd ** 2] * 2 + [p.prior_speed_sd ** 2 if p.dim == 3 else 0.0])
+            Pv = self._prior_velocity_cov()
         try:
             if len(names) < self.min_beacons:
                 raise NoFix("too_few_beacons", f"{len(names)} beacon(s) {names}, need {self.min_beacons}")
-            with np.errstate(over="ignore", invalid="ignore"):    # overflowing ranges: caught just below
-                pos, cov, info = trilaterate(
-                    B, ranges, dim=p.dim, z=p.z, z_sd=p.z_sd, sigma=p.range_sd, reference=p.reference,
-                    qr_condition=p.qr_condition, degenerate_condition=p.degenerate_condition,
-                    refine=p.refine_iterations, consistency_probability=p.consistency_probability,
-                    max_outliers=p.max_outliers, min_beacons=self.min_beacons,
-                    offsets=None if Pv is None else times - t_m, velocity_cov=Pv,
-                    accel_sd=p.accel_sd if Pv is not None else 0.0, solve_height=p.solve_height,
-                    inflate_misfit=p.inflate_misfit, start=start if p.refine_iterations else None)
+            try:
+                pos, cov, info = self._trilaterate(B, ranges, times - t_m, Pv, start)
+            except NoFix as exc:
+                # Lost lock: after a gap the belief can be metres and m/s off, its velocity then spoils the
+                # compensation and every cycle is refused (the fix that would correct the belief refused
+                # because of the belief). After REACQUIRE_AFTER refused cycles in a row the cycle is solved
+                # as without a belief (v = 0, sd prior_speed_sd; Gauss-Newton from the beacons' geometry).
+                if not (compensated and exc.reason == "inconsistent" and self._refused >= REACQUIRE_AFTER - 1):
+                    raise
+                B, Pv, t_fix, age, start = B0, self._prior_velocity_cov(), t_m, 0.0, None
+                pos, cov, info = self._trilaterate(B, ranges, times - t_m, Pv, None)
+                self.counters["reacquired"] = self.counters.get("reacquired", 0) + 1
+                self.events.append(Event(t_end, "reacquired", self._sensor, f"fix without the belief's velocity after "
+                                         f"{self._refused} cycles refused in a row (lost lock)"))
             if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(cov))):
                 raise NoFix("inconsistent", f"the fix is not finite (ranges {ranges.tolist()} m)")
         except NoFix as exc:
+            if exc.reason == "inconsistent":
+                self._refused += 1
             self.counters[exc.reason] += 1
             self.events.append(Event(t_end, "no_fix", self._sensor, str(exc)))
             return []
@@ -258,6 +267,7 @@ class OlsTrilateration(Solver):
             self.events.append(Event(float(times[j]), "rejected", self._sensor,
                                      f"range to {names[j]} ({ranges[j]:.3f} m) inconsistent with the others; "
                                      f"fix from {len(info['used'])} beacons"))
+        self._refused = 0
         self.counters["fixes"] += 1
         self.counters["qr"] += info["method"].startswith("qr")
         self.last_fix = (t_m, pos, cov, info)
@@ -266,6 +276,25 @@ class OlsTrilateration(Solver):
         cov = np.triu(cov) + np.triu(cov, 1).T
         return [Fix(t_fix, np.asarray(pos, dtype=float), cov, float(age) if age > 0.0 else 0.0,
                     tuple(names[j] for j in info["used"]), self._sensor, self._line)]
+
+    def _prior_velocity_cov(self) -> np.ndarray:
+        """Without a usable belief: the receiver moved at an unknown velocity (sd prior_speed_sd) between the
+        ranges; their offsets from t_m carry that as correlated range errors (an honest covariance)."""
+        p: OlsParams = self.params  # type: ignore[assignment]
+        return np.diag([p.prior_speed_sd ** 2] * 2 + [p.prior_speed_sd ** 2 if p.dim == 3 else 0.0])
+
+    def _trilaterate(self, B: np.ndarray, ranges: np.ndarray, offsets: np.ndarray, Pv: np.ndarray | None,
+                     start: np.ndarray | None):
+        p: OlsParams = self.params  # type: ignore[assignment]
+        with np.errstate(over="ignore", invalid="ignore"):    # overflowing ranges: caught by the caller
+            return trilaterate(
+                B, ranges, dim=p.dim, z=p.z, z_sd=p.z_sd, sigma=p.range_sd, reference=p.reference,
+                qr_condition=p.qr_condition, degenerate_condition=p.degenerate_condition,
+                refine=p.refine_iterations, consistency_probability=p.consistency_probability,
+                max_outliers=p.max_outliers, min_beacons=self.min_beacons,
+                offsets=None if Pv is None else offsets, velocity_cov=Pv,
+                accel_sd=p.accel_sd if Pv is not None else 0.0, solve_height=p.solve_height,
+                inflate_misfit=p.inflate_misfit, start=start if p.refine_iterations else None)
 
     def _velocity(self, t: float) -> tuple[np.ndarray, np.ndarray, float, np.ndarray | None]:
         """From the filter's belief predicted to ``t``: the velocity (3,) (m/s, navigation frame), its
