@@ -104,7 +104,8 @@ class SensorSpec(_Strict):
     noise: NoiseSpec | float | list[float] | None = None
     gate: ComponentSpec | None = None
     time_offset: float = Field(0.0, ge=-MAX_TIME_OFFSET_S, le=MAX_TIME_OFFSET_S, description="s added to the "
-                               "sensor's time stamps (a known latency, or a clock's offset)")
+                               "sensor's time stamps: a clock's offset, or minus a known latency (a sensor "
+                               "that stamps its measurements 0.2 s late takes -0.2)")
     max_gap: float | None = Field(None, gt=0.0, description="input sensors: report a gap between samples "
                                   "longer than this (s)")
     recovery: RecoverySpec | None = Field(None, description="recover from a lock-out (fusion.recovery); off by default")

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
-from typing import Collection, Iterable, Iterator, Sequence
+from typing import Callable, Collection, Iterable, Iterator, Sequence
 
 from fusion.api import MalformedMessage, Message
 
@@ -197,6 +197,9 @@ class ParsedStream:
     header: Header = field(default_factory=Header)
     malformed: dict[str | None, int] = field(default_factory=dict)
     last_error: dict[str | None, str] = field(default_factory=dict)
+    #: Called as ``on_fields(sensor, names, lineno)`` after each ``# fields`` line (a run checks them against
+    #: what its components read); it may raise to refuse the stream.
+    on_fields: Callable[[str, tuple[str, ...], int], None] | None = None
 
 
 def _guess_sensor(text: str) -> str | None:
@@ -263,6 +266,10 @@ def iter_messages(lines: Iterable[str], state: ParsedStream | None = None,
             text = text.lstrip("\ufeff")
             if text.startswith("#"):
                 parse_comment(text, st.header)
+                if st.on_fields is not None and text[1:].lstrip().startswith("fields "):
+                    sensor = text[1:].split()[1] if len(text[1:].split()) > 2 else None
+                    if sensor is not None:
+                        st.on_fields(sensor, st.header.fields.get(sensor, ()), lineno)
                 continue
         if raw_streams:
             msg = _raw_message(text, raw_streams, fields, lineno)

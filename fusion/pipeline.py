@@ -30,7 +30,7 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
-from fusion.api import (Closes, Estimate, Event, FusionError, MalformedMessage, Message, Opens, ReceivesEvents,
+from fusion.api import (Closes, Estimate, Event, FusionError, InputError, MalformedMessage, Message, Opens, ReceivesEvents,
                         Source, has)
 from fusion.config import System
 from fusion.logformat import ParsedStream, iter_messages, parse_values
@@ -104,7 +104,8 @@ class Run:
                  on_truth: Callable[[Message], Any] | None = None, hooks: bool = True, label: str = ""):
         self.system = system
         self.label = label
-        self.parsed = ParsedStream()
+        self.parsed = ParsedStream(on_fields=self._check_fields)
+        self._fields_told: set[str] = set()
         self.stats: RunStats
         self.scheduler = Scheduler(system)
         self.stats = RunStats(system, self.scheduler, self.parsed)
@@ -187,6 +188,27 @@ class Run:
             if self.on_truth is not None and m.sensor == "truth":
                 self.on_truth(m._replace(values=parse_values(m.values)))
 
+    def _check_fields(self, sensor: str, names: tuple[str, ...], lineno: int) -> None:
+        """A ``# fields SENSOR ...`` line against the names the sensor's reading component declares
+        (``fields``, or the process's ``input_fields`` for the input): the same names in another order would
+        be read by position, the columns silently swapped, so the stream is refused; other names get a
+        warning (read by position)."""
+        runtime = self.system.sensors.get(sensor)
+        if runtime is None or not names:
+            return
+        expected, who = expected_fields(runtime, self.system.process)
+        if expected is None or tuple(names) == tuple(expected):
+            return
+        line = f"{self.label + ' ' if self.label else ''}line {lineno}: '# fields {sensor} {' '.join(names)}'"
+        if sorted(names) == sorted(expected):
+            raise InputError(f"{line} names the values in another order than {who} reads them "
+                             f"({' '.join(expected)}): they would be swapped; reorder the columns (or the "
+                             f"importer's mapping) to {' '.join(expected)}")
+        if sensor not in self._fields_told:
+            self._fields_told.add(sensor)
+            self._dispatch(Event(math.nan, "warning", sensor, f"{line}: {who} reads {' '.join(expected)}; the "
+                                 "values are read in that order, by position"))
+
     def _on_nis(self, sensor: str, t: float, nis: float, dim: int, accepted: bool = True) -> None:
         self.stats.add_nis(sensor, t, nis, dim)
         self.stats.add_update(sensor, t, accepted)
@@ -260,6 +282,24 @@ class Run:
                 errors.append(exc)
         if errors:
             raise errors[0]
+
+
+def expected_fields(runtime: Any, process: Any) -> tuple[tuple[str, ...] | None, str]:
+    """(the names of the values a sensor's messages are read as, in order, and the component that reads
+    them), or (None, "") when none declares them: the input's process (``input_fields``), else the first of
+    the sensor's decoder, preprocessor and model that declares ``fields`` (past the decoder only when it is
+    ``line``, which passes the values on as they are: another decoder's output is not the line's values)."""
+    if runtime.role == "input":
+        names = getattr(process, "input_fields", None)
+        return (tuple(names), f"process {process.name!r}") if names else (None, "")
+    chain = (runtime.decoder, runtime.preprocessor, runtime.model)
+    if runtime.decoder is not None and runtime.decoder.name != "line":
+        chain = (runtime.decoder,)
+    for comp in chain:
+        names = getattr(comp, "fields", None) if comp is not None else None
+        if names:
+            return tuple(names), f"{comp.kind} {comp.name!r}"
+    return None, ""
 
 
 def truth_warnings(stats: RunStats, unnamed: dict[str, int], state_names: Sequence[str]) -> list[Event]:

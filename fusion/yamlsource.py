@@ -221,10 +221,11 @@ def read_yaml_text(path: str | Path, what: str = "file") -> str:
         raise ConfigError(f"{p}: is a directory, expected a YAML file") from None
     except OSError as exc:
         raise ConfigError(f"{p}: cannot read the {what}: {exc.strerror or exc}") from None
+    mode = os.fstat(fd).st_mode
+    if stat_.S_ISDIR(mode):          # os.open opens a folder; os.fdopen would then fail with "Is a directory: 3"
+        os.close(fd)
+        raise ConfigError(f"{p}: is a folder, not a YAML {what}")
     with os.fdopen(fd, "rb") as fh:
-        mode = os.fstat(fd).st_mode
-        if stat_.S_ISDIR(mode):
-            raise ConfigError(f"{p}: is a directory, expected a YAML file")
         if not stat_.S_ISREG(mode):
             kind = ("a character device" if stat_.S_ISCHR(mode) else "a FIFO" if stat_.S_ISFIFO(mode)
                     else "a block device" if stat_.S_ISBLK(mode) else "a socket" if stat_.S_ISSOCK(mode)

@@ -143,6 +143,10 @@ class Component(Generic[P]):
     name: ClassVar[str] = ""
     kind: ClassVar[str] = ""
     Params: ClassVar[type[_ParamsBase]] = _ParamsBase
+    #: The names of the log values it reads, in their order (``("beacon", "range")``), or None (any). A
+    #: recording whose ``# fields SENSOR ...`` line names the same values in another order is refused at
+    #: that line (read by position, the columns would be swapped silently); other names get a warning.
+    fields: ClassVar[tuple[str, ...] | None] = None
     params: P
 
     def __init__(self, params: P | None = None, context: BuildContext | None = None):
@@ -163,6 +167,9 @@ class ProcessModel(Component[P]):
     kind: ClassVar[str] = "process"
     layout: StateLayout
     input_dim: int = 0
+    #: The input message's values by name, in order (``("ax", "ay", "az", "gx", "gy", "gz")``), or None:
+    #: as ``Component.fields``, for the sensor whose role is ``input``.
+    input_fields: ClassVar[tuple[str, ...] | None] = None
     linear: bool = False
 
     def f(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:

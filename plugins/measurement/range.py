@@ -49,6 +49,7 @@ class RangeModel(MeasurementModel):
     ``mirror_warn_sigma``: thresholds of ``check`` (see the module docstring)."""
 
     name = "range"
+    fields = ("beacon", "range")
     dim = 1
     carries_R = False   # a range message has no covariance: R is the sensor's noise
 

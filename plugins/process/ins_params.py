@@ -112,4 +112,5 @@ class InsProcess(ProcessModel):
     name: ClassVar[str] = "ins"
     Params: ClassVar[type[Params]] = InsParams
     input_dim: int = 6
+    input_fields = ("ax", "ay", "az", "gx", "gy", "gz")   # m/s^2, rad/s, FRD body frame
     linear: bool = False

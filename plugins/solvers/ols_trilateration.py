@@ -120,6 +120,7 @@ class OlsTrilateration(Solver):
     """
 
     name: ClassVar[str] = "ols_trilateration"
+    fields = ("beacon", "range")
     Params: ClassVar[type[Params]] = OlsParams
 
     def __init__(self, params: OlsParams | None = None, context: BuildContext | None = None):

@@ -64,3 +64,15 @@ def test_a_scenario_too_large_to_simulate_is_refused_naming_the_field(tmp_path, 
     assert main(["simulate", str(sc), "-o", str(tmp_path / "x.log")]) == 2
     err = capsys.readouterr().err
     assert "rate_hz: 1e+09 Hz" in err and "at most 5e+07" in err and not (tmp_path / "x.log").exists()
+
+
+def test_a_folder_as_config_or_scenario_is_one_line_exit_2(tmp_path, capsys):
+    """Before: 'internal error: IsADirectoryError: ... Is a directory: 3', exit 1 (tester2 #11)."""
+    folder = tmp_path / "d.yaml"
+    folder.mkdir()
+    for argv in (["run", str(folder)], ["validate", str(folder)], ["simulate", str(folder), "-o", str(tmp_path / "s.log")],
+                 ["sweep", str(folder), "--seeds", "2", "-o", str(tmp_path / "sw.csv")]):
+        assert main(argv) == 2, argv
+        printed = capsys.readouterr()
+        text = printed.err + printed.out
+        assert f"{folder}: is a folder, not a YAML" in text and "internal error" not in text, argv
