@@ -114,6 +114,11 @@ def run(args: argparse.Namespace) -> int:
         if bad:
             raise ConfigError(f"--sensors: {', '.join(bad)} not known to importer {cls.name!r} "
                               f"(it writes: {', '.join(cls.sensors)})")
+        one = getattr(cls, "single_instance", False)
+        numbered = sorted(s for s in sensors if s != s.rstrip("0123456789") and s.rstrip("0123456789") in cls.sensors)
+        if one and numbered:   # PX4: only instance 0 of a topic is read (the one the estimator uses)
+            raise ConfigError(f"--sensors {' '.join(numbered)}: importer {cls.name!r} reads only instance 0 of each "
+                              f"topic (it writes: {', '.join(cls.sensors)})")
     if args.map and cls.name != "csv":
         raise ConfigError(f"--map: a mapping file applies to CSV files, not to {cls.name!r} logs")
     check_outputs({"-o": args.output}, [str(src)] + ([args.map] if args.map else []), force=args.force)
@@ -129,6 +134,14 @@ def run(args: argparse.Namespace) -> int:
         # a file whose content the importer's format reader did not expect (a field missing, a bad count):
         # the user's file, not a bug of ours, in every case met so far; --debug shows the traceback
         raise InputError(f"{src}: unexpected content for the {cls.name} importer ({type(exc).__name__}: {exc})") from exc
+    if sensors is not None and cls.sensors:
+        have = {s.sensor for s in log.streams}
+        absent = sorted(s for s in sensors if s not in cls.sensors and s not in have)
+        if absent:   # never a silent drop of a sensor asked for by name (imu9 of a log with two IMUs)
+            fams = {s.rstrip("0123456789") for s in absent}
+            others = sorted(s for s in have if s.rstrip("0123456789") in fams)
+            raise InputError(f"{src}: --sensors {' '.join(absent)}: not in the log"
+                             + (f" (it has: {', '.join(others)})" if others else ""))
     streams = [s for s in log.streams if len(s)]
     if not streams:
         span = ""

@@ -7,8 +7,9 @@ a row), the unit scale and offset of each field (``value * scale + offset``), a 
 ground truth (written as ``truth`` lines, never fused). A sensor (or the truth) may come from another file
 with its own time column (``file:``, relative to the input file's folder).
 
-Only the columns the mapping names are parsed, and only rows in ``--start``..``--end``; with a time column
-that never goes back, reading stops at the end of the span.
+Only the columns the mapping names are parsed, and only in rows in ``--start``..``--end``; the time column is
+read to the end of the file (a row inside the span may follow a later one). ``time.zero: first`` is the
+earliest time in the column; rows out of time order are said in a note and sorted.
 """
 from __future__ import annotations
 
@@ -34,7 +35,8 @@ CSV_FMT = ".12g"   # values read from text: 12 significant digits keep what a da
 class TimeSpec(Params):
     """The time column: ``unit`` ``s``/``ms``/``us``/``ns`` (numbers) or ``iso`` (ISO 8601 date-time text, a
     naive one taken as UTC, or any text ``format`` of datetime.strptime). ``zero``: ``first`` (t = 0 at the
-    first row of the first file read: the input file when it maps a sensor), ``none`` (times as they are, in s), or a date-time / number of s to subtract."""
+    earliest time of the first file read, the input file when it maps a sensor; not the first row's time
+    when the rows are out of order), ``none`` (times as they are, in s), or a date-time / number of s to subtract."""
 
     column: str | int
     unit: Literal["s", "ms", "us", "ns", "iso"] = "s"
@@ -307,8 +309,52 @@ def _index(col: str | int, names: list[str] | None, path: Path, where: str) -> i
         raise ConfigError(f"{where}: no column {col!r} in {path.name} (columns: {shown})") from None
 
 
+def _show_time(ta: float, spec: TimeSpec) -> str:
+    """A time cell's value as the user reads it: the date-time (ISO) or seconds."""
+    if spec.unit == "iso":
+        return dt.datetime.fromtimestamp(ta, dt.timezone.utc).isoformat(timespec="milliseconds")
+    return f"{ta / _UNIT[spec.unit]:.9g} {spec.unit}"
+
+
 def _read_file(path: Path, tspec: TimeSpec, opts: CsvOptions, specs: dict[str, SensorMap], request: ImportRequest,
                zero: float | None, out: dict[str, tuple[list[float], list[Any]]], notes: list[str]) -> float | None:
+    """Read the mapped columns of ``path`` into ``out``; the zero (s) it used. ``zero: first`` is the earliest
+    time in the column, not the first row's: when a row earlier than the first one turns up, the times read
+    are shifted to that zero, or with --start/--end the file is read again (rows out of time order are said
+    in a note, and sorted by the caller)."""
+    zero_here = zero is None and tspec.zero == "first"
+    z, earliest, disorder, incomplete = _read_pass(path, tspec, opts, specs, request, zero, out)
+    if disorder is not None:
+        lineno, ta, before = disorder
+        notes.append(f"{path.name}: rows not in time order (line {lineno}: {_show_time(ta, tspec)} after "
+                     f"{_show_time(before, tspec)}); the rows are sorted by time"
+                     + (f", and t = 0 is the earliest time, {_show_time(earliest, tspec)}" if zero_here
+                        and z is not None and earliest < z else ""))
+    if zero_here and z is not None and earliest < z:
+        if (request.start is None and request.end is None) or not path.is_file():
+            for sname in specs:   # no span to redo (or a stream that cannot be read twice): shift the times
+                ts = out[sname][0]
+                if len(ts):
+                    np.frombuffer(ts, float)[:] += z - earliest
+            if request.start is not None or request.end is not None:
+                notes.append(f"{path.name}: --start/--end were applied with t = 0 at the first row (the input "
+                             "cannot be read twice)")
+        else:   # the span is on the new time axis: read again
+            for sname in specs:
+                out.pop(sname, None)
+            z, _, _, incomplete = _read_pass(path, tspec, opts, specs, request, earliest, out)
+        z = earliest
+    for sname, n in incomplete.items():
+        notes.append(f"{sname}: {n} row(s) of {path.name} with some but not all of its columns dropped")
+    return z
+
+
+def _read_pass(path: Path, tspec: TimeSpec, opts: CsvOptions, specs: dict[str, SensorMap], request: ImportRequest,
+               zero: float | None, out: dict[str, tuple[list[float], list[Any]]]):
+    """One pass over the file: (zero, the earliest absolute time, (line, time, the later time before it) of
+    the first row out of order or None, rows with only some columns per sensor). Every row is read to the
+    end of the file (a row inside the span may come after a later one: the time column is never assumed to
+    go only forward), but a cell is converted only in rows inside the span."""
     rows = _rows(path, opts)
     names: list[str] | None = None
     if opts.header:
@@ -328,10 +374,9 @@ def _read_file(path: Path, tspec: TimeSpec, opts: CsvOptions, specs: dict[str, S
         store = (array("d"), array("d") if s.fields is not None else [])   # flat float64: ~8 B a value
         plan.append((sname, s, keys, idx, scale, offset, out.setdefault(sname, store)))
     missing = set(opts.missing)
-    t_prev = -math.inf
-    monotonic = True
+    ta_prev, earliest = -math.inf, math.inf
+    disorder = None
     incomplete: dict[str, int] = {}
-    max_off = max(s.time_offset for s in specs.values()) if specs else 0.0
     for lineno, cells in rows:
         where = f"{path}:{lineno}"
         try:
@@ -344,11 +389,10 @@ def _read_file(path: Path, tspec: TimeSpec, opts: CsvOptions, specs: dict[str, S
         if zero is None:
             zero = _zero_of(tspec, ta)
         t = ta - zero
-        if t < t_prev:
-            monotonic = False
-        t_prev = t
-        if request.end is not None and monotonic and t + max_off > request.end:
-            break
+        if ta < ta_prev and disorder is None:
+            disorder = (lineno, ta, ta_prev)
+        ta_prev = max(ta_prev, ta)
+        earliest = min(earliest, ta)
         for sname, s, keys, idx, scale, offset, (ts, vals) in plan:
             lo, hi = s.valid if s.valid is not None else (-math.inf, math.inf)
             ts_s = t + s.time_offset
@@ -380,6 +424,4 @@ def _read_file(path: Path, tspec: TimeSpec, opts: CsvOptions, specs: dict[str, S
                 vals.extend(got)
             elif any(v is not None for v in got):
                 incomplete[sname] = incomplete.get(sname, 0) + 1
-    for sname, n in incomplete.items():
-        notes.append(f"{sname}: {n} row(s) of {path.name} with some but not all of its columns dropped")
-    return zero
+    return zero, earliest, disorder, incomplete

@@ -21,6 +21,11 @@ is not the expected one (or a known conversion of it) is refused. Logs without `
 
 Time: ``t = TimeUS / 1e6`` s, the autopilot's boot clock (as in MAVExplorer and Mission Planner); ``TimeMS``
 in older logs.
+
+Damage (fusion.importers.dataflash_tables): a message of an unknown type ends pymavlink's index, so the
+reader resyncs past it and the skipped bytes are corruption (exit 2 unless ``--partial``); messages that
+parse but are absurd (instance number, time) are skipped and said; byte-identical repeats after the clock
+goes back (a log concatenated with itself) are dropped and said.
 """
 from __future__ import annotations
 
@@ -84,8 +89,8 @@ class DataflashImporter(Importer):
         types = sorted(t for t, fam in _FAMILY.items() if request.wants_family(fam)
                        or (t == "ATT" and request.wants_family("mag")))   # ATT: the field in NED (mag header)
         reader = open_log(path, request)
-        rows, units, vehicle, texts = collect(reader, path, types, request)
         log = ImportedLog()
+        rows, units, vehicle, texts = collect(reader, path, types, request, log.notes)
         log.meta["source"] = f"{os.path.basename(path)} (ArduPilot DataFlash, read by pymavlink)"
         if vehicle:
             log.meta["vehicle"] = vehicle
@@ -93,6 +98,8 @@ class DataflashImporter(Importer):
         conv = _Units(units)
         log.messages = texts
         notes = log.notes
+        if getattr(reader, "fusion_damage", None):   # --partial: what was skipped, said
+            notes.append(f"{reader.fusion_damage}: skipped, the messages around them read")
         streams: list[Stream] = []
         missing: list[str] = []
         for fam, fn in (("imu", _imu), ("gps", _gps), ("mag", _mag), ("baro", _baro)):
@@ -100,6 +107,11 @@ class DataflashImporter(Importer):
                 continue
             got = fn(rows, conv, request, notes)
             streams += [s for s in got if request.wants(s.sensor)]
+            absent = sorted(n for n in request.sensors or () if n.rstrip("0123456789") == fam and n != fam
+                            and n not in {s.sensor for s in got})
+            if absent:   # --sensors imu9 of a log with two IMUs: said, never a silent drop
+                raise InputError(f"{path}: --sensors {' '.join(absent)}: not in the log (its {fam} instances: "
+                                 f"{', '.join(s.sensor for s in got) or 'none'})")
             if not got:
                 missing.append(fam)
         utc = _start_utc(rows.get("GPS"))

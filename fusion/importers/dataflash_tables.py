@@ -38,15 +38,88 @@ def open_log(path: str, request: ImportRequest):
         raise InputError(f"{path}: damaged DataFlash log ({type(exc).__name__}: {exc})") from None
     if len(reader.formats) <= 1:
         raise InputError(f"{path}: not a DataFlash log: no FMT records")
+    stop = _resync(reader)
     cut, gap, first_gap = _integrity(reader)
+    why = (f": a message of unknown type 0x{stop[1]:02x}, where pymavlink's index stops"
+           if stop is not None and stop[0] == first_gap else "")
+    reader.fusion_damage = (f"corrupt: {gap} byte(s) belong to no message (the first at byte {first_gap}{why})"
+                            if gap else None)   # said by the importer under --partial
     if not request.allow_partial:
         if cut is not None:
             raise InputError(f"{path}: truncated: the last message, at byte {cut}, is cut short by the end of the "
                              f"file at byte {reader.data_len}; pass --partial to import what comes before it")
         if gap:
-            raise InputError(f"{path}: corrupt: {gap} byte(s) belong to no message (the first at byte {first_gap}); "
-                             "pass --partial to import the messages pymavlink could read")
+            raise InputError(f"{path}: {reader.fusion_damage}; pass --partial to import the messages pymavlink "
+                             "could read")
     return reader
+
+
+def _resync(reader) -> tuple[int, int] | None:
+    """Index the messages after the point where pymavlink's indexer stopped, if it stopped early.
+
+    Both of pymavlink's indexers (C and Python) end the index at a message of an unknown type (a damaged
+    type byte), without a word to the caller, so all that follows would be lost; its reader
+    (``recv_match``) resyncs instead ("Skipped N bad bytes"), and so does this: from the stop, the next
+    header ``A3 95`` of a known type whose message is followed by another header (or the end of the
+    file), then message by message, resyncing again at each damaged one. FMT records met on the way are
+    parsed, as pymavlink's indexer does. The offsets found are added to ``reader.offsets``; the bytes
+    skipped are then gaps for ``_integrity``. Returns (offset, type byte) of the stop, or None when the
+    index covered the file (or what follows it holds no message: end-of-file padding, which pymavlink
+    ignores too)."""
+    from pymavlink.DFReader import DFFormat, null_term
+    import struct
+
+    fmts = reader.formats
+    end = 0
+    for mtype, o in enumerate(reader.offsets):
+        if len(o) and mtype in fmts:
+            end = max(end, int(max(o)) + fmts[mtype].len)
+    data, n = reader.data_map, reader.data_len
+    head = b"\xa3\x95"
+    at = data.find(head, end) if n - end >= 3 else -1   # the stop (after bytes the indexer skipped, if any)
+    if at < 0 or at + 3 > n:
+        return None
+    stop = (at, data[at + 2])
+    found: list[tuple[int, int]] = []
+    pos = at + 1
+    synced = False
+    fmt_type = 0x80
+    while pos + 3 <= n:
+        if not synced:
+            j = data.find(head, pos)
+            if j < 0:
+                break
+            f = fmts.get(data[j + 2])
+            k = j + (f.len if f is not None else 0)
+            if f is None or k > n or (k + 2 <= n and data[k:k + 2] != head):
+                pos = j + 1
+                continue
+            pos, synced = j, True
+        mtype = data[pos + 2] if data[pos:pos + 2] == head else None
+        f = fmts.get(mtype) if mtype is not None else None
+        if f is None or pos + f.len > n:
+            synced = False
+            pos += 1
+            continue
+        found.append((mtype, pos))
+        if mtype == fmt_type:
+            try:
+                el = struct.unpack(f.msg_struct, data[pos + 3:pos + f.len])
+                mf = DFFormat(el[0], null_term(el[2]), el[1], null_term(el[3]), null_term(el[4]),
+                              oldfmt=fmts.get(el[0]))
+                fmts[el[0]] = mf
+                reader.name_to_id[mf.name] = mf.type
+                reader.id_to_name[mf.type] = mf.name
+            except (struct.error, ValueError, KeyError, IndexError):
+                pass
+        pos += f.len
+    if not found:
+        return None
+    offsets = [list(o) for o in reader.offsets]
+    for mtype, o in found:
+        offsets[mtype].append(o)
+    reader.offsets = offsets
+    return stop
 
 
 def _integrity(reader) -> tuple[int | None, int, int | None]:
@@ -88,7 +161,27 @@ _DTYPE = {"b": "<i1", "B": "<u1", "M": "<u1", "h": "<i2", "H": "<u2", "c": "<i2"
           "Q": "<u8", "n": "S4", "N": "S16", "Z": "S64", "a": "S64"}
 
 
-def _table(reader, name: str, request: ImportRequest | None) -> dict[str, np.ndarray] | None:
+# ArduPilot logs at most 3 IMUs, compasses, barometers (INS_MAX_INSTANCES, COMPASS_MAX_INSTANCES,
+# BARO_MAX_INSTANCES) and 2 GPS + a blended one; a larger instance number is a damaged message
+_MAX_INSTANCES = {"IMU": 3, "MAG": 3, "BARO": 3, "GPS": 3, "GPA": 3}
+MAX_BOOT_S = 1e8   # a boot-clock time beyond ~3 years of uptime is a damaged message
+
+
+def _absurd(t: np.ndarray) -> np.ndarray:
+    """Mask of the times (s, file order) that are damaged: non-finite, beyond MAX_BOOT_S, or an isolated
+    outlier (far from both neighbours, which agree with each other; "far" is 1 s or 100 median periods)."""
+    bad = ~np.isfinite(t) | (t > MAX_BOOT_S)
+    g = np.flatnonzero(~bad)
+    if g.size >= 3:
+        tg = t[g]
+        jump = max(1.0, 100.0 * float(np.median(np.abs(np.diff(tg)))))
+        prev, nxt, span = tg[1:-1] - tg[:-2], tg[2:] - tg[1:-1], tg[2:] - tg[:-2]
+        bad[g[1:-1][(np.abs(prev) > jump) & (np.abs(nxt) > jump) & (np.abs(span) <= jump)]] = True
+    return bad
+
+
+def _table(reader, name: str, request: ImportRequest | None, notes: list[str] | None = None,
+           jumps: list | None = None) -> dict[str, np.ndarray] | None:
     """The columns this importer uses of every ``name`` message, read straight from the file's bytes at the
     offsets of pymavlink's index (vectorised: only these messages' bytes are touched, and of them only the
     time column before the span is cut), scaled by the format characters' multipliers as pymavlink scales
@@ -121,6 +214,8 @@ def _table(reader, name: str, request: ImportRequest | None) -> dict[str, np.nda
     out: dict[str, np.ndarray] = {}
     if tcol is not None:
         t = read(tcol, offs) / (1e6 if tcol == "TimeUS" else 1e3)
+        if request is not None and offs.size:
+            offs, t = _sane(buf, fmt, name, offs, t, read if "I" in where else None, notes, jumps)
         if request is not None:
             keep = np.ones(len(t), bool)
             if request.start is not None:
@@ -138,17 +233,61 @@ def _table(reader, name: str, request: ImportRequest | None) -> dict[str, np.nda
     return out
 
 
+def _sane(buf, fmt, name: str, offs: np.ndarray, t: np.ndarray, read_col, notes, jumps):
+    """Drop the messages of one type that are damaged although their bytes parse (an absurd time or instance
+    number: a bit flip that left a valid header), and exact copies of earlier ones (a log concatenated with
+    itself, only looked for when the clock goes back), the absurd ones said in ``notes``; a clock that goes
+    back is recorded in ``jumps`` (offset, from s, to s, type, repeats dropped) for one note of collect's."""
+    bad = _absurd(t)
+    base = _BASE.get(name, name)
+    inst = None
+    if read_col is not None and base in _MAX_INSTANCES:
+        inst = read_col("I", offs)
+        bad |= inst >= _MAX_INSTANCES[base]
+    if bad.any() and notes is not None:
+        idx = np.flatnonzero(bad)
+        said = "; ".join(f"byte {int(offs[i])} (t {t[i]:.6g} s" + (f", instance {int(inst[i])}" if inst is not None
+                                                                 else "") + ")" for i in idx[:3])
+        notes.append(f"{name}: {idx.size} message(s) with an absurd time or instance number skipped as corrupt: "
+                     f"{said}{' ...' if idx.size > 3 else ''}")
+    offs, t = offs[~bad], t[~bad]
+    if t.size < 2:
+        return offs, t
+    back = np.flatnonzero(np.diff(t) < -1.0)
+    if back.size:
+        i = int(back[0])
+        raw = buf[offs[:, None] + np.arange(fmt.len)]
+        _, first = np.unique(np.ascontiguousarray(raw).view(np.dtype((np.void, fmt.len))).ravel(), return_index=True)
+        if jumps is not None:
+            jumps.append((int(offs[i + 1]), float(t[i]), float(t[i + 1]), name, int(offs.size - first.size)))
+        if first.size < offs.size:
+            keep = np.zeros(offs.size, bool)
+            keep[np.sort(first)] = True
+            offs, t = offs[keep], t[keep]
+    return offs, t
+
+
 FORMAT_MULT = {"c": 0.01, "C": 0.01, "e": 0.01, "E": 0.01, "L": 1e-7}   # pymavlink's FORMAT_TO_STRUCT
 
 
-def collect(reader, path: str, types: list[str], request: ImportRequest):
+def collect(reader, path: str, types: list[str], request: ImportRequest, notes: list[str] | None = None):
     """Tables per message type (columns scaled by the format characters' multipliers), the units per
-    (type, column) from FMTU/UNIT/MULT, and a vehicle description from VER or the first MSG."""
+    (type, column) from FMTU/UNIT/MULT, and a vehicle description from VER or the first MSG. Damaged
+    messages that parse (absurd time, instance) and exact repeats are dropped and said in ``notes``, as is a
+    clock that goes back (two logs in one file, or a reboot)."""
     rows: dict[str, dict[str, np.ndarray]] = {}
+    jumps: list[tuple[int, float, float, str, int]] = []
     for mt in types:
-        tab = _table(reader, mt, request)
+        tab = _table(reader, mt, request, notes, jumps)
         if tab is not None and int(tab["_n"]):
             rows[mt] = tab
+    if jumps and notes is not None:
+        at, t0, t1, _, _ = min(jumps)
+        dup = [f"{name} {k}" for _, _, _, name, k in sorted(jumps, key=lambda j: j[3]) if k]
+        notes.append(f"the log's clock goes back from {t0:.3f} s to {t1:.3f} s at byte {at} (the log twice in one "
+                     "file, two logs, or a reboot): "
+                     + (f"message(s) that repeat an earlier one byte for byte dropped ({', '.join(dup)}); " if dup
+                        else "") + "the rest merged in time order (import each part from its own file)")
     meta = {n: _table(reader, n, None) for n in ("FMTU", "UNIT", "MULT", "VER", "MSG")}
     unit_label: dict[str, str] = {}
     mult: dict[str, float] = {}

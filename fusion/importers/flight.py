@@ -7,7 +7,8 @@
   is on the globe (PX4 ``ref_lat/ref_lon/ref_alt`` with ``xy_global``, ArduPilot ``ORGN``), else by the
   reference's own position at the first fix (its frame is not tied to the globe: only motion compares).
 - **The onboard attitude at the start**, as one ``initial_attitude`` line (``qw qx qy qz``, body FRD to
-  NED) at the first reference time: a config that starts in flight takes its attitude from it (docs/import.md,
+  NED) at the first reference time, unless the importer gave its own (PX4: the first valid attitude, which
+  a reference that starts late, when the EKF's position becomes valid, does not move): a config that starts in flight takes its attitude from it (docs/import.md,
   "Starting in flight"). It is the only reference value a config may use, and only to start.
 """
 from __future__ import annotations
@@ -78,7 +79,8 @@ def prepare(log: ImportedLog) -> None:
     elif ref is not None and "ekf_origin" in ref.meta:
         log.meta.setdefault("origin", ref.meta["ekf_origin"])
         log.meta.setdefault("origin_source", "the onboard estimator's origin (no accepted GPS fix imported)")
-    if ref is not None and ref.values is not None and {"qw", "qx", "qy", "qz"} <= set(ref.fields):
+    given = any(s.sensor == "initial_attitude" and len(s) for s in log.streams)   # the importer's own (PX4)
+    if not given and ref is not None and ref.values is not None and {"qw", "qx", "qy", "qz"} <= set(ref.fields):
         idx = [list(ref.fields).index(c) for c in ("qw", "qx", "qy", "qz")]
         q = np.asarray(ref.values, float)[:1, idx]
         log.streams.append(Stream("initial_attitude", ("qw", "qx", "qy", "qz"), np.asarray(ref.t[:1], float), q,
