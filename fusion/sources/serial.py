@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import errno
 import os
+import select
 import threading
 import time
 from datetime import datetime, timezone
@@ -79,6 +80,37 @@ def _hint(port: str, exc: BaseException) -> str:
             found = []
         return f" (ports found: {', '.join(found)})" if found else " (no serial ports found)"
     return ""
+
+
+def _read_chunk(port) -> bytes:
+    """What has arrived on ``port``, up to _CHUNK bytes, waiting up to the port's timeout for a first byte.
+    A device port's ``in_waiting`` counts the bytes waiting; a ``socket://`` port's says only 0 or 1
+    ("readable"), so reading ``in_waiting`` bytes took one byte a read (three system calls a byte: a 1 kHz
+    IMU was more than such a view could read, tester2 #8): there the first byte is read as pyserial
+    reads it, then what else the socket holds in one ``recv``."""
+    waiting = port.in_waiting
+    sock = getattr(port, "_socket", None) if waiting <= 1 else None
+    if sock is None or not _is_socket_port(port):
+        return port.read(min(_CHUNK, max(1, waiting)))
+    import serial
+
+    chunk = port.read(1)
+    if chunk:
+        try:
+            if select.select([sock], [], [], 0)[0]:
+                more = sock.recv(_CHUNK - 1)
+                if not more:
+                    raise serial.SerialException("socket disconnected")
+                chunk += more
+        except BlockingIOError:
+            pass
+    return chunk
+
+
+def _is_socket_port(port) -> bool:
+    from serial.urlhandler.protocol_socket import Serial as SocketSerial
+
+    return isinstance(port, SocketSerial)
 
 
 class SerialSource(Source):
@@ -201,7 +233,7 @@ class SerialSource(Source):
         port = self.port
         while not self._closed.is_set():
             try:
-                chunk = port.read(min(_CHUNK, max(1, port.in_waiting)))
+                chunk = _read_chunk(port)
             except (serial.SerialException, OSError) as exc:
                 if self._closed.is_set():
                     break

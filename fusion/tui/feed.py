@@ -211,8 +211,20 @@ class LiveFeed:
         return self._emit(time.monotonic())
 
     def _paced(self, lines: Iterable[str]) -> Iterator[str]:
-        """The lines, counted; a replay is held while paused and paced by sensor time at ``speed``."""
+        """The lines, counted; a replay is held while paused and paced by sensor time at ``speed``.
+
+        Paced by the stream's time as the scheduler keeps it (``Scheduler.newest``, after the clock
+        guard), not by raw stamps: a line stamped farther than the guard's ``future_s`` from the stream's
+        time (a wild stamp, which the guard drops, or a clock jump, which it re-synchronises) is not
+        waited for; the stream's time only moves on when the scheduler accepts it. And no single wait is
+        longer than ``scheduler.max_predict_s`` / speed (the longest gap the scheduler predicts over): a
+        longer one is cut, with a ``replay`` event (tester2 #12: one stamp 100,000 s ahead froze the view
+        for hours)."""
         t0 = wall0 = None
+        sched = self.run_.scheduler
+        future = sched.clock.future_s
+        cap = sched.max_predict
+        paced = -math.inf   # the stream time paced to so far
         for raw in lines:
             if self._stop.is_set():
                 return
@@ -228,9 +240,19 @@ class LiveFeed:
                 elif self.speed > 0.0:
                     t = _time_of(raw)
                     if t is not None:
-                        if t0 is None:
-                            t0, wall0 = t, time.monotonic()
-                        else:
+                        base = sched.newest
+                        if base == -math.inf:
+                            base = t if t0 is None else paced
+                        t = t if abs(t - base) <= future else base   # far from the stream: not waited for
+                        if t0 is None or t < paced - future:        # the start, or the stream's time went back
+                            t0, wall0, paced = t, time.monotonic(), t
+                        elif t > paced:
+                            if t - paced > cap:
+                                self._log(Event(paced, "replay", None, f"{t - paced:.3g} s of sensor time to the "
+                                                f"next message: waited {cap:g} s / speed at most "
+                                                "(scheduler.max_predict_s)"))
+                                t0 -= t - paced - cap  # type: ignore[operator]
+                            paced = t
                             wall0 += self._sleep_until(wall0 + (t - t0) / self.speed)  # type: ignore[operator]
             if self._stop.is_set():
                 return
