@@ -35,6 +35,7 @@ from fusion.tui.state_series import StateHistory
 
 __all__ = ["LiveFeed", "FeedSnapshot", "LoggedEvent", "COUNTERS"]
 _SLICE = 0.05  # s: longest sleep between checks of pause/stop while pacing
+CAUGHT_UP_S = 0.5  # s without a line from a live source: everything it sent has been read (lag 0)
 
 
 class LiveFeed:
@@ -102,6 +103,7 @@ class LiveFeed:
         self._wall0: float | None = None
         self._t_first = math.nan
         self._t_start = math.nan  # time of the first message
+        self._best_offset = math.inf  # a live feed: least (wall - stream time) so far (s), for lag_s
         lay = system.layout
         self._pos = None
         if "p" in lay and lay.block("p").size >= 2:
@@ -362,7 +364,7 @@ class LiveFeed:
         elif t == t:
             rates = {k: v for k, v in self.health.rates(t).items() if v == v}  # by sensor time: deterministic
         snap = FeedSnapshot(
-            source=self.source, live=self.live, state=self.state, estimate=self.estimate, counters=counters,
+            lag_s=self._lag(now), source=self.source, live=self.live, state=self.state, estimate=self.estimate, counters=counters,
             ignored=self.run_.stats.ignored(), rates=rates, events=tuple(self.events), track=tuple(self.track),
             track_total=self.track_total, truth=tuple(self.truth), truth_total=self.truth_total,
             lines=self.lines_read, data_wall=self._data_wall, sensor_t=t, speed_ratio=ratio, wall=now, message=self.message,
@@ -373,6 +375,21 @@ class LiveFeed:
         self._emitted_lines = self.lines_read
         self._post(snap)
         return snap
+
+    def _lag(self, now: float) -> float:
+        """A live feed: how far behind the device the view is (s), the wall clock's lead on the stream's time
+        (the scheduler's, after the clock guard) beyond its least so far, i.e. what the view fell behind
+        since it was best caught up; 0 once nothing has been read for CAUGHT_UP_S (all read is fused);
+        NaN for a replay or before a message."""
+        if not self.live or self.state != "running":
+            return math.nan
+        newest = self.run_.scheduler.newest
+        if newest == -math.inf:
+            return math.nan
+        offset = now - newest
+        if offset < self._best_offset:
+            self._best_offset = offset
+        return 0.0 if now - self._data_wall > CAUGHT_UP_S else offset - self._best_offset
 
     def _smoothed_fields(self) -> dict:
         if self.smoothed is None:
