@@ -148,7 +148,11 @@ def main(argv: list[str] | None = None) -> int:
             except KeyboardInterrupt:
                 if received:   # before or after the run's own handling: the command's outputs are discarded
                     name = signal.Signals(received[0]).name
-                    print(f"fusion {args.command}: stopped by {name}", file=sys.stderr)
+                    _print_quietly(f"fusion {args.command}: stopped by {name}")
+                    return 128 + received[0]
+                raise
+            except OSError:
+                if received:   # a closed terminal (SIGHUP): printing the summary fails; the files are written
                     return 128 + received[0]
                 raise
     except FusionError as exc:
@@ -171,6 +175,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"fusion {args.command}: internal error: {type(exc).__name__}: {exc} (rerun with --debug for a traceback)",
               file=sys.stderr)
         return 1
+
+
+def _print_quietly(text: str) -> None:
+    """One line on stderr, nothing when stderr is gone (the closed terminal that sent SIGHUP)."""
+    try:
+        print(text, file=sys.stderr)
+    except (OSError, ValueError):
+        pass
 
 
 def _stoppable(command: str):
