@@ -56,7 +56,7 @@ def child(config: str, port: str, seconds: float, out: str) -> None:
 
     def mark(name):
         marks[name] = (time.monotonic(), time.process_time(), frames[0], app.feed.lines_read, app.updates)
-        lags.append(app.latest.lag_s if app.latest is not None else float("nan"))
+        lags.append(getattr(app.latest, "lag_s", float("nan")))  # (older versions: no lag_s)
         if name == "end":
             app.exit()
 
