@@ -108,3 +108,30 @@ def test_fusion_simulate_stopped_by_sigterm_leaves_no_temporary_file(tmp_path, m
     assert main(["simulate", str(ROOT / "scenarios" / "example_2d.yaml"), "-o", str(out)]) == 143
     assert capsys.readouterr().err.strip() == "fusion simulate: stopped by SIGTERM"
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("engine", ["serial", "pool"])
+def test_fusion_sweep_stopped_by_sigterm_keeps_its_rows(tmp_path, engine):
+    """As Ctrl-C: the rows so far are kept (a resumable results file), exit 143, one line."""
+    from fusion.sweep.results import read_rows
+
+    out = tmp_path / "r.csv"
+    cmd = [sys.executable, "-m", "fusion.cli", "sweep", str(ROOT / "configs" / "uwb_pv_ukf.yaml"), "--scenario",
+           str(ROOT / "scenarios" / "uwb_route1.yaml"), "--seeds", "400", "--param", "scenario.duration=12.0",
+           "--engine", engine, "--jobs", "2", "-o", str(out), "--no-progress"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        t0 = time.monotonic()
+        while not (out.exists() and out.read_text().count("\n") > 3) and proc.poll() is None:
+            assert time.monotonic() - t0 < 60, "no rows"
+            time.sleep(0.1)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines()[-1] == "fusion sweep: stopped by SIGTERM" and "Traceback" not in err
+    rows = read_rows(out)
+    assert 3 <= len(rows) < 400 and all(r["status"] == "ok" for r in rows)
+    assert [p.name for p in tmp_path.iterdir()] == ["r.csv"]
