@@ -3,6 +3,12 @@ the view's process uses (issue 16 item 8: at least 10 refreshes a second, under 
 
     python benchmarks/bench_tui_pty.py [--rate 1000] [--seconds 10] [--config configs/abps_ins.yaml]
     python benchmarks/bench_tui_pty.py --rate 2000 --seconds 10     # headroom
+    python benchmarks/bench_tui_pty.py --link socket --rate 0        # socket://, everything at once: lines/s
+
+``--link socket``: the serial line is a TCP connection (``--port socket://127.0.0.1:P``, a ser2net or Wi-Fi
+bridge) instead of a pty. ``--rate 0``: the writer sends the whole recording at once, so the lines a
+second read are what the view can consume (its throughput). The child also reports the lag the view
+shows (``FeedSnapshot.lag_s``, the status line's ``BEHIND by N s``) at the end of the window.
 
 Two pty pairs: the view (``fusion tui CONFIG --port PTY``, Textual's real Linux driver) runs in a child
 process whose terminal is the first pty (120 x 40; the parent reads and discards what it draws); the
@@ -46,9 +52,11 @@ def child(config: str, port: str, seconds: float, out: str) -> None:
     FusionApp._display = counted
     app = make_app(config, SerialSource(port=port, baud=921600))
     marks = {}
+    lags = []
 
     def mark(name):
         marks[name] = (time.monotonic(), time.process_time(), frames[0], app.feed.lines_read, app.updates)
+        lags.append(getattr(app.latest, "lag_s", float("nan")))  # (older versions: no lag_s)
         if name == "end":
             app.exit()
 
@@ -60,7 +68,8 @@ def child(config: str, port: str, seconds: float, out: str) -> None:
     app.run()
     (w0, c0, f0, l0, u0), (w1, c1, f1, l1, u1) = marks["start"], marks["end"]
     Path(out).write_text(json.dumps({"wall_s": w1 - w0, "cpu_s": c1 - c0, "frames": f1 - f0, "lines": l1 - l0,
-                                     "snapshots": u1 - u0, "state": app.latest.state if app.latest else None}))
+                                     "snapshots": u1 - u0, "state": app.latest.state if app.latest else None,
+                                     "lag_s": lags[-1]}))
 
 
 def reference_cpu_per_line(config: str, lines: list[str]) -> float:
@@ -76,8 +85,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--rate", type=float, default=1000.0, help="lines a second into the serial pty")
     ap.add_argument("--seconds", type=float, default=10.0, help="measured window after a 2 s warm-up")
+    ap.add_argument("--link", choices=("pty", "socket"), default="pty",
+                    help="the serial line: a pty pair, or a TCP connection (socket://)")
     ap.add_argument("--config", default=str(ROOT / "configs" / "abps_ins.yaml"),
                     help="a config whose recording lasts the warm-up and window at --rate (abps_ins: 30,935 lines)")
+    ap.add_argument("--recording", help="the lines to send (default: the config's recording)")
     ap.add_argument("--child", nargs=3, metavar=("PORT", "SECONDS", "OUT"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
@@ -92,16 +104,29 @@ def main() -> None:
     from fusion.config import load_system
 
     system = load_system(args.config)
-    lines = Path(system.recording).read_text().splitlines(True)
+    lines = Path(args.recording or system.recording).read_text().splitlines(True)
     term_m, term_s = os.openpty()
     fcntl.ioctl(term_s, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 120, 0, 0))
-    ser_m, ser_s = os.openpty()
+    if args.link == "pty":
+        ser_m, ser_s = os.openpty()
+        port = os.ttyname(ser_s)
+    else:
+        import socket
+
+        server = socket.create_server(("127.0.0.1", 0))
+        port = f"socket://127.0.0.1:{server.getsockname()[1]}"
     out = Path(f"/tmp/bench_tui_pty_{os.getpid()}.json")
     env = dict(os.environ, TERM="xterm-256color", COLORTERM="truecolor")
-    proc = subprocess.Popen([sys.executable, __file__, "--config", args.config, "--child", os.ttyname(ser_s),
+    proc = subprocess.Popen([sys.executable, __file__, "--config", args.config, "--child", port,
                              str(args.seconds), str(out)], stdin=term_s, stdout=term_s, stderr=term_s, env=env,
                             start_new_session=True)
     os.close(term_s)
+    if args.link == "socket":
+        conn, _ = server.accept()
+        send = conn.sendall
+    else:
+        def send(data):
+            os.write(ser_m, data)
     done = threading.Event()
 
     def drain():  # the terminal: read what the view draws (else it blocks on a full pty)
@@ -113,7 +138,7 @@ def main() -> None:
                 return
 
     def write():  # the device: --rate lines a second, in 10 ms bursts, through the recording once
-        tick, n = 0.01, max(1, round(args.rate * 0.01))
+        tick, n = 0.01, max(1, round(args.rate * 0.01)) if args.rate > 0 else len(lines)
         nxt = time.monotonic() + 1.0
         for i in range(0, len(lines), n):
             if done.is_set():
@@ -122,7 +147,7 @@ def main() -> None:
             if now < nxt:
                 time.sleep(nxt - now)
             try:
-                os.write(ser_m, "".join(lines[i:i + n]).encode())
+                send("".join(lines[i:i + n]).encode())
             except OSError:
                 return
             nxt += tick
@@ -143,8 +168,9 @@ def main() -> None:
     out.unlink()
     ref = reference_cpu_per_line(args.config, lines)
     rate = stats["lines"] / stats["wall_s"]
-    print(f"config {Path(args.config).name}, {rate:.0f} lines/s read over {stats['wall_s']:.1f} s "
-          f"(asked {args.rate:.0f}; the recording has {len(lines)} lines)")
+    print(f"config {Path(args.config).name}, {args.link}, {rate:.0f} lines/s read over {stats['wall_s']:.1f} s "
+          f"(asked {args.rate:.0f}{' = all at once' if args.rate <= 0 else ''}; the recording has {len(lines)} "
+          f"lines); lag shown at the end {stats['lag_s']:.1f} s")
     print(f"screen refreshes: {stats['frames'] / stats['wall_s']:.1f} /s  (snapshots {stats['snapshots'] / stats['wall_s']:.1f} /s)")
     print(f"view process CPU: {100 * stats['cpu_s'] / stats['wall_s']:.0f}% of one core; "
           f"the same lines through fusion.pipeline.run alone: {100 * ref * rate:.0f}%")

@@ -3,7 +3,10 @@
 Exit codes: 0 success; 2 bad usage, bad config or bad input (one line naming file, line/field and what
 is wrong; no traceback unless ``--debug``); 1 internal error; 141 (128 + SIGPIPE, what a shell reports for
 a tool that a closed pipe ended) when the reader of standard output went away (``fusion run -o - | head``):
-no message, no traceback, stdout pointed at the null device so that the exit's flush cannot fail again.
+no message, no traceback, stdout pointed at the null device so that the exit's flush cannot fail again;
+143 / 129 (128 + SIGTERM / SIGHUP) when ``fusion run``, ``simulate``, ``sweep`` or ``import`` was stopped by
+that signal (``timeout``, ``kill``, systemd, ``docker stop``, a closed terminal): handled as Ctrl-C is
+(``stop_signals``), so what was read is summarised and no temporary file is left.
 """
 from __future__ import annotations
 
@@ -16,8 +19,12 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import importlib  # noqa: E402
+import signal  # noqa: E402
 import sys  # noqa: E402
+import threading  # noqa: E402
 import warnings  # noqa: E402
+from contextlib import contextmanager  # noqa: E402
+from typing import Iterator  # noqa: E402
 
 from fusion import __version__  # noqa: E402
 from fusion.errors import FusionError  # noqa: E402
@@ -25,6 +32,56 @@ from fusion.errors import FusionError  # noqa: E402
 COMMANDS = ("run", "validate", "plugins", "simulate", "tui", "import_", "sweep")  # import_: `fusion import`
 # Commands that import numpy and scipy.linalg: numpy's unused submodules are deferred for them (start-up).
 NUMERIC_COMMANDS = ("run", "validate", "tui", "simulate", "import", "sweep")
+# Commands that write outputs: SIGTERM and SIGHUP stop them as Ctrl-C does (stop_signals). The live view
+# (tui) is left to Textual, which restores the terminal itself.
+STOPPABLE_COMMANDS = ("run", "simulate", "sweep", "import")
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+
+class Stopped(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised in the main thread where Ctrl-C's KeyboardInterrupt would be: every
+    ``except KeyboardInterrupt`` (the run loop keeping what was read, an ``OutputFile`` discarding its
+    temporary file) handles it as Ctrl-C. ``signum``: the signal."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+@contextmanager
+def stop_signals() -> Iterator[list[int]]:
+    """Within the block, SIGTERM and SIGHUP raise ``Stopped`` in the main thread (as Ctrl-C raises
+    KeyboardInterrupt); yields the list of the signals received. Installed only in the main thread (a
+    signal handler can be set nowhere else) and restored after. A process forked inside the block (a
+    sweep's pool worker, which its pool ends with SIGTERM) gets the default action, as it would have."""
+    if threading.current_thread() is not threading.main_thread():
+        yield []
+        return
+    received: list[int] = []
+    owner = os.getpid()
+
+    def handler(signum, frame):
+        if os.getpid() != owner:        # a forked child: die of the signal as before
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+            return
+        received.append(signum)
+        raise Stopped(signum)
+
+    previous = {}
+    try:
+        for sig in STOP_SIGNALS:
+            previous[sig] = signal.signal(sig, handler)
+        yield received
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def _stopped_status(received: list[int], status: int) -> int:
+    """The exit status of a command that a signal of ``received`` interrupted (130 for Ctrl-C): 128 + the
+    signal, as a shell reports a process that signal killed (143 SIGTERM, 129 SIGHUP)."""
+    return 128 + received[0] if received and status == 130 else status
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -84,9 +141,20 @@ def main(argv: list[str] | None = None) -> int:
             from fusion.lazy_imports import defer_unused_numpy_modules
 
             defer_unused_numpy_modules()
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _stoppable(args.command) as received:
             warnings.showwarning = _warning_printer(args.command)
-            return int(args.func(args) or 0)
+            try:
+                return _stopped_status(received, int(args.func(args) or 0))
+            except KeyboardInterrupt:
+                if received:   # before or after the run's own handling: the command's outputs are discarded
+                    name = signal.Signals(received[0]).name
+                    _print_quietly(f"fusion {args.command}: stopped by {name}")
+                    return 128 + received[0]
+                raise
+            except OSError:
+                if received:   # a closed terminal (SIGHUP): printing the summary fails; the files are written
+                    return 128 + received[0]
+                raise
     except FusionError as exc:
         if _stdout_closed(exc):
             return _end_stdout_closed()
@@ -107,6 +175,21 @@ def main(argv: list[str] | None = None) -> int:
         print(f"fusion {args.command}: internal error: {type(exc).__name__}: {exc} (rerun with --debug for a traceback)",
               file=sys.stderr)
         return 1
+
+
+def _print_quietly(text: str) -> None:
+    """One line on stderr, nothing when stderr is gone (the closed terminal that sent SIGHUP)."""
+    try:
+        print(text, file=sys.stderr)
+    except (OSError, ValueError):
+        pass
+
+
+def _stoppable(command: str):
+    """``stop_signals()`` for a command that writes outputs, else a block that changes nothing."""
+    from contextlib import nullcontext
+
+    return stop_signals() if command in STOPPABLE_COMMANDS else nullcontext([])
 
 
 def _stdout_closed(exc: BaseException) -> bool:

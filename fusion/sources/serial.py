@@ -1,8 +1,11 @@
 """Serial port source (pyserial): lines of the log format from a live device.
 
 The wire format is the recording format (DESIGN.md "Log format"): UTF-8 text, one message a line,
-``t,sensor,v1,...[*HH]``, ``\\n`` or ``\\r\\n`` line ends. A bad byte spoils only its own line (decoded with
-U+FFFD and then counted as malformed); ``record`` tees the raw bytes, exactly as received, to a file.
+``t,sensor,v1,...[*HH]``, ``\\n``, ``\\r\\n`` or ``\\r`` line ends, split as the recording reader splits
+the record file (fusion.sources.line_splitter), so ``record`` replays as the session read it; a line over
+1 MiB is one malformed line (skipped to its end), as in a recording. A bad byte spoils only its own line
+(decoded with U+FFFD and then counted as malformed); ``record`` tees the raw bytes, exactly as received,
+to a file.
 
 ``port`` is a device (``/dev/ttyUSB0``, ``COM3``) or any pyserial URL (``loop://``,
 ``socket://host:port``, ``rfc2217://host:port``), opened with ``serial.serial_for_url``.
@@ -30,6 +33,7 @@ from __future__ import annotations
 
 import errno
 import os
+import select
 import threading
 import time
 from datetime import datetime, timezone
@@ -39,6 +43,7 @@ from pydantic import Field
 
 from fusion.api import InputError, Params, Source
 from fusion.logformat import OVERLONG
+from fusion.sources.line_splitter import LineSplitter
 from fusion.sources.recording import MAX_LINE
 
 _CHUNK = 4096  # bytes per read at most
@@ -75,6 +80,37 @@ def _hint(port: str, exc: BaseException) -> str:
             found = []
         return f" (ports found: {', '.join(found)})" if found else " (no serial ports found)"
     return ""
+
+
+def _read_chunk(port) -> bytes:
+    """What has arrived on ``port``, up to _CHUNK bytes, waiting up to the port's timeout for a first byte.
+    A device port's ``in_waiting`` counts the bytes waiting; a ``socket://`` port's says only 0 or 1
+    ("readable"), so reading ``in_waiting`` bytes took one byte a read (three system calls a byte: a 1 kHz
+    IMU was more than such a view could read, tester2 #8): there the first byte is read as pyserial
+    reads it, then what else the socket holds in one ``recv``."""
+    waiting = port.in_waiting
+    sock = getattr(port, "_socket", None) if waiting <= 1 else None
+    if sock is None or not _is_socket_port(port):
+        return port.read(min(_CHUNK, max(1, waiting)))
+    import serial
+
+    chunk = port.read(1)
+    if chunk:
+        try:
+            if select.select([sock], [], [], 0)[0]:
+                more = sock.recv(_CHUNK - 1)
+                if not more:
+                    raise serial.SerialException("socket disconnected")
+                chunk += more
+        except BlockingIOError:
+            pass
+    return chunk
+
+
+def _is_socket_port(port) -> bool:
+    from serial.urlhandler.protocol_socket import Serial as SocketSerial
+
+    return isinstance(port, SocketSerial)
 
 
 class SerialSource(Source):
@@ -115,6 +151,8 @@ class SerialSource(Source):
         self.on_status: Callable[[str, int, str], object] | None = None
         self.reconnects = 0  # times the port came back
         self._last_byte = b"\n"  # last byte recorded (a gap marker starts on a line of its own)
+        # Bytes -> lines as the recording reader splits the record file (CR, CRLF or LF ends)
+        self._splitter = LineSplitter(MAX_LINE)
 
     @property
     def label(self) -> str:
@@ -190,61 +228,38 @@ class SerialSource(Source):
         """Lines from the open port until close(); PortLost when a read fails (after the partial line)."""
         import serial
 
-        buf = bytearray()
-        skipping = False
+        split = self._splitter
         first = True  # the first line is cut when the port is opened while the device is sending
         port = self.port
         while not self._closed.is_set():
             try:
-                chunk = port.read(min(_CHUNK, max(1, port.in_waiting)))
+                chunk = _read_chunk(port)
             except (serial.SerialException, OSError) as exc:
                 if self._closed.is_set():
                     break
-                if buf:
-                    yield buf.decode("utf-8", "replace")
-                    buf.clear()
+                rest = split.end()
+                if rest is not None:
+                    yield rest
                 raise PortLost(f"lost {self.params.port}: {_reason(exc)}") from None
             if not chunk:
-                if first and not buf:
+                if first and not split.pending:
                     first = False  # a read timed out before any byte: the device starts on a line
                 if self.on_idle is not None:
                     self.on_idle()
                 continue
             self.bytes_received += len(chunk)
             self._tee(chunk)
-            buf += chunk
-            if skipping:               # inside an overlong line already reported: drop it to its end
-                i = buf.find(b"\n")
-                if i < 0:
-                    buf.clear()
-                    continue
-                del buf[:i + 1]
-                skipping = False
-                if b"\n" not in buf:
-                    continue
-            elif b"\n" not in chunk:
-                if len(buf) > MAX_LINE:
-                    # no newline for MAX_LINE bytes (a device at the wrong baud rate, /dev/zero): one
-                    # malformed line, as a recording's bounded_lines makes it, never a buffer filling memory
-                    first = False
-                    yield bytes(buf[:MAX_LINE]).decode("utf-8", "replace") + OVERLONG + "\n"
-                    buf.clear()
-                    skipping = True
-                continue
-            *done, rest = buf.split(b"\n")
-            buf = bytearray(rest)
-            for raw in done:
-                text = raw.decode("utf-8", "replace")
-                if first and not text.startswith("#"):
+            for text in split.feed(chunk):
+                if first and not text.startswith("#") and not text.endswith(OVERLONG + "\n"):
                     # A fragment may still parse ("560000,imu,..." from "1234.560000,imu,...") with a
                     # wrong time that would make every later message late: keep it as a comment (same
                     # line number as in the record file, never fused).
-                    first = False
                     text = "# fusion: first line cut by opening the port mid-stream: " + text
                 first = False
-                yield text + "\n"
-        if buf:  # closed mid-line: the partial line too
-            yield buf.decode("utf-8", "replace")
+                yield text
+        rest = split.end()
+        if rest is not None:  # closed mid-line: the partial line too
+            yield rest
 
     def _tee(self, data: bytes) -> None:
         """Append raw bytes to the record file (flushed: a crash loses nothing received)."""
@@ -258,10 +273,13 @@ class SerialSource(Source):
         self._last_byte = data[-1:]
 
     def _mark(self, comment: str) -> str:
-        """A gap marker: recorded on a line of its own (a line cut by the loss is ended first)."""
-        if self._last_byte != b"\n":
-            self._tee(b"\n")
-        self._tee(comment.encode("utf-8"))
+        """A gap marker: recorded on a line of its own (a line cut by the loss is ended first), ended as the
+        stream's lines are (CR for a device that has sent no LF: an LF would change how the record file
+        splits, fusion.sources.line_splitter)."""
+        eol = b"\r" if self._splitter.mode != "lf" and self.bytes_received else b"\n"
+        if self._last_byte not in (b"\n", b"\r"):
+            self._tee(eol)
+        self._tee(comment.encode("utf-8")[:-1] + eol)
         return comment
 
     def _status(self, state: str, attempt: int, detail: str) -> None:

@@ -266,6 +266,8 @@ def run_trial(trial: Trial) -> dict[str, Any]:
         else:
             from fusion import pipeline
             result = pipeline.run(system, lines, hooks=False)
+        if result.interrupted:   # Ctrl-C, SIGTERM or SIGHUP (fusion.cli.stop_signals) mid-run: a cut trial is
+            raise KeyboardInterrupt   # no row; the sweep stops, its rows so far kept (as between trials)
         row = row_of(result.summary, [n for n, s in system.sensors.items() if s.role == "measurement"])
         # a run that never initialised (e.g. a scenario without the config's sensors) is no result: a failed
         # row that says why, so the summary counts it, rather than "ok" with nothing in it

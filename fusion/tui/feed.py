@@ -35,6 +35,7 @@ from fusion.tui.state_series import StateHistory
 
 __all__ = ["LiveFeed", "FeedSnapshot", "LoggedEvent", "COUNTERS"]
 _SLICE = 0.05  # s: longest sleep between checks of pause/stop while pacing
+CAUGHT_UP_S = 0.5  # s without a line from a live source: everything it sent has been read (lag 0)
 
 
 class LiveFeed:
@@ -102,6 +103,7 @@ class LiveFeed:
         self._wall0: float | None = None
         self._t_first = math.nan
         self._t_start = math.nan  # time of the first message
+        self._best_offset = math.inf  # a live feed: least (wall - stream time) so far (s), for lag_s
         lay = system.layout
         self._pos = None
         if "p" in lay and lay.block("p").size >= 2:
@@ -211,8 +213,20 @@ class LiveFeed:
         return self._emit(time.monotonic())
 
     def _paced(self, lines: Iterable[str]) -> Iterator[str]:
-        """The lines, counted; a replay is held while paused and paced by sensor time at ``speed``."""
+        """The lines, counted; a replay is held while paused and paced by sensor time at ``speed``.
+
+        Paced by the stream's time as the scheduler keeps it (``Scheduler.newest``, after the clock
+        guard), not by raw stamps: a line stamped farther than the guard's ``future_s`` from the stream's
+        time (a wild stamp, which the guard drops, or a clock jump, which it re-synchronises) is not
+        waited for; the stream's time only moves on when the scheduler accepts it. And no single wait is
+        longer than ``scheduler.max_predict_s`` / speed (the longest gap the scheduler predicts over): a
+        longer one is cut, with a ``replay`` event (tester2 #12: one stamp 100,000 s ahead froze the view
+        for hours)."""
         t0 = wall0 = None
+        sched = self.run_.scheduler
+        future = sched.clock.future_s
+        cap = sched.max_predict
+        paced = -math.inf   # the stream time paced to so far
         for raw in lines:
             if self._stop.is_set():
                 return
@@ -228,9 +242,19 @@ class LiveFeed:
                 elif self.speed > 0.0:
                     t = _time_of(raw)
                     if t is not None:
-                        if t0 is None:
-                            t0, wall0 = t, time.monotonic()
-                        else:
+                        base = sched.newest
+                        if base == -math.inf:
+                            base = t if t0 is None else paced
+                        t = t if abs(t - base) <= future else base   # far from the stream: not waited for
+                        if t0 is None or t < paced - future:        # the start, or the stream's time went back
+                            t0, wall0, paced = t, time.monotonic(), t
+                        elif t > paced:
+                            if t - paced > cap:
+                                self._log(Event(paced, "replay", None, f"{t - paced:.3g} s of sensor time to the "
+                                                f"next message: waited {cap:g} s / speed at most "
+                                                "(scheduler.max_predict_s)"))
+                                t0 -= t - paced - cap  # type: ignore[operator]
+                            paced = t
                             wall0 += self._sleep_until(wall0 + (t - t0) / self.speed)  # type: ignore[operator]
             if self._stop.is_set():
                 return
@@ -340,7 +364,7 @@ class LiveFeed:
         elif t == t:
             rates = {k: v for k, v in self.health.rates(t).items() if v == v}  # by sensor time: deterministic
         snap = FeedSnapshot(
-            source=self.source, live=self.live, state=self.state, estimate=self.estimate, counters=counters,
+            lag_s=self._lag(now), source=self.source, live=self.live, state=self.state, estimate=self.estimate, counters=counters,
             ignored=self.run_.stats.ignored(), rates=rates, events=tuple(self.events), track=tuple(self.track),
             track_total=self.track_total, truth=tuple(self.truth), truth_total=self.truth_total,
             lines=self.lines_read, data_wall=self._data_wall, sensor_t=t, speed_ratio=ratio, wall=now, message=self.message,
@@ -351,6 +375,21 @@ class LiveFeed:
         self._emitted_lines = self.lines_read
         self._post(snap)
         return snap
+
+    def _lag(self, now: float) -> float:
+        """A live feed: how far behind the device the view is (s), the wall clock's lead on the stream's time
+        (the scheduler's, after the clock guard) beyond its least so far, i.e. what the view fell behind
+        since it was best caught up; 0 once nothing has been read for CAUGHT_UP_S (all read is fused);
+        NaN for a replay or before a message."""
+        if not self.live or self.state != "running":
+            return math.nan
+        newest = self.run_.scheduler.newest
+        if newest == -math.inf:
+            return math.nan
+        offset = now - newest
+        if offset < self._best_offset:
+            self._best_offset = offset
+        return 0.0 if now - self._data_wall > CAUGHT_UP_S else offset - self._best_offset
 
     def _smoothed_fields(self) -> dict:
         if self.smoothed is None:

@@ -2,6 +2,7 @@
 worker thread, immutable, posted to the UI) and the :class:`LoggedEvent` entries of its event log."""
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Mapping
@@ -35,7 +36,8 @@ class FeedSnapshot:
     by sensor (fusion.tui.series); ``states``: estimate, 1-sigma and error against truth of the state
     elements (fusion.tui.state_series); ``attempt``: the reopen attempt while reconnecting.
     ``smooth_lag``: the fixed lag (s) of ``smoothed`` ((north, east) points in m, as ``track``) and
-    ``smoothed_states`` (as ``states``), None when the view does not smooth."""
+    ``smoothed_states`` (as ``states``), None when the view does not smooth. ``lag_s``: a live feed, how far
+(s) the view has fallen behind the device (fusion.tui.feed.LiveFeed._lag; NaN for a replay)."""
 
     source: str
     live: bool
@@ -63,3 +65,4 @@ class FeedSnapshot:
     smoothed: tuple[tuple[float, float], ...] = ()
     smoothed_total: int = 0
     smoothed_states: tuple[StateSample, ...] = ()
+    lag_s: float = math.nan

@@ -1,5 +1,6 @@
 """The status line: source, state (RECONNECTING with the attempt count), overall health (OK, DEGRADED,
-LOST) with its reason, sensor time, speed against real time, filter, lines read. It wraps onto a second
+LOST) with its reason, sensor time, speed against real time, filter, lines read, and for a live port that
+the view cannot keep up with, how far behind it is (``BEHIND by 12.3 s``). It wraps onto a second
 line in a narrow terminal rather than being cut."""
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from fusion.tui.snapshot import FeedSnapshot
 from fusion.tui.health_panel import STATE_STYLE
 
 SILENT_S = 5.0  # s without a byte on a live port: LOST (as fusion.tui.health)
+BEHIND_S = 1.0  # s a live view may lag its device before the status line says BEHIND by N s
 
 _STATE_STYLE = {"running": "bold green", "waiting": "bold", "finished": "bold blue", "paused": "bold yellow",
                 "lost": "bold red", "error": "bold red", "stopped": "bold", "reconnecting": "bold yellow"}
@@ -41,6 +43,9 @@ def describe(snap: FeedSnapshot, paused: bool, filter_name: str, now: float | No
     if snap.live and snap.state == "running" and now is not None and now - snap.data_wall > 2.0:
         parts.append(f"no data for {now - snap.data_wall:.0f} s")
     out.append(" | " + " | ".join(parts))
+    if snap.live and snap.lag_s >= BEHIND_S and snap.state == "running":   # NaN: not compared
+        out.append(" | ")
+        out.append(f"BEHIND by {snap.lag_s:.1f} s", style="bold yellow")
     if snap.message:
         out.append(" | ")
         out.append(snap.message, style="bold red")

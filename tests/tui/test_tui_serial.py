@@ -186,3 +186,36 @@ def test_a_port_that_never_sends_a_newline_gives_one_malformed_line_not_a_full_m
         logformat.parse_line(junk)
     assert good == "2.0,uwb,B2,4.0\n"
     src.close()
+
+
+def test_a_socket_port_is_read_in_chunks_not_a_byte_a_read():
+    """pyserial's socket:// says only 0 or 1 for in_waiting: reading that many bytes took one read a byte
+    (tester2 #8: three system calls a byte, a 1 kHz IMU more than the view could read). Counted reads,
+    not a timing. A peer that closes after its last bytes is a lost port after they are delivered."""
+    import socket
+
+    server = socket.create_server(("127.0.0.1", 0))
+    lines = [f"{i * 0.025:.3f},uwb,B{i % 4 + 1},{10.0 + 0.001 * i:.6f}\n" for i in range(400)]
+    data = "".join(lines).encode()
+
+    def device():
+        conn, _ = server.accept()
+        time.sleep(0.2)
+        conn.sendall(data + b"9.9,uwb,B1")   # the last line cut by the close
+        time.sleep(0.3)
+        conn.close()
+
+    th = threading.Thread(target=device)
+    th.start()
+    src = SerialSource(port=f"socket://127.0.0.1:{server.getsockname()[1]}", timeout=0.05).open()
+    reads = []
+    real = src.port.read
+    src.port.read = lambda size=1: reads.append(size) or real(size)
+    got = []
+    with pytest.raises(PortLost, match="socket disconnected"):
+        for line in src.lines():
+            got.append(line)
+    th.join()
+    server.close()
+    assert got == lines + ["9.9,uwb,B1"]
+    assert len([n for n in reads]) < len(data) / 100   # ~16 kB: a few dozen reads, not 16,000
