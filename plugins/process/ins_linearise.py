@@ -55,8 +55,9 @@ def linearise_run(x: np.ndarray, us: np.ndarray, dts: np.ndarray, g: float, unit
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(x after the run (n,), F (k, n, n), Q (k, n, n)) for states x (n,) = [p v q (ba bw sa sw)] (m, m/s,
     Hamilton scalar-first C_b^n, m/s^2, rad/s, 1), IMU samples us (k, 6) (m/s^2, rad/s, FRD) held over dts
-    (k,) s. ``Q_base`` (k, n, n): each sample's attitude-independent noise (q block zero); ``var_w`` the
-    gyro's white-noise variance density (rad^2/s), ``quat_norm_variance`` the variance along q."""
+    (k,) s. ``Q_base`` (k, n, n): each sample's attitude-independent noise, a new array of the caller's that
+    is completed in place (its q block written) and returned as Q; ``var_w`` the gyro's white-noise
+    variance density (rad^2/s), ``quat_norm_variance`` the variance along q."""
     n = x.shape[0]
     k = dts.shape[0]
     a = us[:, :3]
@@ -66,13 +67,14 @@ def linearise_run(x: np.ndarray, us: np.ndarray, dts: np.ndarray, g: float, unit
         w = (w - x[13:16]) / x[19:22]
     hh = (0.5 * dts)[:, None] * w                                  # half rotation vector (k, 3)
     s = np.sqrt((hh * hh).sum(axis=1))
+    sin_s, cos_s = np.sin(s), np.cos(s)
     tiny = s <= 1e-300
     ss = np.where(tiny, 1.0, s)
-    sinc = np.where(tiny, 1.0, np.sin(s) / ss)
+    sinc = np.where(tiny, 1.0, sin_s / ss)
     small = s <= 1e-4
-    c3 = np.where(small, -1.0 / 3.0 + s * s / 30.0, (ss * np.cos(s) - np.sin(s)) / ss ** 3)
+    c3 = np.where(small, -1.0 / 3.0 + s * s / 30.0, (ss * cos_s - sin_s) / ss ** 3)
     dq = np.empty((k, 4))
-    dq[:, 0] = np.cos(s)
+    dq[:, 0] = cos_s
     dq[:, 1:] = sinc[:, None] * hh                                 # eqs. 43-49
     qs = _chain(x[6:10].tolist(), dq, unit)
     q = qs[:-1]                                                     # attitude before each sample (k, 4)
@@ -119,7 +121,7 @@ def linearise_run(x: np.ndarray, us: np.ndarray, dts: np.ndarray, g: float, unit
         F[:, 6:10, 19:22] = -Ldw * (w * inv_sw)[:, None, :]
 
     # the q block of Q: N_w^2 dt / 4 (|q|^2 I - q q^T) plus quat_norm_variance along q (ins_states._noise)
-    Q = Q_base.copy()
+    Q = Q_base
     kw = var_w * dts / 4.0
     blk = qq * (quat_norm_variance / n2 - kw)[:, None, None]
     blk += (n2 * kw)[:, None, None] * _I4
