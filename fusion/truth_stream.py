@@ -173,11 +173,15 @@ class _Rows:
 
     def __getitem__(self, i: int) -> np.ndarray:
         row = np.array(self._v[i], dtype=float)
-        for cols in self._quats.values():
-            # as Truth does it over all rows at once (the same reduction, so the same last bit)
-            q = row[None, cols]
-            nrm = np.linalg.norm(q, axis=1, keepdims=True)
-            row[cols] = np.divide(q, nrm, out=q.copy(), where=nrm > 0)[0]
+        if self._quats:
+            vals = row.tolist()
+            for cols in self._quats.values():
+                # as Truth does it over all rows at once (np.linalg.norm's sum of squares, left to right: the
+                # same last bit), in plain floats: ~2 us against ~8 us for the numpy calls on one row
+                a, b, c, d = [vals[j] for j in cols]
+                nrm = math.sqrt(a * a + b * b + c * c + d * d)
+                if nrm > 0.0:
+                    row[cols] = (a / nrm, b / nrm, c / nrm, d / nrm)
         return row
 
 
