@@ -215,7 +215,13 @@ class Magnetometer(MeasurementModel):
             raise RejectedMessage("magnetometer: field_source: alignment found no magnetometer sample in the "
                                   "alignment window (initial.align_s): the reference field is unknown")
         z = message.floats()
-        if z.shape != (3,) or not np.all(np.isfinite(z)):
+        if z.shape != (3,):
+            raise MalformedMessage(f"magnetometer expects 3 finite values (mx my mz), got {message.values!r}")
+        a, b, c = z.tolist()
+        total = a + b + c
+        # a nan or an inf among them, in plain floats (~4x cheaper than np.isfinite); an overflowing sum of
+        # finite values is checked one by one
+        if total - total != 0.0 and not np.all(np.isfinite(z)):
             raise MalformedMessage(f"magnetometer expects 3 finite values (mx my mz), got {message.values!r}")
         if self.direction_only:
             nz = float(np.linalg.norm(z))
