@@ -34,7 +34,6 @@ __all__ = ["InsStates"]
 
 _LAYOUTS = {10: StateLayout.parse("p:3 v:3 q:4:quaternion"),
             22: StateLayout.parse("p:3 v:3 q:4:quaternion ba:3 bw:3 sa:3 sw:3")}
-_SCALE_DIAG = np.arange(16, 22) * 23          # flat indices of the sa, sw diagonal in a (22, 22) matrix
 
 
 class InsStates(InsProcess):
@@ -67,7 +66,7 @@ class InsStates(InsProcess):
         self._cache_key: tuple | None = None
         self._cache: tuple = ()
         self._Qc: dict[float, np.ndarray] = {}
-        self._base_nz: tuple | None = None
+        self._base_coef: tuple | None = None
 
     # ------------------------------------------------------------------ mapping to the 16-state model
     def _core(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -176,23 +175,19 @@ class InsStates(InsProcess):
         :meth:`_q_base` per sample; a cache per dt would miss: the intervals of a recording differ in
         their last bits (0.01999999999999602, 0.020000000000003126, ...)."""
         k, n = dts.shape[0], self.layout.n
-        Q1, Q2, Q3 = self.core._Qdt
-        d1 = dts[:, None]
+        if self._base_coef is None:                   # Q1, Q2, Q3 (n, n) with the scale walks' N_s^2 in Q1
+            if n == 10:
+                Q1, Q2, Q3 = (np.ascontiguousarray(c[:10, :10]) for c in self.core._Qdt)
+            else:
+                Q1, Q2, Q3 = (np.pad(c, (0, 6)) for c in self.core._Qdt)
+                Q1[16:, 16:] = np.diag(self._var_s)                   # eq. 13: scale-factor random walks
+            self._base_coef = tuple(c.reshape(n * n) for c in (Q1, Q2, Q3))
+        c1, c2, c3 = self._base_coef
         d2 = dts * dts
-        d3 = (d2 * dts)[:, None]
-        d2 = d2[:, None]
-        if self._base_nz is None:                                # the nonzero entries of Q1, Q2, Q3 within n
-            nz = np.flatnonzero((Q1 != 0) | (Q2 != 0) | (Q3 != 0))
-            nz = nz[(nz // 16 < n) & (nz % 16 < n)]
-            self._base_nz = ((nz // 16) * n + nz % 16, Q1.ravel()[nz], Q2.ravel()[nz], Q3.ravel()[nz])
-        dst, c1, c2, c3 = self._base_nz
-        Q = np.zeros((k, n * n))
-        v = c1 * d1
-        v += c2 * d2
-        v += c3 * d3
-        Q[:, dst] = v
-        if n == 22:
-            Q[:, _SCALE_DIAG] = self._var_s * d1                 # eq. 13: scale-factor random walks
+        # zero coefficients give exact zeros, so the sums are those of the nonzero terms, in Q's order
+        Q = np.multiply.outer(dts, c1)
+        Q += np.multiply.outer(d2, c2)
+        Q += np.multiply.outer(d2 * dts, c3)
         return Q.reshape(k, n, n)                                 # the q block: linearise_run's
 
     # ------------------------------------------------------------------ the one-point fast path
