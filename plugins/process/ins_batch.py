@@ -24,8 +24,10 @@ K10 = np.concatenate([quat.ROTATION_FORM, np.eye(16)[:, quat.NORM_TERMS].sum(axi
 K10T = np.ascontiguousarray(K10.T)          # (10, 16): [R(q) rows (9), |q|^2] = K10T @ outer(q, q)
 T16T = np.ascontiguousarray(quat.PRODUCT_FORM.T)     # (4, 16):  p (x) q = T16T @ outer(p, q)
 _ONE = np.array([1.0, 0.0, 0.0, 0.0])
-_GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(4)   # on [-1, 1]; mapped to [0, 1] below
-_GL_NODES, _GL_WEIGHTS = 0.5 * (_GL_NODES + 1.0), 0.5 * _GL_WEIGHTS
+# 4-point Gauss-Legendre on [0, 1]: np.polynomial.legendre.leggauss(4) mapped by (x + 1) / 2, weights / 2, as
+# literals (the same floats, tests/models/test_ekf_run_paths.py): importing numpy.polynomial costs ~3 ms of start-up
+_GL_NODES = np.array([0.06943184420297371, 0.33000947820757187, 0.6699905217924281, 0.9305681557970262])
+_GL_WEIGHTS = np.array([0.17392742256872679, 0.3260725774312732, 0.3260725774312732, 0.17392742256872679])
 _EYE15 = np.eye(15)
 _EYE3 = np.eye(3)
 _G16 = np.zeros((16, 15))                      # error state [dp dv dth dba dbw] -> state (q rows set per call)

@@ -165,3 +165,11 @@ def test_nmea_ned_is_pymap3ds():
     for lat, lon, h in zip(-23.21 + 0.01 * rng.normal(size=50), -45.876 + 0.01 * rng.normal(size=50),
                            600 + 10 * rng.normal(size=50)):
         assert dec._ned(pymap3d, lat, lon, h) == pymap3d.geodetic2ned(lat, lon, h, *dec.origin)
+
+
+def test_gauss_legendre_literals_are_numpys():
+    from fusion_plugins.process import ins_batch
+
+    nodes, weights = np.polynomial.legendre.leggauss(4)
+    np.testing.assert_array_equal(ins_batch._GL_NODES, 0.5 * (nodes + 1.0))
+    np.testing.assert_array_equal(ins_batch._GL_WEIGHTS, 0.5 * weights)
