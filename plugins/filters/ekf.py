@@ -49,13 +49,11 @@ class ExtendedKalmanFilter(KalmanBase):
             return super().predict_inputs(belief, process, us, dts)
         x1, F, Q = run
         P = covariance_of(belief)
-        t = belief.t
-        for j, dt in enumerate(np.asarray(dts, dtype=float).tolist()):
-            Fj = F[j]
+        for Fj, Qj in zip(F, Q):
             P = Fj @ P @ Fj.T
-            P += Q[j]
-            t += dt
-        return Belief(t, x1, P=symmetrise(P))
+            P += Qj
+        # sum() adds left to right from belief.t: the same time as t += dt sample by sample
+        return Belief(sum(np.asarray(dts, dtype=float).tolist(), belief.t), x1, P=symmetrise(P))
 
     def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                gate: Gate | None = None) -> UpdateResult:

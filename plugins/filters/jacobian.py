@@ -52,4 +52,4 @@ def measurement_jacobian(model, x: np.ndarray) -> np.ndarray:
     H = model.jacobian(x)
     if H is None:
         H = numerical_jacobian(model.h, x, model.residual)
-    return np.atleast_2d(H)
+    return H if type(H) is np.ndarray and H.ndim == 2 else np.atleast_2d(H)

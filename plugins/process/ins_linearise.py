@@ -33,6 +33,17 @@ _RIGHT = np.ascontiguousarray(_T.transpose(1, 2, 0).reshape(4, 16))   # [m, (i, 
 _LEFT = np.ascontiguousarray(_T.transpose(0, 2, 1).reshape(4, 16))    # [m, (i, j)] = T[m, j, i]
 _I3 = np.eye(3)
 _I4 = np.eye(4)
+_EYES: dict[tuple[int, int], np.ndarray] = {}
+
+
+def _identities(k: int, n: int) -> np.ndarray:
+    """k identity matrices (k, n, n), a new array (copied from a cached one: one call instead of two)."""
+    E = _EYES.get((k, n))
+    if E is None:
+        if len(_EYES) > 64:
+            _EYES.clear()
+        E = _EYES[(k, n)] = np.broadcast_to(np.eye(n), (k, n, n)).copy()
+    return E.copy()
 
 
 def _chain(q: list[float], dq: np.ndarray, unit: bool) -> np.ndarray:
@@ -55,33 +66,36 @@ def linearise_run(x: np.ndarray, us: np.ndarray, dts: np.ndarray, g: float, unit
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(x after the run (n,), F (k, n, n), Q (k, n, n)) for states x (n,) = [p v q (ba bw sa sw)] (m, m/s,
     Hamilton scalar-first C_b^n, m/s^2, rad/s, 1), IMU samples us (k, 6) (m/s^2, rad/s, FRD) held over dts
-    (k,) s. ``Q_base`` (k, n, n): each sample's attitude-independent noise (q block zero); ``var_w`` the
-    gyro's white-noise variance density (rad^2/s), ``quat_norm_variance`` the variance along q."""
+    (k,) s. ``Q_base`` (k, n, n): each sample's attitude-independent noise, a new array of the caller's that
+    is completed in place (its q block written) and returned as Q; ``var_w`` the gyro's white-noise
+    variance density (rad^2/s), ``quat_norm_variance`` the variance along q."""
     n = x.shape[0]
     k = dts.shape[0]
+    if n == 22:
+        us = (us - x[10:16]) / x[16:22]                            # eq. 11 solved for the true input
     a = us[:, :3]
     w = us[:, 3:]
-    if n == 22:
-        a = (a - x[10:13]) / x[16:19]                              # eq. 11 solved for the true input
-        w = (w - x[13:16]) / x[19:22]
     hh = (0.5 * dts)[:, None] * w                                  # half rotation vector (k, 3)
     s = np.sqrt((hh * hh).sum(axis=1))
+    sin_s, cos_s = np.sin(s), np.cos(s)
     tiny = s <= 1e-300
     ss = np.where(tiny, 1.0, s)
-    sinc = np.where(tiny, 1.0, np.sin(s) / ss)
+    sinc = np.where(tiny, 1.0, sin_s / ss)
     small = s <= 1e-4
-    c3 = np.where(small, -1.0 / 3.0 + s * s / 30.0, (ss * np.cos(s) - np.sin(s)) / ss ** 3)
+    c3 = np.where(small, -1.0 / 3.0 + s * s / 30.0, (ss * cos_s - sin_s) / ss ** 3)
     dq = np.empty((k, 4))
-    dq[:, 0] = np.cos(s)
+    dq[:, 0] = cos_s
     dq[:, 1:] = sinc[:, None] * hh                                 # eqs. 43-49
     qs = _chain(x[6:10].tolist(), dq, unit)
     q = qs[:-1]                                                     # attitude before each sample (k, 4)
-    q0, q1, q2, q3 = q.T
-    n2 = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
     qq = q[:, :, None] * q[:, None, :]
-    C = (qq.reshape(k, 16) @ _R_OF_QQ).reshape(k, 3, 3)            # C_b^n = R(q) / |q|^2 (eq. 35)
+    qq16 = qq.reshape(k, 16)
+    d = qq16[:, ::5]                                                # q_i q_i
+    n2 = d[:, 0] + d[:, 1] + d[:, 2] + d[:, 3]
+    C = (qq16 @ _R_OF_QQ).reshape(k, 3, 3)                         # C_b^n = R(q) / |q|^2 (eq. 35)
     C /= n2[:, None, None]
-    Ca = C[:, :, 0] * a[:, 0:1] + C[:, :, 1] * a[:, 1:2] + C[:, :, 2] * a[:, 2:3]
+    # numpy sums fewer than 8 terms left to right: the same numbers as C[.., 0] a0 + C[.., 1] a1 + C[.., 2] a2
+    Ca = (C * a[:, None, :]).sum(axis=2)
     acc = Ca.copy()
     acc[:, 2] += g
     # v_{j+1} = v_j + (C a + g) dt, r_{j+1} = r_j + v_j dt: running sums in the order of the per-sample steps
@@ -95,9 +109,8 @@ def linearise_run(x: np.ndarray, us: np.ndarray, dts: np.ndarray, g: float, unit
     x1 = x.copy()
     x1[0:3], x1[3:6], x1[6:10] = r[-1], v[-1], qs[-1]
 
-    F = np.zeros((k, n, n))
-    F.reshape(k, n * n)[:, ::n + 1] = 1.0
-    F[:, 0, 3] = F[:, 1, 4] = F[:, 2, 5] = dts
+    F = _identities(k, n)
+    F.reshape(k, n * n)[:, [3, n + 4, 2 * n + 5]] = dts[:, None]      # F[0, 3], F[1, 4], F[2, 5]: dp/dv = I dt
     # d(C a)/dq for the normalised C: (dR/dq a - 2 C a q^T) / |q|^2, R the homogeneous form
     dRa = ((q[:, :, None] * a[:, None, :]).reshape(k, 12) @ _DRA_OF_QA).reshape(k, 3, 4)
     F[:, 3:6, 6:10] = (dts / n2)[:, None, None] * (dRa - 2.0 * Ca[:, :, None] * q[:, None, :])
@@ -119,7 +132,7 @@ def linearise_run(x: np.ndarray, us: np.ndarray, dts: np.ndarray, g: float, unit
         F[:, 6:10, 19:22] = -Ldw * (w * inv_sw)[:, None, :]
 
     # the q block of Q: N_w^2 dt / 4 (|q|^2 I - q q^T) plus quat_norm_variance along q (ins_states._noise)
-    Q = Q_base.copy()
+    Q = Q_base
     kw = var_w * dts / 4.0
     blk = qq * (quat_norm_variance / n2 - kw)[:, None, None]
     blk += (n2 * kw)[:, None, None] * _I4
