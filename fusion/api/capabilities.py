@@ -155,7 +155,9 @@ class AlignsState(Protocol):
 
     def align_state(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray,
                     observations: Sequence[Observation], R: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        """(x0, P0) refined; ``u_mean`` the mean input over the static start, ``R`` the sensor's noise."""
+        """(x0, P0) refined; ``u_mean`` the mean input over the static start, ``R`` the sensor's noise.
+        ``observations`` may be empty (the sensor sent nothing in the window): return (x0, P0) as they are,
+        and refuse the later messages that need the alignment (RejectedMessage, with that reason)."""
         ...
 
 

@@ -41,9 +41,10 @@ class Initialisation:
                 if has(self.process, Aligns):   # wiring refuses align_s for a process without it
                     self._x0, self._P0 = self.process.align(self._x0, self._P0, u_mean)
                 for name, observations in self._aligners.items():
-                    if observations:
-                        s = self.sensors[name]
-                        self._x0, self._P0 = s.model.align_state(self._x0, self._P0, u_mean, observations, s.R)  # type: ignore[union-attr]
+                    # called with no observations too (no sample of the sensor in the window): the model
+                    # then knows the static start is over and can refuse its later messages with the reason
+                    s = self.sensors[name]
+                    self._x0, self._P0 = s.model.align_state(self._x0, self._P0, u_mean, observations, s.R)  # type: ignore[union-attr]
             self._start(t)
             self.u = u
             sensor.counters["used"] += 1

@@ -94,7 +94,9 @@ class Attitude(MeasurementModel):
     def align_state(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray,
                     observations: Sequence[Observation], R: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """Initial attitude: the chordal mean of the static fixes (fusion.api.AlignsState), covariance the
-        mean fix covariance / N; the q rows and columns of P0 are replaced."""
+        mean fix covariance / N; the q rows and columns of P0 are replaced. No observations: unchanged."""
+        if not observations:
+            return x0, P0
         qs = np.array([o.model.q_m for o in observations])  # type: ignore[attr-defined]
         qs *= np.where(qs @ qs[0] < 0.0, -1.0, 1.0)[:, None]
         q = quat.normalize(qs.sum(axis=0))
