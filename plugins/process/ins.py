@@ -286,13 +286,18 @@ class Ins(InsNoise, ProcessModel):
         vals = message.values
         if len(vals) != 6:
             raise MalformedMessage(f"process 'ins' expects 6 IMU values (ax ay az gx gy gz), got {len(vals)}")
-        try:
-            u = np.array(vals, dtype=float)
-        except (TypeError, ValueError):
-            raise MalformedMessage(f"expected numbers, got {vals!r}") from None
-        if u.shape != (6,):                          # sequences for numbers (a message from another source)
-            raise MalformedMessage(f"expected numbers, got {vals!r}")
-        ax, ay, az, gx, gy, gz = u.tolist()          # plain floats: these checks cost ~1 us, numpy's ~10
+        # plain floats first (the parser's tuple): these checks cost ~1 us, numpy's ~10, and the array is
+        # made once, at the end
+        ax, ay, az, gx, gy, gz = vals
+        if not (ax.__class__ is float and ay.__class__ is float and az.__class__ is float
+                and gx.__class__ is float and gy.__class__ is float and gz.__class__ is float):
+            try:                                     # ints, numpy scalars (a message from another source)
+                u = np.array(vals, dtype=float)
+            except (TypeError, ValueError):          # a label
+                raise MalformedMessage(f"expected numbers, got {vals!r}") from None
+            if u.shape != (6,):                      # sequences for numbers
+                raise MalformedMessage(f"expected numbers, got {vals!r}")
+            ax, ay, az, gx, gy, gz = u.tolist()
         total = ax + ay + az + gx + gy + gz
         if total - total != 0.0:                     # a nan or an inf among them
             raise RejectedMessage(f"non-finite IMU value in {vals!r}")
@@ -302,7 +307,7 @@ class Ins(InsNoise, ProcessModel):
         lim = self._max_w
         if lim is not None and not (abs(gx) <= lim and abs(gy) <= lim and abs(gz) <= lim):
             raise RejectedMessage(f"angular rate {[gx, gy, gz]} beyond the sensor range +-{lim} rad/s")
-        return u
+        return np.array((ax, ay, az, gx, gy, gz))
 
     # ------------------------------------------------------------------ initial alignment
     def align(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
