@@ -52,6 +52,10 @@ PV_HALL = "uwb_pv_matched.yaml"                 # a walk of the PV model, redraw
 PV_FREE = "uwb_pv_matched.yaml, no walls"       # the same walk without bounds: the model exactly
 HALL = [[0.0, 30.0], [0.0, 20.0]]               # m: the hall of paper 001 (uwb_pv_matched.yaml's bounds)
 INS_MATCHED = "car_gps_mag_matched.yaml"        # paper 002's sensor errors drawn with the config's figures
+# scenarios whose trajectory is a random draw of its own seed (trajectory.seed): each run seed draws its own
+# walk (unless --fixed-trajectory). The others are fixed routes (the papers' routes, waypoints) or draw their
+# walk already (the PV control).
+WALKS = ("ultrasonic_3d_walk.yaml",)
 SYSTEMS = [  # config, scenario
     ("abps_ins.yaml", "abps_mine.yaml"),
     ("abps_ins.yaml", FLAT),
@@ -116,9 +120,10 @@ def verdict(o: dict, which: str) -> str:
     return "yes" if not bad else "no: " + ", ".join(bad)
 
 
-def one(config: str, scenario: str, seed: int, tmp: Path) -> dict:
+def one(config: str, scenario: str, seed: int, tmp: Path, vary: bool = True) -> dict:
     """One seed: the summary's filtered and smoothed scores; for abps_ins also the NEES of the p and v blocks
-    and of pz alone (experiments/abps_smoothed.py), where the smoothed NEES exceeds its dof."""
+    and of pz alone (experiments/abps_smoothed.py), where the smoothed NEES exceeds its dof. ``vary``: a
+    scenario of ``WALKS`` draws its random walk with the seed too (:func:`walk_per_seed`)."""
     from fusion.config import load_system
     from fusion.metrics import Truth
     from fusion.simulate.engine import simulate_file
@@ -131,7 +136,7 @@ def one(config: str, scenario: str, seed: int, tmp: Path) -> dict:
     else:
         path = (abps_smoothed.flat_scenario(tmp) if scenario == FLAT else
                 ROOT / "scenarios" / "controls" / scenario if scenario == INS_MATCHED else ROOT / "scenarios" / scenario)
-        text = simulate_file(str(path), seed=seed)
+        text = walk_per_seed(path, seed) if vary and scenario in WALKS else simulate_file(str(path), seed=seed)
     if config == "imu_gps_mag_ekf.yaml":
         from fusion import pipeline
         import ins_blocks
@@ -173,6 +178,18 @@ def one(config: str, scenario: str, seed: int, tmp: Path) -> dict:
             "nees_f": s["consistency"]["nees_mean"], "nees_s": sm["consistency"]["nees_mean"],
             "in95_f": s["consistency"]["nees_in_95_fraction"], "in95_s": sm["consistency"]["nees_in_95_fraction"],
             "dof": s["consistency"]["nees_dof"], "forward_s": sm["forward_wall_s"], "backward_s": sm["backward_wall_s"]}
+
+
+def walk_per_seed(path: Path, seed: int) -> str:
+    """The recording of the scenario file ``path`` for ``seed`` with its random walk drawn with ``seed`` too
+    (its ``trajectory.seed`` replaced; with the scenario's own trajectory seed, byte-identical to
+    ``simulate_file(path, seed)``): a Monte-Carlo over walks, not over the noise on one walk."""
+    from fusion.simulate.engine import render, simulate_parts
+    from fusion.simulate.scenario import load_scenario
+
+    sc, text = load_scenario(path)
+    sc = sc.model_copy(update={"trajectory": sc.trajectory.model_copy(update={"seed": seed})})
+    return render(simulate_parts(sc, seed=seed, where=str(path), text=text))
 
 
 def pv_walk(scenario: str, seed: int) -> tuple[str, dict]:
@@ -497,6 +514,9 @@ def main(argv=None) -> int:
     ap.add_argument("--from-json", help="write the page from numbers a run saved (no runs)")
     ap.add_argument("--minutes", type=float, help="with --from-json: the saved run's duration for the header")
     ap.add_argument("--note", default="", help="a line for the page's head (e.g. rows run with fewer seeds)")
+    ap.add_argument("--fixed-trajectory", action="store_true", help="the random-walk scenarios (paper 003's) keep "
+                    "their own fixed walk for every seed (before issue 17's rework: new noise on one walk); "
+                    "default: a new walk each seed")
     args = ap.parse_args(argv)
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     json_path = Path(args.json) if args.json else JSON
@@ -512,8 +532,10 @@ def main(argv=None) -> int:
     done: dict = {}
     for config, scenario in todo:
         with tempfile.TemporaryDirectory() as d:
-            rows = [one(config, scenario, s, Path(d)) for s in seeds]
+            rows = [one(config, scenario, s, Path(d), not args.fixed_trajectory) for s in seeds]
         out = aggregate(config, scenario, rows)
+        if scenario in WALKS:
+            out["walks"] = "fixed" if args.fixed_trajectory else "per seed"
         done[(config, scenario)] = out
         print(f"{config} / {scenario}: filtered {out['f_mean']:.4f} m, smoothed {out['s_mean']:.4f} m, "
               f"reduction {100 * out['red_mean']:.1f}% (p5 {100 * out['red_p5']:.1f}%), helped {out['helped']}/{out['n']}, "
