@@ -289,31 +289,33 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         with ``until``, the last sample is held up to that time in the same batch."""
         sensor = self.sensors[msgs[0].sensor]
         good: list[tuple[float, np.ndarray]] = []
+        decode, input_from, max_gap = sensor.decoder.decode, self.process.input_from, sensor.max_gap  # per sample
         for msg in msgs:
             try:
-                decoded = sensor.decoder.decode(msg)
+                decoded = decode(msg)
                 if decoded is None:
                     sensor.counters["absorbed"] += 1
                     continue
-                u = self.process.input_from(decoded)
+                u = input_from(decoded)
             except MalformedMessage as exc:
                 yield self._bad(sensor, msg, exc)
                 continue
             except Exception as exc:  # a plugin that fails on one message must not stop the run
                 yield self._bad(sensor, msg, _failed(sensor.decoder, exc))
                 continue
-            told = self._silence_told and msg.t > self._silence_last   # its silence already told: it ends now
-            if sensor.max_gap is not None and self._last_input_t is not None and msg.t - self._last_input_t > sensor.max_gap:
-                if told:   # one gap, one "gap" event: its end is a "resumed" one, with the length
-                    yield Event(msg.t, "resumed", msg.sensor, f"{msg.sensor} samples again after "
-                                f"{msg.t - self._last_input_t:.3f} s; prediction held the last sample")
-                else:
-                    yield Event(msg.t, "gap", msg.sensor, f"no {msg.sensor} sample for {msg.t - self._last_input_t:.3f} "
-                                f"s (limit {sensor.max_gap} s); prediction held the last sample")
-            self._last_input_t = msg.t
-            if told:   # a new sample, not a held one
+            t = msg.t
+            last = self._last_input_t
+            if max_gap is not None and last is not None and t - last > max_gap:
+                if self._silence_told and t > self._silence_last:   # told while the others went on: it ends
+                    yield Event(t, "resumed", msg.sensor, f"{msg.sensor} samples again after {t - last:.3f} s; "
+                                "prediction held the last sample")
+                else:                                               # one gap, one "gap" event
+                    yield Event(t, "gap", msg.sensor, f"no {msg.sensor} sample for {t - last:.3f} s (limit "
+                                f"{max_gap} s); prediction held the last sample")
+            self._last_input_t = t
+            if self._silence_told and t > self._silence_last:   # a new sample, not a held one
                 self._silence_told = False
-            good.append((msg.t, u))
+            good.append((t, u))
         if good:
             self._last_u = good[-1][1]
         if self.belief is None:
