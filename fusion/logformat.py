@@ -117,7 +117,7 @@ OVERLONG = "\uffff"
 _BINARY = re.compile(r"[\x00-\x08\x0e-\x1f\x7f\ufffd\uffff]")  # control characters; U+FFFD: a byte that was not UTF-8
 
 
-def _parse_stripped(line: str, lineno: int | None) -> Message:
+def _parse_stripped(line: str, lineno: int | None, head: list[str] | None = None) -> Message:
     # The hot path of every replay (one call a line): each check below is the cheapest that decides it,
     # and the message is built with tuple.__new__ (NamedTuple's own __new__ is a Python-level frame).
     if "\ufffd" in line or (not line.isprintable() and _BINARY.search(line)):  # isprintable: ~0.1 us, no regex
@@ -127,7 +127,8 @@ def _parse_stripped(line: str, lineno: int | None) -> Message:
             raise MalformedMessage(f"line longer than {bad.start()} characters (skipped to its end)")  # type: ignore[union-attr]
         what = "invalid UTF-8" if c == "\ufffd" else f"control byte 0x{ord(c):02x}"
         raise MalformedMessage(f"binary data in the line ({what} at column {bad.start() + 1})")  # type: ignore[union-attr]
-    head = line.split(",", 2)
+    if head is None:
+        head = line.split(",", 2)
     if len(head) < 3:
         raise MalformedMessage("expected 't,sensor,value,...'")
     t_text, sensor, rest = head
@@ -217,13 +218,10 @@ _PLAIN_NUMBERS = re.compile(r"-?[0-9]{1,15}+(?:\.[0-9]{0,17}+)?+(?:,-?[0-9]{1,15
 # without its bookkeeping the match takes about half the time)
 
 
-def _raw_message(text: str, raw_streams: Collection[str], fields: dict, lineno: int) -> Message | None:
-    """A line of one of ``raw_streams`` whose values are certainly ``# fields``-many finite numbers, as a
-    Message whose values are still their text (a ``str``), or None (then the line takes the full parse,
-    which gives the same verdict and message for anything this does not accept)."""
-    head = text.split(",", 2)
-    if len(head) != 3 or head[1] not in raw_streams:
-        return None
+def _raw_message(head: list[str], fields: dict, lineno: int) -> Message | None:
+    """A line (split as ``t, sensor, rest``) of a raw stream whose values are certainly ``# fields``-many
+    finite numbers, as a Message whose values are still their text (a ``str``), or None (then the line
+    takes the full parse, which gives the same verdict and message for anything this does not accept)."""
     names = fields.get(head[1])
     rest = head[2]
     if names is None or rest.count(",") + 1 != len(names) or _PLAIN_NUMBERS.fullmatch(rest) is None:
@@ -271,13 +269,16 @@ def iter_messages(lines: Iterable[str], state: ParsedStream | None = None,
                     if sensor is not None:
                         st.on_fields(sensor, st.header.fields.get(sensor, ()), lineno)
                 continue
+        head = None
         if raw_streams:
-            msg = _raw_message(text, raw_streams, fields, lineno)
-            if msg is not None:
-                yield msg
-                continue
+            head = text.split(",", 2)   # (given to the full parse too: split once)
+            if len(head) == 3 and head[1] in raw_streams:
+                msg = _raw_message(head, fields, lineno)
+                if msg is not None:
+                    yield msg
+                    continue
         try:
-            msg = _parse_stripped(text, lineno)
+            msg = _parse_stripped(text, lineno, head)
             if (known_sensors is not None and msg.sensor not in known_sensors
                     and msg.sensor != "truth" and msg.sensor != "reference"):
                 raise MalformedMessage(f"unknown sensor {msg.sensor!r}")
