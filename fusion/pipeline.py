@@ -173,7 +173,7 @@ class Run:
             else:
                 self._unnamed[msg.sensor] = self._unnamed.get(msg.sensor, 0) + 1
             if self.on_truth is not None and msg.sensor == "truth":
-                self.on_truth(msg._replace(values=parse_values(msg.values)))
+                self.on_truth(msg if msg.values.__class__ is not str else msg._replace(values=parse_values(msg.values)))
             return
         admitted, events = clock.admit(msg.sensor, msg, t, newest)
         for ev in events:
@@ -186,7 +186,7 @@ class Run:
             else:
                 self._unnamed[m.sensor] = self._unnamed.get(m.sensor, 0) + 1
             if self.on_truth is not None and m.sensor == "truth":
-                self.on_truth(m._replace(values=parse_values(m.values)))
+                self.on_truth(m if m.values.__class__ is not str else m._replace(values=parse_values(m.values)))
 
     def _check_fields(self, sensor: str, names: tuple[str, ...], lineno: int) -> None:
         """A ``# fields SENSOR ...`` line against the names the sensor's reading component declares

@@ -163,19 +163,18 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                 yield from self._drain_solver_events(sensor)
         if self._pending:
             yield from self._flush_inputs()
-        if self._input_gap is not None and not self._silence_told and self._newest > -math.inf:
-            yield from self._input_silence(self._newest, "at the end of the input")
 
     # ------------------------------------------------------------------ internals
 
-    def _input_silence(self, t: float, where: str) -> Iterator[Event]:
-        """One ``gap`` event when the input sensor has been silent for more than its max_gap at ``t`` (s):
-        a sensor that dies is reported while the others go on, not only when (if ever) it comes back."""
+    def _input_silence(self, t: float, other: str) -> Iterator[Event]:
+        """One ``gap`` event when the input sensor has been silent for more than its max_gap at ``t`` (s), the
+        time of another sensor's message: a sensor that dies is reported while the others go on, not only
+        when (if ever) it comes back."""
         name, max_gap = self._input_gap  # type: ignore[misc]
         last = self._pending[-1].t if self._pending else self._last_input_t
         if last is not None and t - last > max_gap:
             self._silence_told, self._silence_last = True, last
-            yield Event(t, "gap", name, f"no {name} sample for {t - last:.3f} s (limit {max_gap} s) {where}; the "
+            yield Event(t, "gap", name, f"no {name} sample for {t - last:.3f} s (limit {max_gap} s) while {other} goes on; the "
                         "prediction holds the last sample")
 
     def _process(self, msg: Message) -> Iterator[Estimate | Event]:
@@ -186,7 +185,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             yield from self._inputs([msg])
             return
         if self._input_gap is not None and not self._silence_told:
-            yield from self._input_silence(msg.t, f"while {msg.sensor} goes on")
+            yield from self._input_silence(msg.t, msg.sensor)
         users = self._input_users.get(msg.sensor)
         if users or (self.belief is None and msg.sensor in self._aligners):
             # integrate the inputs up to this message first: a UsesInput component reads the latest sample,

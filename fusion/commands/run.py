@@ -141,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
     if not result.stats.estimates:   # a log this config cannot use (or nothing in it): a user error
         print(f"fusion run: error: {summary['not_started']}; the summary covers what was read", file=sys.stderr)
         return 2
-    if result.stats.estimates and not result.stats.last_finite:
+    if not result.stats.last_finite:
         print("fusion run: the estimate ended non-finite (the filter diverged); see the summary's health",
               file=sys.stderr)
         return 3
@@ -192,12 +192,15 @@ class _KeepSinkError:
         except FusionError:
             pass
 
-    def on_estimate(self, estimate) -> None:
+    def _forward(self, method: str, item) -> None:
         if self.error is None:
             try:
-                self.sink.on_estimate(estimate)
+                getattr(self.sink, method)(item)
             except FusionError as exc:
                 self._keep(exc)
+
+    def on_estimate(self, estimate) -> None:
+        self._forward("on_estimate", estimate)
 
     def close(self) -> None:
         if self.error is None:
@@ -215,11 +218,7 @@ class _KeepSinkErrorEvents(_KeepSinkError):
     """``_KeepSinkError`` of a sink that takes events too (fusion.api.ReceivesEvents)."""
 
     def on_event(self, event) -> None:
-        if self.error is None:
-            try:
-                self.sink.on_event(event)
-            except FusionError as exc:
-                self._keep(exc)
+        self._forward("on_event", event)
 
 
 def guard_sink(sink: Any) -> _KeepSinkError:

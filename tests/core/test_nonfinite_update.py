@@ -73,7 +73,10 @@ def test_a_nan_prediction_is_refused_and_the_run_goes_on(filter_type):
     # the ranges go on being used (before: every one rejected after the NaN) and the track is good
     assert s["sensors"]["uwb"]["used"] > 0.95 * s["sensors"]["uwb"]["received"]
     assert s["errors"]["position_rmse_m"] < 0.5
-    assert all(math.isfinite(v) for v in (s["consistency"].get("nees_mean", 0.0),))
+    # a refused update never enters the NIS statistics (a NaN would spoil them)
+    c, odo = s["consistency"], s["sensors"]["odo"]
+    assert math.isfinite(c["nis_mean"]["odo"]) and math.isfinite(c["nees_mean"])
+    assert c["nis_samples"]["odo"] == odo["used"] + odo["rejected"] - len(refused)
 
 
 def test_the_contract_kit_catches_a_model_nan_at_rest():

@@ -66,18 +66,6 @@ def test_an_input_that_dies_is_reported_once_while_the_others_go_on():
     assert len(gaps) == 1 and "while abps goes on" in gaps[0].detail and 40.05 < gaps[0].t < 40.5
 
 
-def test_an_input_that_stops_last_is_reported_at_the_end():
-    lines = _lines(end=30.0)
-    body = [ln for ln in lines if not ln.startswith("#")]
-    last_imu = max(float(ln.split(",", 1)[0]) for ln in body if ",imu," in ln)
-    tail = [f"{last_imu + 0.5:.6f},truth," + body[-1].split(",", 2)[2]] if ",truth," in body[-1] else []
-    events = []
-    pipeline.run(load_system(CONFIG), lines + [f"{last_imu + 0.5:.6f},abps,B9,1.0"] + tail, on_event=events.append)
-    gaps = [e for e in events if e.kind == "gap" and e.sensor == "imu"]
-    assert len(gaps) == 1 and ("at the end of the input" in gaps[0].detail or "goes on" in gaps[0].detail)
-    assert "0.5" in gaps[0].detail
-
-
 def test_a_healthy_input_is_never_reported():
     events = []
     pipeline.run(load_system(CONFIG), _lines(end=40.0), on_event=events.append)

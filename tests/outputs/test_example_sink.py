@@ -12,17 +12,10 @@ from fusion.testing.faults import full_disk_after
 
 from fusion.cli import main
 
-ROOT = Path(__file__).resolve().parents[2]
-CONFIG = ROOT / "configs" / "example_2d.yaml"
-
 
 @pytest.fixture
-def cfg(tmp_path):
-    rec = tmp_path / "walk.log"
-    rec.write_text("".join((ROOT / "recordings" / "example_2d.log").read_text().splitlines(True)[:300]))
-    c = tmp_path / "cfg.yaml"
-    c.write_text(CONFIG.read_text().replace("../recordings/example_2d.log", "walk.log"))
-    return c
+def cfg(short_example):
+    return short_example[0]
 
 
 def test_output_file_is_part_of_the_api():

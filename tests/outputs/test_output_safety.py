@@ -24,13 +24,9 @@ CONFIG = ROOT / "configs" / "example_2d.yaml"
 
 
 @pytest.fixture
-def work(tmp_path):
-    """A config with a short recording of its own (400 lines of the shipped one), in a temporary folder."""
-    rec = tmp_path / "walk.log"
-    rec.write_text("".join((ROOT / "recordings" / "example_2d.log").read_text().splitlines(True)[:400]))
-    cfg = tmp_path / "cfg.yaml"
-    cfg.write_text(CONFIG.read_text().replace("../recordings/example_2d.log", "walk.log"))
-    return tmp_path, cfg, rec
+def work(tmp_path, short_example):
+    """(folder, config, recording): a config with a short recording of its own, in a temporary folder."""
+    return (tmp_path, *short_example)
 
 
 def _leftovers(folder: Path) -> list[str]:
