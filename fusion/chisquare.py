@@ -1,4 +1,5 @@
-"""Chi-square distribution functions in plain Python: ``chi2.ppf(p, k)``, ``chi2.cdf(x, k)``, ``chi2.sf(x, k)``.
+"""Chi-square distribution functions in plain Python: ``chi2.ppf(p, k)``, ``chi2.isf(q, k)``, ``chi2.cdf(x, k)``,
+``chi2.sf(x, k)``.
 
 Written here rather than taken from scipy because of start-up: a run asks for a handful of quantiles
 (gate thresholds, the consistency bounds), and importing scipy.special for them cost ~45-70 ms of the
@@ -16,7 +17,7 @@ from __future__ import annotations
 import math
 from statistics import NormalDist
 
-__all__ = ["chi2"]
+__all__ = ["chi2", "isf_log"]
 
 _EPS = 2.220446049250313e-16
 _TINY = 1e-300
@@ -52,8 +53,21 @@ def _series_p(a: float, x: float) -> float:
     return total * _prefactor(a, x)
 
 
+def _log_prefactor(a: float, x: float) -> float:
+    """ln(x^a e^-x / Gamma(a)): :func:`_prefactor` before its exp (for tails beyond the float range)."""
+    if a < 15.0 or not -0.5 < (x - a) / a < 1.0:
+        return a * math.log(x) - x - math.lgamma(a)
+    t = (x - a) / a
+    return a * (math.log1p(t) - t) + 0.5 * math.log(a) - _LOG_SQRT_2PI - _stirling_error(a)
+
+
 def _fraction_q(a: float, x: float) -> float:
     """Q(a, x) by its continued fraction (x >= a + 1), modified Lentz."""
+    return _prefactor(a, x) * _fraction(a, x)
+
+
+def _fraction(a: float, x: float) -> float:
+    """The continued fraction of Q(a, x) (x >= a + 1), Q = prefactor * it, modified Lentz."""
     b = x + 1.0 - a
     c = 1.0 / _TINY
     d = 1.0 / b
@@ -72,7 +86,7 @@ def _fraction_q(a: float, x: float) -> float:
         h *= delta
         if abs(delta - 1.0) < _EPS:
             break
-    return _prefactor(a, x) * h
+    return h
 
 
 def _p_q(a: float, x: float) -> tuple[float, float]:
@@ -112,11 +126,33 @@ def _ppf(p: float, k: float) -> float:
         return 0.0
     if p == 1.0:
         return math.inf
-    a = 0.5 * k
     upper = p > 0.5            # solve on the smaller tail: Q(a, y) = 1 - p, else P(a, y) = p
-    target = 1.0 - p if upper else p
+    return _quantile(1.0 - p if upper else p, k, upper, NormalDist().inv_cdf(p))
+
+
+def _isf(q: float, k: float) -> float:
+    """x with P(X > x) = q, solved on the upper tail itself when q is small (1 - q rounds to 1 below
+    q ~ 1e-16, where ``ppf(1 - q)`` would be inf: a gate far out in the tail)."""
+    k = _check_dof(k)
+    q = float(q)
+    if not 0.0 <= q <= 1.0:
+        return math.nan
+    if q == 0.0:
+        return math.inf
+    if q == 1.0:
+        return 0.0
+    if q >= 0.5:
+        return _ppf(1.0 - q, k)
+    if q < _Q_LOG:
+        return _isf_newton_log(math.log(q), k)
+    return _quantile(q, k, True, -NormalDist().inv_cdf(q))
+
+
+def _quantile(target: float, k: float, upper: bool, z: float) -> float:
+    """Solve Q(k/2, y) = target (``upper``) or P(k/2, y) = target for x = 2 y; ``z`` the standard normal
+    quantile of the same probability (the start)."""
+    a = 0.5 * k
     # Start: Wilson-Hilferty, or the small-x limit P ~ y^a / Gamma(a + 1) far in the lower tail.
-    z = NormalDist().inv_cdf(p)
     h = 2.0 / (9.0 * k)
     y = 0.5 * k * max(1.0 - h + z * math.sqrt(h), 0.0) ** 3
     if y <= 0.0:
@@ -138,6 +174,50 @@ def _ppf(p: float, k: float) -> float:
             break
         if not lo < y_new < hi:                           # outside the bracket (or no slope): bisect, or grow
             y_new = 0.5 * (lo + hi) if math.isfinite(hi) else max(2.0 * y, y + 1.0)
+        y = y_new
+    return 2.0 * y
+
+
+def _logsf(x: float, k: float) -> float:
+    """ln P(X > x), finite where P(X > x) itself underflows (x beyond ~1400 for small k)."""
+    a, y = 0.5 * _check_dof(k), 0.5 * float(x)
+    if y < a + 1.0 or math.isinf(y):
+        q = _p_q(a, y)[1]
+        return math.log(q) if q > 0.0 else -math.inf
+    return _log_prefactor(a, y) + math.log(_fraction(a, y))
+
+
+# Below this upper-tail probability the quantile is solved on ln Q: Newton on Q itself crawls there (Q changes
+# by e per unit of y, so each step moves y by about one) and the probability underflows beyond ~1e-308
+_Q_LOG = 1e-30
+_LOG_Q_LOG = math.log(_Q_LOG)
+
+
+def isf_log(log_q: float, k: float) -> float:
+    """x with ln P(X > x) = ``log_q`` for X ~ chi-square(k): the upper-tail quantile where the probability
+    itself is below the float range (an n-sigma gate at n > ~37). Newton on ln Q(k/2, y), whose slope is
+    -1 / (y F) with F the continued fraction (Q = prefactor F)."""
+    k = _check_dof(k)
+    log_q = float(log_q)
+    if log_q != log_q or log_q > 0.0:
+        return math.nan
+    if log_q == -math.inf:
+        return math.inf
+    if log_q >= _LOG_Q_LOG:
+        return _isf(math.exp(log_q), k)
+    return _isf_newton_log(log_q, k)
+
+
+def _isf_newton_log(log_q: float, k: float) -> float:
+    a = 0.5 * k
+    y = max(-log_q + (a - 1.0) * math.log(-log_q), a + 1.0)    # ln Q ~ (a - 1) ln y - y - ln Gamma(a)
+    for _ in range(200):
+        frac = _fraction(a, y)
+        g = _log_prefactor(a, y) + math.log(frac) - log_q   # decreasing in y
+        y_new = max(y + g * y * frac, 0.5 * (y + a + 1.0))
+        if abs(y_new - y) <= 4.0 * _EPS * y:
+            y = y_new
+            break
         y = y_new
     return 2.0 * y
 
@@ -165,6 +245,16 @@ class _Chi2:
     def cdf(x, k):
         """P(X <= x) for X ~ chi-square(k)."""
         return _map(_cdf, x, k)
+
+    @staticmethod
+    def isf(q, k):
+        """Upper-tail quantile: x with P(X > x) = q (accurate where 1 - q rounds to 1)."""
+        return _map(_isf, q, k)
+
+    @staticmethod
+    def logsf(x, k):
+        """ln P(X > x), finite far beyond where ``sf`` underflows to 0."""
+        return _map(_logsf, x, k)
 
     @staticmethod
     def sf(x, k):

@@ -2,6 +2,8 @@
 untouched and is counted by the run's GateRun (the gate itself keeps nothing)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from pydantic import ValidationError
@@ -148,3 +150,19 @@ def test_gate_parameters_out_of_a_meaningful_range_are_config_errors(name, param
     cls = testing.registry_class("gate", name)
     with pytest.raises(ValidationError):
         cls.Params(**params)
+
+
+@pytest.mark.parametrize("dim", [2, 3, 6])
+@pytest.mark.parametrize("n", [8.5, 9.0, 20.0, 38.0, 1000.0])
+def test_n_sigma_gate_stays_closed_far_out(n, dim):
+    """An n-sigma gate on a vector: ppf(cdf(n^2, 1)) rounds cdf to 1 from ~8.5 sigma (threshold inf, an open
+    gate) and the tail probability underflows beyond ~37; the threshold is finite, of the 1-D tail's
+    probability (checked by its own inverse, the tail of dim dof at it), and an absurd NIS is refused."""
+    from fusion.chisquare import chi2 as c2
+
+    g = _gate(n_sigma=n)
+    thr = g.threshold(dim)
+    assert math.isfinite(thr) and thr > n * n
+    assert c2.logsf(thr, dim) == pytest.approx(c2.logsf(n * n, 1), rel=1e-12)
+    assert g.accept(0.999 * thr, dim) and not g.accept(1.001 * thr, dim)
+    assert not g.accept(1e12 if n < 100 else 1e13, dim)

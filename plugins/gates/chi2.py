@@ -24,14 +24,17 @@ def chi2_threshold(probability: float, dim: int) -> float:
 @lru_cache(maxsize=256)
 def n_sigma_threshold(n_sigma: float, dim: int) -> float:
     """The NIS threshold of an n-sigma gate: ``n_sigma^2`` for a scalar, else the chi-square quantile of the
-    same probability as the 1-D interval, ``chi2.ppf(chi2.cdf(n_sigma^2, 1), dim)``."""
+    same probability as the 1-D interval, computed on the upper tail's logarithm,
+    ``isf_log(chi2.logsf(n_sigma^2, 1), dim)``
+    (``ppf(cdf(...))`` loses the tail to rounding from ~8 sigma on: cdf rounds to 1 and the gate opens;
+    the probability itself underflows beyond ~37 sigma)."""
     if dim < 1:
         raise ValueError(f"measurement dimension must be >= 1, got {dim}")
     if dim == 1:
         return float(n_sigma) ** 2
-    from fusion.chisquare import chi2
+    from fusion.chisquare import chi2, isf_log
 
-    return float(chi2.ppf(chi2.cdf(n_sigma ** 2, 1), dim))
+    return float(isf_log(chi2.logsf(float(n_sigma) ** 2, 1), dim))
 
 
 class Chi2Gate(Gate):
@@ -42,7 +45,7 @@ class Chi2Gate(Gate):
     (y the innovation, S its covariance; the NIS of a consistent filter is chi-square with m degrees
     of freedom). ``n_sigma`` instead gates a scalar measurement at |y| <= n_sigma sqrt(S), i.e.
     NIS <= n_sigma^2 (paper 003 rejects echoes at 2-3 sigma); for m > 1 it uses the same probability
-    as the 1-D n-sigma interval, ``chi2.ppf(chi2.cdf(n_sigma^2, 1), m)``. Give one of the two
+    as the 1-D n-sigma interval (:func:`n_sigma_threshold`, finite up to n_sigma 1e3). Give one of the two
     (default probability 0.997).
 
     Memoryless and immutable: ``check`` returns the decision (fusion.api.GateDecision); the run counts

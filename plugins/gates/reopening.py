@@ -28,7 +28,7 @@ class ReopeningGate(Gate):
     Closed, it accepts a measurement of dimension m when its NIS ``y^T S^-1 y <= n_sigma^2`` (m = 1: the
     innovation within n_sigma standard deviations; paper 003 gates arrival times at 2 sigma of 0.2 ms and
     so rejects echoes, whose extra path of 0.3-3 m is 4-40 sigma). For m > 1 the threshold is the chi-square
-    quantile of the same probability, ``chi2.ppf(chi2.cdf(n_sigma^2, 1), m)``.
+    quantile of the same probability (chi2.n_sigma_threshold: on the upper tail, finite far out).
 
     A gate alone can lock a filter out: once the belief is wrong (a bad start, a jump, a run of echoes
     accepted), the truth itself falls outside the gate and is rejected for ever. As in the Crazyflie's

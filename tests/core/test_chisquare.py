@@ -54,3 +54,36 @@ def test_does_not_import_scipy():
     code = "import sys, fusion.chisquare as c; c.chi2.ppf(0.99, 3); c.chi2.sf(9.0, 2); print('scipy' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"
+
+
+def _log_q_closed_form(k: int, y: float) -> float:
+    """ln Q(k/2, y) by the closed forms of integer k (a finite sum for even k; erfc plus a sum for odd k),
+    with scipy's log_ndtr for the erfc: independent of the continued fraction under test."""
+    from scipy.special import log_ndtr
+
+    if k % 2 == 0:
+        return -y + float(np.logaddexp.reduce([j * math.log(y) - math.lgamma(j + 1) for j in range(k // 2)]))
+    terms = [math.log(2.0) + float(log_ndtr(-math.sqrt(2.0 * y)))]
+    terms += [-y + (j + 0.5) * math.log(y) - math.lgamma(j + 1.5) for j in range((k - 1) // 2)]
+    return float(np.logaddexp.reduce(terms))
+
+
+@pytest.mark.parametrize("k", [1, 2, 3, 4, 6, 9, 15])
+def test_logsf_far_beyond_the_float_range_of_sf(k):
+    for x in (10.0, 100.0, 1400.0, 3000.0, 1e5, 1e6):
+        assert chi2.logsf(x, k) == pytest.approx(_log_q_closed_form(k, 0.5 * x), rel=1e-13)
+    assert chi2.logsf(30.0, k) == pytest.approx(float(stats.chi2.logsf(30.0, k)), rel=1e-12)
+
+
+@pytest.mark.parametrize("k", [1, 2, 3, 4, 6, 9, 15])
+def test_upper_tail_quantiles(k):
+    from fusion.chisquare import isf_log
+
+    for q in (0.5, 0.1, 1e-6, 1e-17, 1e-100, 1e-280):  # 1e-17: ppf(1 - q) would be inf (1 - q rounds to 1)
+        want = float(stats.chi2.isf(q, k))
+        assert chi2.isf(q, k) == pytest.approx(want, rel=1e-12)
+        assert isf_log(math.log(q), k) == pytest.approx(want, rel=1e-12)
+    for log_q in (-800.0, -1e4, -5e5):                 # probabilities that underflow: against the closed form
+        x = isf_log(log_q, k)
+        assert _log_q_closed_form(k, 0.5 * x) == pytest.approx(log_q, rel=1e-13)
+    assert chi2.isf(0.0, k) == math.inf and chi2.isf(1.0, k) == 0.0 and math.isnan(chi2.isf(1.5, k))
