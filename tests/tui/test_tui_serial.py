@@ -219,3 +219,40 @@ def test_a_socket_port_is_read_in_chunks_not_a_byte_a_read():
     server.close()
     assert got == lines + ["9.9,uwb,B1"]
     assert len([n for n in reads]) < len(data) / 100   # ~16 kB: a few dozen reads, not 16,000
+
+
+def test_what_a_socket_device_sends_before_the_port_is_open_is_kept(monkeypatch):
+    """pyserial's open() ends by discarding the bytes already received (reset_input_buffer): a socket://
+    device that sends as soon as it is connected lost its first burst or all of it (tester4 #3). The open
+    is slowed here so that the whole stream is waiting before it ends: every line must still be read."""
+    import socket
+
+    from serial.urlhandler import protocol_socket
+
+    real_reconfigure = protocol_socket.Serial._reconfigure_port
+
+    def slow_reconfigure(self, *a, **k):
+        time.sleep(0.3)                      # the device's data is in the socket before open() returns
+        return real_reconfigure(self, *a, **k)
+
+    monkeypatch.setattr(protocol_socket.Serial, "_reconfigure_port", slow_reconfigure)
+    server = socket.create_server(("127.0.0.1", 0))
+    lines = [f"{i * 0.025:.3f},uwb,B{i % 4 + 1},{10.0 + 0.001 * i:.6f}\n" for i in range(200)]
+
+    def device():
+        conn, _ = server.accept()
+        conn.sendall("".join(lines).encode())   # at once, as a bridge pushing its stream does
+        time.sleep(0.6)
+        conn.close()
+
+    th = threading.Thread(target=device)
+    th.start()
+    src = SerialSource(port=f"socket://127.0.0.1:{server.getsockname()[1]}", timeout=0.05).open()
+    assert "reset_input_buffer" not in vars(src.port)                  # the method is pyserial's again
+    got = []
+    with pytest.raises(PortLost):
+        for line in src.lines():
+            got.append(line)
+    th.join()
+    server.close()
+    assert got == lines                       # whole, the first line too (a socket stream starts whole)
