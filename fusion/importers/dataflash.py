@@ -241,15 +241,14 @@ def _gps(rows, conv: _Units, request, notes) -> list[Stream]:
                 spd * np.cos(crs), spd * np.sin(crs), conv.column(r, mt, "VZ")]
         fields = ["lat", "lon", "alt", "vn", "ve", "vd"]
         fmts = [LATLON_E7, LATLON_E7, ".2f", F32, F32, F32]
-        if inst in gpa:                                   # GPA is written with the GPS message, same TimeUS
+        if inst in gpa and len(gpa[inst][1]["t"]) and len(t):
             gmt, a = gpa[inst]
-            j = np.searchsorted(a["t"], t)
-            jj = np.clip(j, 0, max(len(a["t"]) - 1, 0))
-            if len(a["t"]) and np.all(a["t"][jj] == t):
-                for name, col in (("hacc", "HAcc"), ("vacc", "VAcc")):
-                    fields.append(name)
-                    cols.append(conv.column(a, gmt, col)[jj])
-                    fmts.append(F32)
+            hv = _gpa_per_fix(t, a["t"], [conv.column(a, gmt, c) for c in ("HAcc", "VAcc")],
+                              _name("gps", inst), notes)
+            for name, col in zip(("hacc", "vacc"), hv):
+                fields.append(name)
+                cols.append(col)
+                fmts.append(F32)
         status = _col(r, "Status", 3.0)
         fields += ["hdop", "fix", "nsat"]
         cols += [_col(r, "HDop"), status, _col(r, "NSats", 0.0)]
@@ -262,6 +261,27 @@ def _gps(rows, conv: _Units, request, notes) -> list[Stream]:
                                                   (" m m" if "hacc" in fields else "") +
                                                   " - (hdop) - - (fix type, satellites)", "message": mt},
                                notes=notes))
+    return out
+
+
+def _gpa_per_fix(t: np.ndarray, t_gpa: np.ndarray, columns: list[np.ndarray], name: str,
+                 notes: list[str]) -> list[np.ndarray]:
+    """The receiver accuracies (m) of each GPS sample at times ``t``: the GPA record written with it (the same
+    TimeUS), else the last GPA before it within 1.5 s (a logger that dropped a record: its accuracy changes
+    slowly), else 0, which the gps measurement reads as unknown (its configured floor). One missing GPA
+    used to remove the accuracies of the whole log (tester4 #5); each sample is matched on its own now."""
+    j = np.searchsorted(t_gpa, t, side="right") - 1      # the last GPA at or before each fix
+    jj = np.clip(j, 0, len(t_gpa) - 1)
+    exact = (j >= 0) & (t_gpa[jj] == t)
+    near = (j >= 0) & ~exact & (t - t_gpa[jj] <= 1.5)
+    keep = exact | near
+    out = [np.where(keep, np.where(np.isfinite(c[jj]), c[jj], 0.0), 0.0) for c in columns]
+    if np.any(near):
+        notes.append(f"{name}: {int(np.sum(near))} sample(s) without their GPA record: the accuracy of the "
+                     "previous one (within 1.5 s) is used")
+    if np.any(~keep):
+        notes.append(f"{name}: {int(np.sum(~keep))} sample(s) without a GPA record within 1.5 s: accuracy "
+                     "unknown (0), the gps measurement's floor is used")
     return out
 
 

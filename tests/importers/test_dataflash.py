@@ -228,3 +228,31 @@ def test_earth_field_from_att(imported):
     want = np.mean(rot.apply(v["mag"] * 0.1), axis=0)   # mGauss -> uT, rotated to NED (MAG 3 us after ATT)
     line = next(c for c in rec.comments if c.startswith("# mag earth_field_ned:"))
     np.testing.assert_allclose([float(x) for x in line.split(":")[1].split()], want, atol=5e-3)
+
+
+def test_a_missing_gpa_record_costs_only_its_own_fix(tmp_path, capsys):
+    """One GPS sample without its GPA (a logger that dropped the record) used to remove the receiver
+    accuracies of the whole log (tester4 #5): now each fix has its own GPA's, a missing one the previous
+    GPA's (within 1.5 s), and none within 1.5 s is 0: unknown (the gps measurement's floor)."""
+    w = DataflashWriter()
+    for name in ("IMU", "GPS"):
+        w.declare(name)
+    w.declare("GPA", "QBCCCCfBIH", "TimeUS,I,VDop,HAcc,VAcc,SAcc,YAcc,VV,SMS,Delta")
+    hacc = 1.0 + 0.1 * np.arange(40)
+    for k in range(40):
+        t = 1_000_000 + 200_000 * k
+        w.write("IMU", TimeUS=t, I=0, AccZ=-9.8)
+        w.write("GPS", TimeUS=t, I=0, Status=3, NSats=12, HDop=0.9, Lat=ORIGIN[0], Lng=ORIGIN[1], Alt=ORIGIN[2])
+        if k != 7 and not 20 <= k < 30:                   # one record dropped, then 2 s of them
+            w.write("GPA", TimeUS=t, I=0, HAcc=hacc[k], VAcc=2 * hacc[k])
+    w.save(tmp_path / "gpa.bin")
+    assert fusion_import(tmp_path / "gpa.bin", "-o", tmp_path / "gpa.log") == 0
+    err = capsys.readouterr().err
+    rec = Recording(tmp_path / "gpa.log")
+    want = hacc.copy()
+    want[7] = hacc[6]                                     # the previous GPA, 0.2 s earlier
+    want[20:27] = hacc[19]                                # within 1.5 s of the last one
+    want[27:30] = 0.0                                     # none within 1.5 s: unknown
+    np.testing.assert_allclose(rec.column("gps", "hacc"), want, rtol=1e-6)
+    np.testing.assert_allclose(rec.column("gps", "vacc"), 2 * want, rtol=1e-6)
+    assert "8 sample(s) without their GPA record" in err and "3 sample(s) without a GPA record within" in err
