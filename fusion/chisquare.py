@@ -42,6 +42,11 @@ def _prefactor(a: float, x: float) -> float:
 
 def _series_p(a: float, x: float) -> float:
     """P(a, x) by its power series (x < a + 1): x^a e^-x / Gamma(a + 1) * sum x^n / ((a+1)...(a+n))."""
+    return _series(a, x) * _prefactor(a, x)
+
+
+def _series(a: float, x: float) -> float:
+    """The power series of P(a, x) (x < a + 1), P = prefactor * it."""
     term = total = 1.0 / a
     n = a
     for _ in range(100_000):
@@ -50,7 +55,7 @@ def _series_p(a: float, x: float) -> float:
         total += term
         if abs(term) < abs(total) * _EPS:
             break
-    return total * _prefactor(a, x)
+    return total
 
 
 def _log_prefactor(a: float, x: float) -> float:
@@ -127,7 +132,32 @@ def _ppf(p: float, k: float) -> float:
     if p == 1.0:
         return math.inf
     upper = p > 0.5            # solve on the smaller tail: Q(a, y) = 1 - p, else P(a, y) = p
+    if not upper and p < _P_LOG_LOWER:
+        return _ppf_lower_log(math.log(p), k)
     return _quantile(1.0 - p if upper else p, k, upper, NormalDist().inv_cdf(p))
+
+
+def _ppf_lower_log(log_p: float, k: float) -> float:
+    """x with ln P(X <= x) = ``log_p`` far in the lower tail (p < 1e-20), by Newton on ln P(k/2, y) in
+    u = ln y, whose slope is 1 / S (S the power series, P = prefactor S): Newton on P itself crawls there,
+    and the start y = (p Gamma(a + 1))^(1/a) underflows for small dof. 0.0 when the quantile is below the
+    smallest float."""
+    a = 0.5 * k
+    u = (log_p + math.lgamma(a + 1.0)) / a                 # ln y: P ~ y^a / Gamma(a + 1) as y -> 0
+    for _ in range(200):
+        if u < -745.0:                                     # exp(u) is below the smallest subnormal
+            return 0.0
+        y = math.exp(u)
+        if y >= a + 1.0:                                   # not the far lower tail after all
+            return _quantile(math.exp(log_p), k, False, NormalDist().inv_cdf(math.exp(log_p)))
+        series = _series(a, y)
+        g = _log_prefactor(a, y) + math.log(series) - log_p
+        u_new = u - g * series
+        if abs(u_new - u) <= 4.0 * _EPS:
+            u = u_new
+            break
+        u = u_new
+    return 2.0 * math.exp(u)
 
 
 def _isf(q: float, k: float) -> float:
@@ -191,6 +221,7 @@ def _logsf(x: float, k: float) -> float:
 # by e per unit of y, so each step moves y by about one) and the probability underflows beyond ~1e-308
 _Q_LOG = 1e-30
 _LOG_Q_LOG = math.log(_Q_LOG)
+_P_LOG_LOWER = 1e-20      # the same for the lower tail (Newton on P loses its way from ~1e-30 at 30 dof)
 
 
 def isf_log(log_q: float, k: float) -> float:
