@@ -123,6 +123,13 @@ class InitialSpec(_Strict):
     align_s: float = Field(0.0, ge=0.0, description="static start (s) over which the process model aligns "
                            "itself from the mean input (e.g. roll/pitch from gravity); 0: no alignment")
 
+    @model_validator(mode="after")
+    def _sd_or_P(self):
+        if self.P is not None and self.sd:
+            raise ValueError("give sd or P, not both (P is the whole initial covariance: its diagonal is "
+                             "the variances)")
+        return self
+
 
 class SchedulerSpec(_Strict):
     max_latency: float = Field(0.0, ge=0.0, description="reorder buffer length, s")

@@ -75,6 +75,8 @@ def test_non_finite_values_are_refused_with_file_line_field(tmp_path, capsys, te
      "or equal to 100000", "history:"),
     ("noise: {sd: 0.1}", "noise: {sd: 0.1, R: [[0.01]]}", "sensors.uwb.noise: Value error, give sd or R, not both",
      "noise:"),
+    ("sd: {p: 1.0, v: 0.5}", "sd: {p: 1.0, v: 0.5}\n  P: [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]",
+     "initial: Value error, give sd or P, not both", "initial:"),   # sd was silently ignored (tester4 #6)
     ("noise: {sd: 0.1}", "noise: {R: [[1, 0.5], [0.5, 1]]}", "sensors.uwb.noise.R: must be 1 x 1", "noise:"),
     ("noise: {sd: 0.1}", "noise: {R: [[1, 2], [3]]}", "sensors.uwb.noise.R: rows of different lengths [1, 2]", "noise:"),
     ("sd: {p: 1.0, v: 0.5}", "P: [[1, 0, 0, 0], [0, 1, 0], [0, 0, 1, 0], [0, 0, 0, 1]]",
