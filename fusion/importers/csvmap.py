@@ -43,6 +43,16 @@ class TimeSpec(Params):
     format: str | None = None
     zero: str | float = "first"
 
+    @field_validator("zero", mode="before")
+    @classmethod
+    def _date_time_zero(cls, v):
+        # YAML reads an unquoted 2026-03-29T00:59:30Z as a date-time (a date alone as a date): as ISO text
+        if isinstance(v, dt.datetime):
+            return v.isoformat()
+        if isinstance(v, dt.date):
+            return dt.datetime(v.year, v.month, v.day).isoformat()
+        return v
+
 
 class CsvOptions(Params):
     """How the file is read: ``delimiter`` (``,`` ``;`` tab, ``whitespace``; default: detected), whether the
@@ -238,9 +248,22 @@ def _zero_of(spec: TimeSpec, first: float | None) -> float:
     if z == "none":
         return 0.0
     try:
-        return _abs_time(z, spec) if spec.unit == "iso" else float(z)
+        return float(z)                     # s
     except ValueError:
-        raise ConfigError(f"time.zero: {z!r} is neither 'first', 'none', a number nor a date-time") from None
+        pass
+    # a date-time: POSIX seconds, whatever the column's unit (a numeric column is then POSIX time in its unit)
+    for parse in ((lambda: _abs_time(z, spec)) if spec.unit == "iso" else None,
+                  lambda: dt.datetime.fromisoformat(z.strip())):
+        if parse is None:
+            continue
+        try:
+            d = parse()
+        except ValueError:
+            continue
+        if isinstance(d, float):
+            return d
+        return (d if d.tzinfo is not None else d.replace(tzinfo=dt.timezone.utc)).timestamp()
+    raise ConfigError(f"time.zero: {z!r} is neither 'first', 'none', a number (s) nor an ISO 8601 date-time")
 
 
 def _rows(path: Path, opts: CsvOptions) -> Iterator[tuple[int, list[str]]]:

@@ -151,6 +151,28 @@ def test_iso_times_naive_are_utc_and_zero_by_date(tmp_path):
     np.testing.assert_allclose(rec.column("gps", "lat"), [45.2, 45.1])
 
 
+@pytest.mark.parametrize("zero", ["2023-07-01T12:00:00Z", '"2023-07-01T12:00:00Z"', '"2023-07-01T14:00:00+02:00"',
+                                  "1688212800", "2023-07-01 12:00:00"])
+def test_a_date_time_zero_for_numeric_epoch_times_quoted_or_not(tmp_path, zero):
+    """time.zero as a date-time for a column of Unix-epoch nanoseconds; YAML reads an unquoted one as a
+    date-time object, which was refused as 'not a valid string', and a quoted one was refused unless the
+    column itself was ISO text (tester3 #9). Every spelling of the same instant gives the same times."""
+    t0 = 1688212800  # 2023-07-01T12:00:00Z
+    csv = _write(tmp_path, "e.csv", f"""
+        t_ns,v
+        {t0 * 10**9 + 250_000_000},1
+        {t0 * 10**9 + 1_500_000_000},2
+    """)
+    mp = _write(tmp_path, "m.yaml", f"""
+        time: {{column: t_ns, unit: ns, zero: {zero}}}
+        sensors:
+          x: {{fields: {{v: v}}}}
+    """)
+    out = tmp_path / "o.log"
+    assert fusion_import(csv, "--map", mp, "-o", out) == 0
+    np.testing.assert_allclose(Recording(out).times("x"), [0.25, 1.5], atol=1e-6)
+
+
 @pytest.mark.parametrize("csv_text,map_text,expect", [
     ("t,a\n0,1\n", "time: {column: t}\nsensors: {x: {fields: {v: nope}}}\n", "no column 'nope'"),
     ("t,a\n0,1\n", "time: {column: t}\nsensors: {x: {fields: {v: a}, scal: 2}}\n", "unknown key"),
