@@ -153,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
     streams = [s for s in log.streams if len(s)]
     if args.gps == "nmea":
         from fusion.importers.nmea import as_nmea
-        streams = [as_nmea(s, log.meta.get("start_utc")) if s.sensor.rstrip("0123456789") == "gps" and
+        streams = [as_nmea(s, log.meta.get("start_utc"), log.notes) if s.sensor.rstrip("0123456789") == "gps" and
                    s.values is not None else s for s in streams]
     log.streams = streams
     t0 = min(float(s.t.min()) for s in streams)

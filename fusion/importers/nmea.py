@@ -17,7 +17,8 @@ import numpy as np
 from fusion.api import Stream
 
 KNOT = 1852.0 / 3600.0   # m/s
-_QUALITY = {2: 1, 3: 1, 4: 2, 5: 5, 6: 4}   # PX4 fix_type / ArduPilot Status -> GGA quality
+_QUALITY = {3: 1, 4: 2, 5: 5, 6: 4}   # PX4 fix_type / ArduPilot Status (3-D, DGPS, RTK float, fixed) -> GGA quality
+_USABLE = frozenset(_QUALITY)
 
 
 def _checksum(body: str) -> str:
@@ -56,8 +57,12 @@ def gga_rmc(t_utc: dt.datetime, lat: float, lon: float, alt: float, geoid: float
     return gga, rmc
 
 
-def as_nmea(s: Stream, start_utc: str | None) -> Stream:
-    """The stream of GGA + RMC sentences (``# fields gps nmea``) of a numeric GPS stream."""
+def as_nmea(s: Stream, start_utc: str | None, notes: list[str] | None = None) -> Stream:
+    """The stream of GGA + RMC sentences (``# fields gps nmea``) of a numeric GPS stream. Only 3-D fixes
+    and better (fix type 3-6) are written: a GGA carries no fix dimension, so a 2-D fix (its height not
+    solved) or an extrapolated one (PX4 fix type 8) would reach the ``nmea`` decoder as an ordinary fix,
+    its unsolved altitude fused and possibly the origin (tester4 #10); the numeric route's ``min_fix`` 3 drops
+    them as well. How many were left out is added to ``notes``."""
     f = {name: i for i, name in enumerate(s.fields)}
     v = np.asarray(s.values, float)
     base = (dt.datetime.fromisoformat(start_utc.replace("Z", "+00:00")) if start_utc
@@ -70,10 +75,17 @@ def as_nmea(s: Stream, start_utc: str | None) -> Stream:
     geoid, vn, ve = col("geoid", 0.0), col("vn", 0.0), col("ve", 0.0)
     fix, nsat, hdop = col("fix", 3.0), col("nsat", 0.0), col("hdop")
     ts, rows = [], []
+    usable = np.isin(fix, list(_USABLE))
+    if notes is not None and not usable.all():
+        kinds = ", ".join(f"{int(np.sum(fix[~usable] == k))} of type {int(k)}" for k in np.unique(fix[~usable]))
+        notes.append(f"{s.sensor} as NMEA: {int(np.sum(~usable))} fix(es) not 3-D or better left out ({kinds}: a "
+                     "GGA cannot say a height is unsolved or a fix extrapolated)")
     for k, t in enumerate(np.asarray(s.t, float).tolist()):
+        if not usable[k]:
+            continue
         when = base + dt.timedelta(seconds=t)
         gga, rmc = gga_rmc(when, lat[k], lon[k], alt[k], geoid[k], vn[k], ve[k],
-                           _QUALITY.get(int(fix[k]), 1), int(nsat[k]), hdop[k])
+                           _QUALITY[int(fix[k])], int(nsat[k]), hdop[k])
         ts += [t, t]
         rows += [(gga,), (rmc,)]
     meta = dict(s.meta)

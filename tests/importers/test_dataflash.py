@@ -256,3 +256,24 @@ def test_a_missing_gpa_record_costs_only_its_own_fix(tmp_path, capsys):
     np.testing.assert_allclose(rec.column("gps", "hacc"), want, rtol=1e-6)
     np.testing.assert_allclose(rec.column("gps", "vacc"), 2 * want, rtol=1e-6)
     assert "8 sample(s) without their GPA record" in err and "3 sample(s) without a GPA record within" in err
+
+
+def test_two_d_fixes_are_not_exported_as_nmea(tmp_path, capsys):
+    """A GGA cannot say that a height is unsolved: 2-D fixes (Status 2) written as NMEA reached the nmea
+    decoder as ordinary fixes, one of them its origin at the unsolved altitude (tester4 #10). They are left
+    out, with a note, as the numeric route's min_fix 3 leaves them out."""
+    import pynmea2
+
+    w = DataflashWriter()
+    for name in ("IMU", "GPS"):
+        w.declare(name)
+    for k in range(20):
+        t = 1_000_000 + 200_000 * k
+        w.write("IMU", TimeUS=t, I=0, AccZ=-9.8)
+        w.write("GPS", TimeUS=t, I=0, Status=2 if k < 5 else 3, NSats=5 if k < 5 else 12, HDop=2.5,
+                Lat=ORIGIN[0], Lng=ORIGIN[1], Alt=0.0 if k < 5 else ORIGIN[2])
+    w.save(tmp_path / "f.bin")
+    assert fusion_import(tmp_path / "f.bin", "-o", tmp_path / "f.log", "--gps", "nmea") == 0
+    assert "5 fix(es) not 3-D or better left out (5 of type 2" in capsys.readouterr().err
+    ggas = [pynmea2.parse(r[0]) for r in Recording(tmp_path / "f.log").rows["gps"] if r[0].startswith("$GPGGA")]
+    assert len(ggas) == 15 and all(abs(float(g.altitude) - ORIGIN[2]) < 1e-3 for g in ggas)
