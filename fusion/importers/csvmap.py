@@ -287,7 +287,12 @@ def _rows(path: Path, opts: CsvOptions) -> Iterator[tuple[int, list[str]]]:
             try:
                 delim = csv.Sniffer().sniff(sample, delimiters=",;\t|").delimiter
             except csv.Error:
-                delim = "whitespace"
+                # the sniffer wants every sampled row alike (one ragged row of a short file defeats it): the
+                # delimiter the first row (the header) is split by most, else whitespace
+                first = sample.split("\n", 1)[0]
+                counts = {d: first.count(d) for d in ",;\t|"}
+                best = max(counts, key=counts.get)
+                delim = best if counts[best] else "whitespace"
         pos = [0]
 
         def lines():
@@ -322,6 +327,10 @@ def _index(col: str | int, names: list[str] | None, path: Path, where: str) -> i
     if names is None:
         raise ConfigError(f"{where}: column {col!r} by name, but the mapping says the file has no header row "
                           "(csv.header: false): use 0-based column numbers")
+    if names.count(col) > 1:
+        dups = [i for i, n in enumerate(names) if n == col]
+        raise ConfigError(f"{where}: column {col!r} is in the header of {path.name} {len(dups)} times (columns "
+                          f"{', '.join(map(str, dups))}): give the 0-based column number instead")
     try:
         return names.index(col)
     except ValueError:

@@ -224,3 +224,38 @@ def test_pairs_with_sentinels_and_per_beacon_scale(tmp_path):
     rec = Recording(out)
     assert rec.rows["uwb"] == [("A0", 1.2), ("B0", 3.4005, "C0", 1.0)]   # 0 and 65535 mm are no range
     np.testing.assert_allclose(rec.times("uwb"), [0.0, 0.1])
+
+
+@pytest.mark.parametrize("n_rows", [1, 5, 20])
+def test_a_short_file_with_one_ragged_row_is_read_by_its_header_delimiter(tmp_path, n_rows):
+    """csv.Sniffer gives up on a short sample with one ragged row; the reader then split on whitespace and
+    blamed the mapping ('no column time in ... columns: time,ax,...'; tester4 #12). The header's delimiter
+    is used instead."""
+    rows = "\n".join(f"{0.01 * k:.2f},1,0,0,0,0,0" + (",9" if k == 0 else "") for k in range(n_rows))
+    csv = _write(tmp_path, "s.csv", "time,ax,ay,az,gx,gy,gz\n" + rows + "\n")
+    mp = _write(tmp_path, "m.yaml", """
+        time: {column: time}
+        sensors:
+          imu: {fields: {ax: ax, ay: ay, az: az, gx: gx, gy: gy, gz: gz}}
+    """)
+    assert fusion_import(csv, "--map", mp, "-o", tmp_path / "o.log") == 0
+    assert len(Recording(tmp_path / "o.log").times("imu")) == n_rows
+
+
+def test_a_mapped_name_twice_in_the_header_is_refused(tmp_path, capsys):
+    """Two columns of one name: the first was taken silently (tester4 #13)."""
+    csv = _write(tmp_path, "d.csv", "time,ax,ay,ax\n0,1,0,99\n0.01,1,0,99\n")
+    mp = _write(tmp_path, "m.yaml", """
+        time: {column: time}
+        sensors:
+          imu: {fields: {ax: ax, ay: ay}}
+    """)
+    assert fusion_import(csv, "--map", mp, "-o", tmp_path / "o.log") == 2
+    assert "column 'ax' is in the header of d.csv 2 times (columns 1, 3)" in one_error_line(capsys)
+    mp2 = _write(tmp_path, "m2.yaml", """
+        time: {column: time}
+        sensors:
+          imu: {fields: {ax: 3, ay: ay}}
+    """)
+    assert fusion_import(csv, "--map", mp2, "-o", tmp_path / "o.log") == 0      # by number: the second one
+    np.testing.assert_allclose(Recording(tmp_path / "o.log").column("imu", "ax"), [99, 99])
