@@ -33,7 +33,7 @@ COMMANDS = ("run", "validate", "plugins", "simulate", "tui", "import_", "sweep")
 # Commands that import numpy and scipy.linalg: numpy's unused submodules are deferred for them (start-up).
 NUMERIC_COMMANDS = ("run", "validate", "tui", "simulate", "import", "sweep")
 # Commands that write outputs: SIGTERM and SIGHUP stop them as Ctrl-C does (stop_signals). The live view
-# (tui) is left to Textual, which restores the terminal itself.
+# (tui) handles them itself (fusion.commands.tui: the app exits as by 'q', the terminal restored).
 STOPPABLE_COMMANDS = ("run", "simulate", "sweep", "import")
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 from fusion.errors import ConfigError, FusionError, InputError
@@ -147,10 +148,51 @@ def build_app(args: argparse.Namespace):
                     expected_rates=rates, limits=limits, smooth_lag=lag)
 
 
+@contextmanager
+def _exit_on_stop_signals(app):
+    """SIGTERM, SIGHUP and SIGINT (``timeout``, ``kill``, a dropped ssh session) close the view as 'q' does: Textual
+    handles neither, and a process they killed left the terminal in the alternate screen with mouse
+    tracking on (tester4 #11). The handler asks the app's event loop to exit (``call_soon_threadsafe`` is
+    safe in a signal handler); before the loop runs or after, the signal stops the command as Ctrl-C does.
+    Yields the list of the signals received."""
+    import asyncio
+    import signal
+    import threading
+
+    from fusion.cli import STOP_SIGNALS, Stopped
+
+    received: list = []
+    if threading.current_thread() is not threading.main_thread():
+        yield received
+        return
+
+    def handler(signum, frame):
+        received.append(signal.Signals(signum))
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:
+            raise Stopped(signum) from None
+        loop.call_soon_threadsafe(app.exit)
+
+    # SIGINT too: in the raw terminal Ctrl-C is a key (Textual's 'ctrl+q to quit'), so a SIGINT comes from
+    # kill -INT, and is an interruption like the others (exit 130)
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, *STOP_SIGNALS)}
+    try:
+        yield received
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
 def run(args: argparse.Namespace) -> int:
     app = build_app(args)
-    app.run()
+    with _exit_on_stop_signals(app) as received:
+        app.run()
     snap = app.latest
+    if received:        # SIGTERM / SIGHUP: the view closed as by 'q' (terminal restored, record complete)
+        print(f"fusion tui: stopped by {received[0].name}" + (f"; raw input recorded to {args.record}"
+                                                               if args.record else ""), file=sys.stderr)
+        return 128 + int(received[0])
     if snap is None:
         return 0
     note = f"fusion tui: {snap.lines} lines from {snap.source}"

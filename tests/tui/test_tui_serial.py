@@ -256,3 +256,53 @@ def test_what_a_socket_device_sends_before_the_port_is_open_is_kept(monkeypatch)
     th.join()
     server.close()
     assert got == lines                       # whole, the first line too (a socket stream starts whole)
+
+
+@pty_only
+@pytest.mark.skipif(not hasattr(__import__("signal"), "SIGHUP"), reason="POSIX signals")
+@pytest.mark.parametrize("signame,code", [("SIGTERM", 143), ("SIGHUP", 129), ("SIGINT", 130)])
+def test_a_stop_signal_closes_the_view_and_restores_the_terminal(signame, code):
+    """kill / timeout / a dropped ssh session while the live view runs: Textual handles none of them, and the
+    process died with the terminal in the alternate screen and mouse tracking on (tester4 #11). The view now
+    closes as by 'q' (the escape sequences that leave the alternate screen are written) and exits 128 + the
+    signal. Event-driven: the signal is sent once the view has drawn, whatever the machine's speed."""
+    import pty
+    import select
+    import signal
+    import sys
+
+    pid, fd = pty.fork()
+    if pid == 0:   # the child: the view over the example's recording in real time (67 s: still running)
+        os.environ.update(TERM="xterm-256color", COLUMNS="100", LINES="30")
+        os.execv(sys.executable, [sys.executable, "-m", "fusion.cli", "tui", str(CONFIG), "--speed", "1"])
+    out = bytearray()
+
+    def read_until(pred, seconds):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end and not pred():
+            if select.select([fd], [], [], 0.1)[0]:
+                try:
+                    out.extend(os.read(fd, 65536))
+                except OSError:
+                    return
+
+    try:
+        read_until(lambda: b"\x1b[?1049h" in out and b"uwb" in out, 60)   # in the alternate screen, drawn
+        assert b"\x1b[?1049h" in out, out[-500:]
+        os.kill(pid, getattr(signal, signame))
+        status = None
+        end = time.monotonic() + 30
+        while status is None and time.monotonic() < end:
+            read_until(lambda: False, 0.2)
+            done, st = os.waitpid(pid, os.WNOHANG)
+            status = st if done else None
+        assert status is not None, "the view did not exit"
+        assert os.waitstatus_to_exitcode(status) == code
+        assert b"\x1b[?1049l" in out                          # left the alternate screen
+    finally:
+        try:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+        except (ProcessLookupError, ChildProcessError):
+            pass
+        os.close(fd)
