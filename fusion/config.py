@@ -166,6 +166,13 @@ class OutputSpec(_Strict):
     rate_hz: float | None = Field(None, gt=0.0, le=MAX_OUTPUT_RATE_HZ, description="fixed-rate outputs by "
                                   "prediction, Hz (at most MAX_OUTPUT_RATE_HZ)")
 
+    @model_validator(mode="after")
+    def _some_output(self):
+        if not self.on_update and self.rate_hz is None:
+            raise ValueError("on_update: false and no rate_hz: the run would emit no estimate (give rate_hz, "
+                             "or on_update: true)")
+        return self
+
 
 class EvaluationSpec(_Strict):
     """How ``fusion run`` scores estimates against truth."""

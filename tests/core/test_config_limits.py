@@ -71,6 +71,8 @@ def test_non_finite_values_are_refused_with_file_line_field(tmp_path, capsys, te
     ("noise: {sd: 0.1}", "noise: {R: [[1.0e+308]]}", None, None),   # finite and positive definite: fine
     ("on_update: true ", "on_update: true\n  rate_hz: 1.0e+9 ", "output.rate_hz: Input should be less than or equal "
      "to 1000", "rate_hz:"),
+    ("on_update: true ", "on_update: false ", "output: Value error, on_update: false and no rate_hz: the run would "
+     "emit no estimate", "output:"),   # validate said ok, the run 'never initialised' (tester3 #21)
     ("late_policy: drop", "late_policy: drop\n  history: 1000000000", "scheduler.history: Input should be less than "
      "or equal to 100000", "history:"),
     ("noise: {sd: 0.1}", "noise: {sd: 0.1, R: [[0.01]]}", "sensors.uwb.noise: Value error, give sd or R, not both",
