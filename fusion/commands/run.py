@@ -96,6 +96,10 @@ def run(args: argparse.Namespace) -> int:
         from fusion.sinks.plot import plot_format
 
         plot_format(args.plot)
+    from fusion.api import Opens, has
+
+    if has(src, Opens):   # a missing recording or an unopenable port: one line, before any output is made
+        src.open()
     guarded = [guard_sink(open_sink(args.output, system.layout, system.registry))] if args.output else []
     sinks = guarded
     plot = None

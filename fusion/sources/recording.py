@@ -124,10 +124,25 @@ class RecordingSource(Source):
         ``-`` or a plain path."""
         path = url
         if url[:7].lower() == "file://":
+            from urllib.parse import unquote
+
             path = url[7:]
             if path[:10].lower() == "localhost/":
                 path = path[9:]
+            path = unquote(path)      # RFC 8089: Path.as_uri() and file managers write %20, UTF-8 as %C3%BC
         return cls(cls.Params(path=path, **options))
+
+    def open(self) -> "RecordingSource":
+        """fusion.api.Opens: a missing recording (or a folder) is refused before the run starts, one line, as
+        an unopenable port is (it read as 'the input stopped early' with a summary of nothing)."""
+        path = self.params.path
+        if path != "-":
+            p = Path(path)
+            if not p.exists():
+                raise InputError(f"{p}: no such recording")
+            if p.is_dir():
+                raise InputError(f"{p}: is a directory, expected a recording (a text log)")
+        return self
 
     def input_paths(self) -> tuple[str, ...]:
         """The recording's path (``file://PATH`` already resolved to PATH); none for standard input."""

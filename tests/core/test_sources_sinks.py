@@ -114,3 +114,24 @@ def test_third_party_source_and_sink_from_the_cli(installed_example, tmp_path):
     rows = out.read_text().splitlines()
     assert rows[0].split("\t") == ["t", "px", "py", "sd_px", "sd_py"]
     assert len(rows) - 1 == s["sensors"]["uwb"]["used"]
+
+
+def test_a_percent_encoded_file_url_reads_the_file(tmp_path, capsys):
+    """RFC 8089: Path.as_uri() writes a space as %20 and UTF-8 as %C3%BC; such a URL was taken literally
+    and read as 'no such recording' (tester4 #17)."""
+    odd = tmp_path / "with space ü.log"
+    odd.write_bytes(RECORDING.read_bytes())
+    out = tmp_path / "o.json"
+    assert main(["run", str(CONFIG), "--input", odd.as_uri(), "-q", "--summary-json", str(out)]) == 0
+    assert json.loads(out.read_text())["sensors"]["uwb"]["used"] > 1000
+
+
+def test_a_missing_input_is_refused_before_the_run(tmp_path, capsys):
+    """One line, exit 2, and no summary or output of a run that never read anything (it was 'the input
+    stopped early', with a summary of nothing written)."""
+    js, csv = tmp_path / "s.json", tmp_path / "o.csv"
+    assert main(["run", str(CONFIG), "--input", str(tmp_path / "nope.log"), "-q", "--summary-json", str(js),
+                 "-o", str(csv)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"fusion run: error: {tmp_path / 'nope.log'}: no such recording"]
+    assert not js.exists() and not csv.exists() and list(tmp_path.iterdir()) == []
