@@ -265,7 +265,7 @@ def _map(fn, first, k):
 
 
 class _Chi2:
-    """The three functions a run needs, with scipy.stats.chi2's argument order: ``(value, dof)``."""
+    """scipy.stats.chi2's functions that a run needs, with its argument order: ``(value, dof)``."""
 
     @staticmethod
     def ppf(p, k):
