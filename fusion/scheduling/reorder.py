@@ -54,7 +54,11 @@ class Reordering:
         if isinstance(item, MalformedMessage):
             sensor = getattr(item, "sensor", None)
             if sensor in self.sensors:
-                self.sensors[sensor].counters["malformed"] += 1
+                # a line the parser refused is still a message of that sensor (received = used + rejected +
+                # malformed + late + absorbed holds for it)
+                counters = self.sensors[sensor].counters
+                counters["received"] += 1
+                counters["malformed"] += 1
             yield Event(math.nan, "malformed", sensor, f"line {getattr(item, 'lineno', '?')}: {item}")
             return
         msg = item
