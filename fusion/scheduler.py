@@ -6,7 +6,9 @@ into the prediction in order, the last sample held over the interval to the next
 are fused by updates at their own times; outputs are emitted at each update and/or at a fixed rate.
 
 A message older than the released horizon is late: ``drop`` counts it, ``replay`` rewinds to the newest
-stored belief before it and re-runs the processed messages after it (bounded history).
+stored belief before it and re-runs the processed messages after it (bounded history); a replayed message
+is counted once, by what its re-run made of it (used, rejected, ...), with its events and NIS, and late only
+when it is older than the history.
 
 Modules: this one is the loop (processing, prediction, updates); fusion.scheduling holds the reorder
 buffer (``reorder``), the initialisation (``initialisation``), what is counted and reported
@@ -85,6 +87,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         self._log: deque[Message] = deque(maxlen=spec.scheduler.history * 8)
         self._log_start = 0
         self._replaying = False
+        self._live = False   # in a replay's re-run, processing the late message itself (its outcome is new)
         self.steps = {"predict": 0, "update": 0}
         # What the filter returned, counted here (filters keep no counters): predicts, batched_predicts (runs
         # of input samples given in one predict_inputs call), updates, rejected, update_iterations, and the
@@ -418,11 +421,12 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                 self._tally(result)
         if self._filter_events:
             yield from self._take_filter_events()
+        quiet = self._replaying and not self._live   # a re-run message: reported when it first ran
         if result.accepted and not _finite(result.nis, result.belief) and _finite(0.0, self.belief):
             # DESIGN: never a NaN propagated silently. A model whose prediction (or Jacobian) is not finite
             # at this state would make the belief NaN for the rest of the run, gate or no gate: refused.
             sensor.counters["rejected"] += 1
-            if not self._replaying:
+            if not quiet:
                 yield Event(obs.t, "rejected", sensor.name, f"model {obs.model.name!r}: the update is not finite "
                             f"(NIS {result.nis}: its prediction or Jacobian at this state is NaN or inf); the "
                             "belief is kept")
@@ -430,13 +434,13 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         if result.accepted:
             sensor.counters["used"] += 1
             self.belief = result.belief
-            if not self._replaying:
+            if not quiet:
                 yield from self._check(sensor, obs.model)
         else:
             sensor.counters["rejected"] += 1
-            if not self._replaying:
+            if not quiet:
                 yield Event(obs.t, "rejected", sensor.name, f"NIS {result.nis:.1f} outside the gate")
-        if not self._replaying:
+        if not quiet:
             if self.on_nis is not None:
                 self.on_nis(sensor.name, obs.t, result.nis, len(obs.z), result.accepted)
             if self.on_update:

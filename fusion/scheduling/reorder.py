@@ -87,8 +87,7 @@ class Reordering:
                 sensor.counters["late"] += 1
                 yield Event(t, "late", msg.sensor, f"{self._horizon - t:.3f} s behind the released horizon; dropped")
                 return
-            sensor.counters["late"] += 1
-            yield from self._replay(msg)
+            yield from self._replay(msg)    # counted by its re-run outcome (late when it cannot be replayed)
             return
         heapq.heappush(self._buffer, (t, next(self._seq), msg))
         self._newest = max(self._newest, t)
