@@ -165,6 +165,8 @@ class Run:
         recording's clock moves truth with it), then to its comparison."""
         sched = self.scheduler
         clock = sched.clock
+        if clock.compared:   # held truth lines a sensor's decision released (the first after a pause)
+            self._take_compared()
         newest = sched.newest
         t = msg.t
         stats = self.stats
@@ -181,9 +183,18 @@ class Run:
         admitted, events = clock.admit(msg.sensor, msg, t, newest)
         for ev in events:
             self._dispatch(ev)
+        self._add_compared(admitted)
+
+    def _take_compared(self) -> None:
+        """The truth and reference lines the clock guard released on another stream's decision."""
+        self._add_compared(self.scheduler.clock.take_compared())
+
+    def _add_compared(self, admitted: list[tuple[Message, float]]) -> None:
+        stats = self.stats
         for m, t in admitted:
             if t != m.t:
                 m = m._replace(t=t)
+            comp = stats.truth if m.sensor == "truth" and stats.truth is not None else stats.comparison(m.sensor)
             if comp is not None:
                 comp.add_truth(m)
             else:
@@ -261,6 +272,8 @@ class Run:
                         self._dispatch(out)
                 except ProcessModelFailed as exc:   # while releasing what was buffered
                     component_error = component_error or str(exc)
+            if self.scheduler.clock.compared:
+                self._take_compared()
             for event in header_beacon_warnings(self.parsed.header.beacons, self.system.beacons):
                 self._dispatch(event)
             for event in truth_warnings(self.stats, self._unnamed, self.system.layout.names):

@@ -293,7 +293,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         except FusionError:
             raise
         except Exception as exc:  # a process model's f or Q that raises: see _predict_failed
-            self._predict_failed(exc, t)
+            self._predict_failed(exc, t, self.u, dt)
             return
         self._predict_fails = 0
         self.time_s["predict"] += time.perf_counter() - t0
@@ -301,10 +301,20 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         if self._pseudo:
             self._pseudo_updates()
 
-    def _predict_failed(self, exc: Exception, t: float) -> None:
-        """A prediction to ``t`` raised (a plugin's process model, usually): the belief is held over the step
-        (moved to ``t`` unchanged), the first failure is reported; :data:`PREDICT_FAILS_MAX` in a row stop
-        the run with ProcessModelFailed, which names the process model."""
+    def _predict_failed(self, exc: Exception, t: float, u: np.ndarray | None, dt: float) -> None:
+        """A prediction to ``t`` raised. When the process model's own ``f`` or ``Q`` raises at the belief (input
+        ``u``, step ``dt`` s), the belief is held over the step (moved to ``t`` unchanged), the first failure is
+        reported, and :data:`PREDICT_FAILS_MAX` in a row stop the run with ProcessModelFailed, which names the
+        process model. Otherwise it is the filter's own bug: ``exc`` is raised again (an internal error)."""
+        x = self.belief.x  # type: ignore[union-attr]
+        try:
+            self.process.f(x, u, dt)
+            self.process.Q(x, u, dt)
+            self.process.jacobian(x, u, dt)
+        except Exception as own:
+            exc = own
+        else:
+            raise exc
         self._predict_fails += 1
         self._predict_failures += 1
         why = f"process model {self.process.name!r} failed in a prediction: {type(exc).__name__}: {exc}"
@@ -316,22 +326,20 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         self.belief = self.belief.with_(t=t)  # type: ignore[union-attr]
 
     def _update_failed(self, sensor: SensorRuntime, model, msg: Message, exc: Exception) -> Event | None:
-        """An update of ``sensor`` raised (its model's h or jacobian, a wrong output shape): the message is
-        lost, counted malformed, the belief kept; the first failure of each sensor is reported (naming the
-        model and the exception), the others counted, their number told at the end."""
+        """An update of ``sensor`` raised. When its model is at fault (its ``h`` or ``jacobian`` raises at the
+        belief, or ``h`` returns another shape than ``(dim,)``), the message is lost, counted malformed, the
+        belief kept; the first failure of each sensor is reported (naming the model and the exception), the
+        others counted, their number told at the end. Otherwise it is the filter's own bug: ``exc`` is raised
+        again (an internal error)."""
+        error = _model_fault(model, self.belief.x)  # type: ignore[union-attr]
+        if error is None:
+            raise exc
         sensor.counters["malformed"] += 1
         name = getattr(model, "name", type(model).__name__)
         failures = self._update_failures.get(sensor.name)
         if failures is not None:
             failures[0] += 1
             return None
-        error = f"{type(exc).__name__}: {exc}"
-        try:   # say why when it is h's output shape (the filter's own error then names no model)
-            shape, dim = np.shape(model.h(self.belief.x)), int(model.dim)  # type: ignore[union-attr]
-            if shape != (dim,):
-                error = f"h at the belief returned shape {shape}, expected ({dim},) (dim {dim}); {error}"
-        except Exception:
-            pass
         self._update_failures[sensor.name] = [1, f"measurement model {name!r} failed in an update ({error})"]
         return Event(msg.t, "malformed", sensor.name, f"line {msg.line}: measurement model {name!r} failed in the "
                      f"update: {error}; the message is lost, the belief kept (further failures of {sensor.name} are "
@@ -419,7 +427,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                 except FusionError:
                     raise
                 except Exception as exc:   # as in _step: held over the run of samples
-                    self._predict_failed(exc, last_t)
+                    self._predict_failed(exc, last_t, us[keep][0], float(dts[keep][0]))
                     belief = None
                 if belief is not None:
                     self._predict_fails = 0
@@ -543,6 +551,21 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                 self.on_nis(sensor.name, obs.t, result.nis, len(obs.z), result.accepted)
             if self.on_update:
                 yield Estimate(obs.t, self.belief, "update", sensor.name, result)
+
+
+def _model_fault(model, x: np.ndarray) -> str | None:
+    """Why a measurement model fails at the state ``x`` (n,) and on a batch of two (what a filter gives it): its
+    ``h`` or ``jacobian`` raises (the exception), or ``h`` returns another shape than ``(dim,)`` / ``(2, dim)``;
+    None when it does neither there (an update that failed anyway is the filter's bug)."""
+    try:
+        dim = int(model.dim)
+        one, two = np.shape(model.h(x)), np.shape(model.h(np.stack([x, x])))
+        if one != (dim,) or two != (2, dim):
+            return f"h returned shape {one} at the belief ({two} on 2 states), expected ({dim},) ((2, {dim}))"
+        model.jacobian(x)
+    except Exception as exc:
+        return f"{type(exc).__name__}: {exc}"
+    return None
 
 
 def _finite(nis: float, belief: Belief | None) -> bool:
