@@ -335,6 +335,8 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         if error is None:
             raise exc
         sensor.counters["malformed"] += 1
+        if self._replaying and not self._live:   # a re-run message: counted and told when it first ran
+            return None
         name = getattr(model, "name", type(model).__name__)
         failures = self._update_failures.get(sensor.name)
         if failures is not None:
@@ -357,7 +359,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             except FusionError:
                 raise
             except Exception as exc:
-                event = self._update_failed(sensor, obs.model, Message(self.belief.t, sensor.name, (), None), exc)
+                event = self._update_failed(sensor, obs.model, Message(self.belief.t, sensor.name, (), "-"), exc)
                 if event is not None:
                     self._filter_events.append(event)
                 continue
@@ -498,7 +500,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             raise
         except Exception as exc:  # a model's h or jacobian that raises, or returns the wrong shape
             event = self._update_failed(sensor, obs.model, msg, exc)
-            if event is not None and not (self._replaying and not self._live):
+            if event is not None:
                 yield event
             return
         self.time_s["update"] += time.perf_counter() - t0
