@@ -13,10 +13,13 @@ the base and goes on as usual (a little late is the scheduler's late policy). A 
   onto the stream's base (the first held message lands at the newest accepted time when it came) and
   is applied to every later message of it (kept as small as the stream allows, so its messages never
   land behind the newest time); a ``clock`` event says by how much. If nothing arrived on the old base
-  and the new one is ahead by at most ``max_gap_s``, the whole stream moved on (a pause): the held
-  messages are released at their own times and the scheduler predicts over the gap. A stream-wide jump
-  ahead by more than ``max_gap_s`` (the scheduler's ``max_predict_s``, longer than any model is
-  predicted over) is taken as every clock jumping together: each sensor is re-synchronised as above.
+  meanwhile (a message of another stream admitted since counts only when it is on the old base, not one
+  already on the new base) and the new one is ahead, the whole stream moved on together, by however much:
+  a pause in the recording, not a clock fault (there is no old time left to re-synchronise to). The held
+  messages are released at their own times, and so are the messages the other streams (truth included)
+  hold on the same new base (their first messages after the pause, which would otherwise be dropped as
+  wild when their next message came); the scheduler predicts over the gap (bounded to its
+  ``max_predict_s``). The stamps are kept.
 
 **Cadence** (the scheduler's ``cadence_k``, default 2, and ``cadence_floor_s``, default 0.02 s). A stamp
 inside ``future_s`` can still be wild: a bit flip 1 s ahead, taken as real, moves the stream's newest
@@ -62,7 +65,10 @@ from dataclasses import dataclass, field
 
 from fusion.api import Event, Message
 
-__all__ = ["ClockGuard"]
+__all__ = ["ClockGuard", "COMPARED"]
+
+#: Streams compared against, never fed (the pipeline's truth and reference lines go through the same guard).
+COMPARED = frozenset(("truth", "reference"))
 
 
 _BLOCK = 16   # messages per spacing sample once started (the first samples: 2, 4 and 8 messages)
@@ -114,6 +120,10 @@ class ClockGuard:
         self._held: dict[str, _Held] = {}
         self._alive = 0                       # messages admitted on the base so far (any sensor)
         self._alive_by: dict[str, int] = {}   # sensor -> _alive when it was last admitted on the base
+        self._last_by: dict[str, float] = {}  # sensor -> the (corrected) stamp it was last admitted at
+        #: Messages of the compared streams (COMPARED) released by another stream's decision (a pause of the
+        #: whole stream): ``(message, t)``, for the pipeline to take (``take_compared``).
+        self.compared: list[tuple[Message, float]] = []
         self.busy = False                     # something held or an offset set (the scheduler's fast path)
         self.cadence_k = float(cadence_k)
         self.floor = min(float(cadence_floor_s), self.future_s)
@@ -249,27 +259,66 @@ class ClockGuard:
             return out, events
         del self._held[sensor]
         first_t = held.items[0][1]
-        others_alive = any(n > held.alive for s, n in self._alive_by.items() if s != sensor)
+        new_lo = first_t - off - fut
+        # another stream admitted since the first was held, on the old base (not already on the new one)
+        others_alive = any(n > held.alive and self._last_by.get(s, -math.inf) < new_lo
+                           for s, n in self._alive_by.items() if s != sensor)
         ahead = first_t - off > newest
-        if ahead and not others_alive and first_t - off - held.newest <= self.max_gap_s:
-            events.append(Event(first_t - off, "clock", sensor, f"stream time jumped {first_t - off - newest:+.3f} s "
-                                f"(no sensor on the old time); taken as a gap, prediction over it bounded"))
-            out += [(m, ts - off) for m, ts in held.items]
+        if ahead and not others_alive:
+            gap = first_t - off - newest
+            bounded = f", prediction over it bounded to {self.max_gap_s:g} s" if gap > self.max_gap_s else ""
+            events.append(Event(first_t - off, "clock", sensor, f"stream time jumped {gap:+.3f} s (no sensor on the "
+                                f"old time); taken as a gap in the recording, the stamps kept{bounded}"))
+            mine = [(m, ts - off) for m, ts in held.items]
+            for _, tf in mine:
+                self._fed(sensor, c, tf)
+            others = self._same_base(sensor, new_lo, mine[-1][1] + fut, only_compared=sensor in COMPARED)
+            for s2, m2, t2 in others:
+                if s2 in COMPARED:
+                    self.compared.append((m2, t2))
+                else:
+                    self._fed(s2, self._cad.get(s2), t2)
+            fed = [(m2, t2) for s2, m2, t2 in others if s2 not in COMPARED]
+            out += sorted(mine + fed, key=lambda mt: mt[1]) if fed else mine
         else:
             new_off = first_t - held.newest  # the first held message lands where the stream was then
             self.offsets[sensor] = new_off
             events.append(Event(newest, "clock", sensor, f"{sensor} clock jumped {new_off - off:+.3f} s "
                                 f"({len(held.items)} messages agree); re-synchronised to the stream's time"))
-            out += [(m, ts - new_off) for m, ts in held.items]
+            resynced = [(m, ts - new_off) for m, ts in held.items]
+            for _, tf in resynced:
+                self._fed(sensor, c, tf)
+            out += resynced
         self.busy = bool(self._held or self.offsets or self._near)
-        for _, tf in out[-len(held.items):]:
-            self._fed(sensor, c, tf)
         return out, events
+
+    def _same_base(self, sensor: str, lo: float, hi: float,
+                   only_compared: bool = False) -> list[tuple[str, Message, float]]:
+        """The messages the other streams hold whose (corrected) stamps all lie on the new base ``[lo, hi]``
+        (s) that ``sensor``'s messages just agreed on: released with them, ``(stream, message, t)`` in time
+        order. A stream holding anything else keeps it held (its own next messages decide), and so do the
+        fed sensors when a compared stream decided (``only_compared``: its caller feeds no sensor; they
+        decide on their own next messages, truth on the new base not counting as the old one alive)."""
+        got: list[tuple[str, Message, float]] = []
+        for s2 in [s for s in self._held if s != sensor and (not only_compared or s in COMPARED)]:
+            off2 = self.offsets.get(s2, 0.0)
+            items = [(m, t - off2) for m, t in self._held[s2].items]
+            if all(lo <= t <= hi for _, t in items):
+                del self._held[s2]
+                got += [(s2, m, t) for m, t in items]
+        got.sort(key=lambda smt: smt[2])
+        return got
+
+    def take_compared(self) -> list[tuple[Message, float]]:
+        """The compared streams' messages released by another stream's decision (see ``compared``), once."""
+        out, self.compared = self.compared, []
+        return out
 
     def _fed(self, sensor: str, c: _Cadence | None, t: float) -> None:
         """``sensor``'s message goes on at ``t``: it is on the base, and its spacing and the stream's learn."""
         self._alive += 1
         self._alive_by[sensor] = self._alive
+        self._last_by[sensor] = t
         if c is None:
             return
         if c is not None and t >= c.last:

@@ -35,7 +35,7 @@ from fusion.api import (Closes, Estimate, Event, FusionError, InputError, Malfor
 from fusion.config import System
 from fusion.logformat import ParsedStream, iter_messages, parse_values
 from fusion.run_stats import COUNTERS, RunStats
-from fusion.scheduler import Scheduler
+from fusion.scheduler import ProcessModelFailed, Scheduler
 
 __all__ = ["run", "Run", "RunResult", "RunStats", "Collect", "COUNTERS"]
 
@@ -75,7 +75,9 @@ class RunResult:
     """What a run leaves: its ``summary`` (the ``--summary-json`` dict), its ``stats``, the ``last``
     estimate (None when there was none), the parse state (``parsed``: header and malformed lines),
     ``interrupted`` (Ctrl-C), the wall time, and ``source_error``: why the source stopped early (it raised
-    an OSError or a FusionError, e.g. a lost link), None when it ended normally."""
+    an OSError or a FusionError, e.g. a lost link), None when it ended normally; ``component_error``: why the
+    run stopped before the end of its input because a component cannot go on (the process model failed on
+    every prediction: fusion.scheduler.ProcessModelFailed), None otherwise."""
 
     summary: dict[str, Any]
     stats: RunStats
@@ -84,6 +86,7 @@ class RunResult:
     interrupted: bool
     wall_s: float
     source_error: str | None = None
+    component_error: str | None = None
 
 
 class Run:
@@ -162,6 +165,8 @@ class Run:
         recording's clock moves truth with it), then to its comparison."""
         sched = self.scheduler
         clock = sched.clock
+        if clock.compared:   # held truth lines a sensor's decision released (the first after a pause)
+            self._take_compared()
         newest = sched.newest
         t = msg.t
         stats = self.stats
@@ -178,9 +183,18 @@ class Run:
         admitted, events = clock.admit(msg.sensor, msg, t, newest)
         for ev in events:
             self._dispatch(ev)
+        self._add_compared(admitted)
+
+    def _take_compared(self) -> None:
+        """The truth and reference lines the clock guard released on another stream's decision."""
+        self._add_compared(self.scheduler.clock.take_compared())
+
+    def _add_compared(self, admitted: list[tuple[Message, float]]) -> None:
+        stats = self.stats
         for m, t in admitted:
             if t != m.t:
                 m = m._replace(t=t)
+            comp = stats.truth if m.sensor == "truth" and stats.truth is not None else stats.comparison(m.sensor)
             if comp is not None:
                 comp.add_truth(m)
             else:
@@ -243,17 +257,23 @@ class Run:
             self._dispatch(out)
         return outs
 
-    def finish(self, *, flush: bool = True, interrupted: bool = False, source_error: str | None = None) -> RunResult:
+    def finish(self, *, flush: bool = True, interrupted: bool = False, source_error: str | None = None,
+               component_error: str | None = None) -> RunResult:
         """End the run: release what the scheduler still buffers (``flush``), close the sinks, build the
-        summary (with ``source_error``, why the source stopped early, if it did) and call
-        ``fusion_on_run_end``. Idempotent."""
+        summary (with ``source_error``, why the source stopped early, or ``component_error``, why the run
+        did, if it did) and call ``fusion_on_run_end``. Idempotent."""
         if self.finished is not None:
             return self.finished
         try:
             if flush and not self._flushed:
                 self._flushed = True
-                for out in self.scheduler.finish():
-                    self._dispatch(out)
+                try:
+                    for out in self.scheduler.finish():
+                        self._dispatch(out)
+                except ProcessModelFailed as exc:   # while releasing what was buffered
+                    component_error = component_error or str(exc)
+            if self.scheduler.clock.compared:
+                self._take_compared()
             for event in header_beacon_warnings(self.parsed.header.beacons, self.system.beacons):
                 self._dispatch(event)
             for event in truth_warnings(self.stats, self._unnamed, self.system.layout.names):
@@ -267,9 +287,12 @@ class Run:
             summary["interrupted"] = True
         if source_error is not None:
             summary["source_error"] = source_error
+        if component_error is not None:
+            summary["component_error"] = component_error
         if self._hook_end is not None:
             _call(self._hook_end, "fusion_on_run_end", summary=summary, system=self.system)
-        self.finished = RunResult(summary, self.stats, self.last, self.parsed, interrupted, wall, source_error)
+        self.finished = RunResult(summary, self.stats, self.last, self.parsed, interrupted, wall, source_error,
+                                  component_error)
         return self.finished
 
     def close_sinks(self) -> None:
@@ -418,20 +441,24 @@ def run(system: System, source: Any, sinks: Sequence[Any] = (), *, on_event: Cal
     Ctrl-C stops reading: what was read is processed, the sinks are closed and the result has
     ``interrupted=True``. A source that fails while it is read (an OSError or a FusionError from its lines,
     e.g. a lost link) ends the run the same way, what was read processed and summarised, the hooks
-    called, with ``source_error`` saying why (``fusion run`` then exits 2). A bug in a component ends the
+    called, with ``source_error`` saying why (``fusion run`` then exits 2). A process model that fails on
+    every prediction (fusion.scheduler.ProcessModelFailed) ends it so too, with ``component_error``; a model's
+    failure in one update only loses that message (fusion.scheduler). A bug in a component ends the
     run with a RuntimeError that says how far it got; a component's ``FusionError`` (bad input the run
     cannot go on with) is raised as is, after the sinks are closed."""
     lines, name, close = _lines_of(source)
     session = Run(system, sinks, on_event=on_event, progress=progress, plot=plot, hooks=hooks,
                   label=label if label is not None else name, on_truth=on_truth)
     interrupted = False
-    source_error = None
+    source_error = component_error = None
     try:
         session.consume(iter_messages(_guarded(lines), session.parsed, raw_streams=_COMPARED))
     except KeyboardInterrupt:
         interrupted = True
     except _SourceLost as exc:
         source_error = _source_message(name, exc.__cause__ or exc)
+    except ProcessModelFailed as exc:
+        component_error = str(exc)
     except FusionError:
         session.close_sinks()
         raise
@@ -444,6 +471,8 @@ def run(system: System, source: Any, sinks: Sequence[Any] = (), *, on_event: Cal
         if close is not None:
             close()
     try:
-        return session.finish(interrupted=interrupted, source_error=source_error)
+        return session.finish(flush=component_error is None, interrupted=interrupted, source_error=source_error,
+                              component_error=component_error)
     except KeyboardInterrupt:  # a second Ctrl-C while flushing: report what there is
-        return session.finish(flush=False, interrupted=True, source_error=source_error)
+        return session.finish(flush=False, interrupted=True, source_error=source_error,
+                              component_error=component_error)

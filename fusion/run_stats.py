@@ -174,7 +174,9 @@ class RunStats:
                 c[ABSORBED] = 0
         for name, n in list(self.parsed.malformed.items()):
             if name not in self.scheduler.sensors:
-                out.setdefault(name or "?", dict.fromkeys((*COUNTERS, ABSORBED), 0))["malformed"] += n
+                row = out.setdefault(name or "?", dict.fromkeys((*COUNTERS, ABSORBED), 0))
+                row["received"] += n
+                row["malformed"] += n
         return out
 
     def component_info(self) -> dict[str, dict[str, Any]]:

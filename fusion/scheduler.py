@@ -6,7 +6,9 @@ into the prediction in order, the last sample held over the interval to the next
 are fused by updates at their own times; outputs are emitted at each update and/or at a fixed rate.
 
 A message older than the released horizon is late: ``drop`` counts it, ``replay`` rewinds to the newest
-stored belief before it and re-runs the processed messages after it (bounded history).
+stored belief before it and re-runs the processed messages after it (bounded history); a replayed message
+is counted once, by what its re-run made of it (used, rejected, ...), with its events and NIS, and late only
+when it is older than the history.
 
 Modules: this one is the loop (processing, prediction, updates); fusion.scheduling holds the reorder
 buffer (``reorder``), the initialisation (``initialisation``), what is counted and reported
@@ -31,8 +33,8 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from fusion.api import (AlignsState, Belief, Estimate, Event, GateRun, HasThreshold, MalformedMessage, Message,
-                        PredictsInputRuns, PseudoMeasurement, ReadsBelief, UsesInput, has)
+from fusion.api import (AlignsState, Belief, Estimate, Event, FusionError, GateRun, HasThreshold, MalformedMessage,
+                        Message, PredictsInputRuns, PseudoMeasurement, ReadsBelief, UsesInput, has)
 from fusion.clock import ClockGuard
 from fusion.recovery import LockoutWatch, recover
 from fusion.config import SensorRuntime, System
@@ -47,6 +49,18 @@ def _failed(component, exc: Exception) -> MalformedMessage:
     plugin should raise MalformedMessage itself; the run goes on either way)."""
     who = f"{component.kind} {component.name!r}" if component is not None else "a plugin"
     return MalformedMessage(f"{who} failed on it: {type(exc).__name__}: {exc}")
+
+
+class ProcessModelFailed(FusionError):
+    """The process model (or the filter's prediction with it) raised on every prediction of
+    :data:`PREDICT_FAILS_MAX` in a row: the belief cannot be carried on, so the run stops there (``fusion run``:
+    exit 2, the summary of what was processed written)."""
+
+
+#: Predictions in a row that may fail (each holds the belief over its step, the first reported) before the run
+#: stops with ProcessModelFailed: one odd input sample is not the end of a run, a process model that always
+#: raises is.
+PREDICT_FAILS_MAX = 5
 
 
 class Scheduler(Reordering, Initialisation, Reporting, Replay):
@@ -85,6 +99,12 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         self._log: deque[Message] = deque(maxlen=spec.scheduler.history * 8)
         self._log_start = 0
         self._replaying = False
+        self._live = False   # in a replay's re-run, processing the late message itself (its outcome is new)
+        # Plugin failures inside the filter's steps (an exception in a model's h, jacobian or f): per sensor
+        # [count, first reason] of updates lost, and the predictions that failed in a row.
+        self._update_failures: dict[str, list] = {}
+        self._predict_fails = 0
+        self._predict_failures = 0
         self.steps = {"predict": 0, "update": 0}
         # What the filter returned, counted here (filters keep no counters): predicts, batched_predicts (runs
         # of input samples given in one predict_inputs call), updates, rejected, update_iterations, and the
@@ -163,6 +183,12 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                 yield from self._drain_solver_events(sensor)
         if self._pending:
             yield from self._flush_inputs()
+        for name, (n, why) in self._update_failures.items():
+            if n > 1:
+                yield Event(math.nan, "warning", name, f"{why} {n} times, each message lost (counted malformed)")
+        if self._predict_failures:
+            yield Event(math.nan, "warning", None, f"process model {self.process.name!r}: {self._predict_failures} "
+                        "prediction(s) failed; the belief was held over each")
 
     # ------------------------------------------------------------------ internals
 
@@ -262,11 +288,64 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             self.belief = self.belief.with_(t=t)  # type: ignore[union-attr]
             return
         t0 = time.perf_counter()
-        belief = self.filter.predict(self.belief, self.process, self.u, dt)
+        try:
+            belief = self.filter.predict(self.belief, self.process, self.u, dt)
+        except FusionError:
+            raise
+        except Exception as exc:  # a process model's f or Q that raises: see _predict_failed
+            self._predict_failed(exc, t, self.u, dt)
+            return
+        self._predict_fails = 0
         self.time_s["predict"] += time.perf_counter() - t0
         self.belief = self._predicted(belief, 1, dts=dt)
         if self._pseudo:
             self._pseudo_updates()
+
+    def _predict_failed(self, exc: Exception, t: float, u: np.ndarray | None, dt: float) -> None:
+        """A prediction to ``t`` raised. When the process model's own ``f`` or ``Q`` raises at the belief (input
+        ``u``, step ``dt`` s), the belief is held over the step (moved to ``t`` unchanged), the first failure is
+        reported, and :data:`PREDICT_FAILS_MAX` in a row stop the run with ProcessModelFailed, which names the
+        process model. Otherwise it is the filter's own bug: ``exc`` is raised again (an internal error)."""
+        x = self.belief.x  # type: ignore[union-attr]
+        try:
+            self.process.f(x, u, dt)
+            self.process.Q(x, u, dt)
+            self.process.jacobian(x, u, dt)
+        except Exception as own:
+            exc = own
+        else:
+            raise exc
+        self._predict_fails += 1
+        self._predict_failures += 1
+        why = f"process model {self.process.name!r} failed in a prediction: {type(exc).__name__}: {exc}"
+        if self._predict_fails >= PREDICT_FAILS_MAX:
+            raise ProcessModelFailed(f"{why} ({self._predict_fails} predictions in a row, at t = {t:.3f} s); the "
+                                     "belief cannot be carried on") from exc
+        if self._predict_failures == 1:
+            self._filter_events.append(Event(t, "warning", None, f"{why}; the belief is held over the step"))
+        self.belief = self.belief.with_(t=t)  # type: ignore[union-attr]
+
+    def _update_failed(self, sensor: SensorRuntime, model, msg: Message, exc: Exception) -> Event | None:
+        """An update of ``sensor`` raised. When its model is at fault (its ``h`` or ``jacobian`` raises at the
+        belief, or ``h`` returns another shape than ``(dim,)``), the message is lost, counted malformed, the
+        belief kept; the first failure of each sensor is reported (naming the model and the exception), the
+        others counted, their number told at the end. Otherwise it is the filter's own bug: ``exc`` is raised
+        again (an internal error)."""
+        error = _model_fault(model, self.belief.x)  # type: ignore[union-attr]
+        if error is None:
+            raise exc
+        sensor.counters["malformed"] += 1
+        if self._replaying and not self._live:   # a re-run message: counted and told when it first ran
+            return None
+        name = getattr(model, "name", type(model).__name__)
+        failures = self._update_failures.get(sensor.name)
+        if failures is not None:
+            failures[0] += 1
+            return None
+        self._update_failures[sensor.name] = [1, f"measurement model {name!r} failed in an update ({error})"]
+        return Event(msg.t, "malformed", sensor.name, f"line {msg.line}: measurement model {name!r} failed in the "
+                     f"update: {error}; the message is lost, the belief kept (further failures of {sensor.name} are "
+                     "counted)")
 
     def _pseudo_updates(self) -> None:
         """The after-predict pseudo-measurements (fusion.api.PseudoMeasurement), in config order."""
@@ -275,7 +354,15 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             if obs is None:
                 continue
             R = obs.R if obs.R is not None else sensor.R
-            result = self.filter.update(self.belief, obs.model, obs.z, R, self.gates.get(sensor.name))
+            try:
+                result = self.filter.update(self.belief, obs.model, obs.z, R, self.gates.get(sensor.name))
+            except FusionError:
+                raise
+            except Exception as exc:
+                event = self._update_failed(sensor, obs.model, Message(self.belief.t, sensor.name, (), "-"), exc)
+                if event is not None:
+                    self._filter_events.append(event)
+                continue
             self._tally(result)
             if result.accepted and _finite(result.nis, result.belief):
                 self.belief = result.belief
@@ -337,11 +424,19 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             if keep.any():
                 t0 = time.perf_counter()
                 k = int(keep.sum())
-                belief = self.filter.predict_inputs(self.belief, self.process, us[keep], dts[keep])
-                self.time_s["predict"] += time.perf_counter() - t0
-                self.belief = self._predicted(belief, k, batched=k > 1, dts=dts[keep])
-                if capped:  # bounded gap: the run still ends at the last sample's time
-                    self.belief = self.belief.with_(t=last_t)
+                try:
+                    belief = self.filter.predict_inputs(self.belief, self.process, us[keep], dts[keep])
+                except FusionError:
+                    raise
+                except Exception as exc:   # as in _step: held over the run of samples
+                    self._predict_failed(exc, last_t, us[keep][0], float(dts[keep][0]))
+                    belief = None
+                if belief is not None:
+                    self._predict_fails = 0
+                    self.time_s["predict"] += time.perf_counter() - t0
+                    self.belief = self._predicted(belief, k, batched=k > 1, dts=dts[keep])
+                    if capped:  # bounded gap: the run still ends at the last sample's time
+                        self.belief = self.belief.with_(t=last_t)
                 if self._filter_events:
                     yield from self._take_filter_events()
             self.u = good[-1][1]
@@ -399,7 +494,15 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         if R.shape[0] != len(obs.z) and len(obs.z) % R.shape[0] == 0:
             R = np.kron(np.eye(len(obs.z) // R.shape[0]), R)  # R per item (a range) for a message of several
         t0 = time.perf_counter()
-        result = self.filter.update(self.belief, obs.model, obs.z, R, self.gates.get(sensor.name))
+        try:
+            result = self.filter.update(self.belief, obs.model, obs.z, R, self.gates.get(sensor.name))
+        except FusionError:
+            raise
+        except Exception as exc:  # a model's h or jacobian that raises, or returns the wrong shape
+            event = self._update_failed(sensor, obs.model, msg, exc)
+            if event is not None:
+                yield event
+            return
         self.time_s["update"] += time.perf_counter() - t0
         self.steps["update"] += 1
         self._tally(result)
@@ -413,16 +516,25 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                 self.belief, event = recover(sensor.recovery, self.belief, self.system.layout, obs, R,  # type: ignore[arg-type]
                                              self.filter, sensor.name)
                 yield event
-                result = self.filter.update(self.belief, obs.model, obs.z, R, self.gates.get(sensor.name))
+                try:
+                    result = self.filter.update(self.belief, obs.model, obs.z, R, self.gates.get(sensor.name))
+                except FusionError:
+                    raise
+                except Exception as exc:
+                    event = self._update_failed(sensor, obs.model, msg, exc)
+                    if event is not None:
+                        yield event
+                    return
                 self.steps["update"] += 1
                 self._tally(result)
         if self._filter_events:
             yield from self._take_filter_events()
+        quiet = self._replaying and not self._live   # a re-run message: reported when it first ran
         if result.accepted and not _finite(result.nis, result.belief) and _finite(0.0, self.belief):
             # DESIGN: never a NaN propagated silently. A model whose prediction (or Jacobian) is not finite
             # at this state would make the belief NaN for the rest of the run, gate or no gate: refused.
             sensor.counters["rejected"] += 1
-            if not self._replaying:
+            if not quiet:
                 yield Event(obs.t, "rejected", sensor.name, f"model {obs.model.name!r}: the update is not finite "
                             f"(NIS {result.nis}: its prediction or Jacobian at this state is NaN or inf); the "
                             "belief is kept")
@@ -430,17 +542,32 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         if result.accepted:
             sensor.counters["used"] += 1
             self.belief = result.belief
-            if not self._replaying:
+            if not quiet:
                 yield from self._check(sensor, obs.model)
         else:
             sensor.counters["rejected"] += 1
-            if not self._replaying:
+            if not quiet:
                 yield Event(obs.t, "rejected", sensor.name, f"NIS {result.nis:.1f} outside the gate")
-        if not self._replaying:
+        if not quiet:
             if self.on_nis is not None:
                 self.on_nis(sensor.name, obs.t, result.nis, len(obs.z), result.accepted)
             if self.on_update:
                 yield Estimate(obs.t, self.belief, "update", sensor.name, result)
+
+
+def _model_fault(model, x: np.ndarray) -> str | None:
+    """Why a measurement model fails at the state ``x`` (n,) and on a batch of two (what a filter gives it): its
+    ``h`` or ``jacobian`` raises (the exception), or ``h`` returns another shape than ``(dim,)`` / ``(2, dim)``;
+    None when it does neither there (an update that failed anyway is the filter's bug)."""
+    try:
+        dim = int(model.dim)
+        one, two = np.shape(model.h(x)), np.shape(model.h(np.stack([x, x])))
+        if one != (dim,) or two != (2, dim):
+            return f"h returned shape {one} at the belief ({two} on 2 states), expected ({dim},) ((2, {dim}))"
+        model.jacobian(x)
+    except Exception as exc:
+        return f"{type(exc).__name__}: {exc}"
+    return None
 
 
 def _finite(nis: float, belief: Belief | None) -> bool:

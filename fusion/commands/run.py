@@ -142,6 +142,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"fusion run: error: the input stopped early: {result.source_error}; the summary covers what was "
               "read", file=sys.stderr)
         return 2
+    if result.component_error is not None:
+        print(f"fusion run: error: the run stopped: {result.component_error}; the summary covers what was "
+              "processed", file=sys.stderr)
+        return 2
     if not result.stats.estimates:   # a log this config cannot use (or nothing in it): a user error
         print(f"fusion run: error: {summary['not_started']}; the summary covers what was read", file=sys.stderr)
         return 2

@@ -54,7 +54,11 @@ class Reordering:
         if isinstance(item, MalformedMessage):
             sensor = getattr(item, "sensor", None)
             if sensor in self.sensors:
-                self.sensors[sensor].counters["malformed"] += 1
+                # a line the parser refused is still a message of that sensor (received = used + rejected +
+                # malformed + late + absorbed holds for it)
+                counters = self.sensors[sensor].counters
+                counters["received"] += 1
+                counters["malformed"] += 1
             yield Event(math.nan, "malformed", sensor, f"line {getattr(item, 'lineno', '?')}: {item}")
             return
         msg = item
@@ -83,8 +87,7 @@ class Reordering:
                 sensor.counters["late"] += 1
                 yield Event(t, "late", msg.sensor, f"{self._horizon - t:.3f} s behind the released horizon; dropped")
                 return
-            sensor.counters["late"] += 1
-            yield from self._replay(msg)
+            yield from self._replay(msg)    # counted by its re-run outcome (late when it cannot be replayed)
             return
         heapq.heappush(self._buffer, (t, next(self._seq), msg))
         self._newest = max(self._newest, t)

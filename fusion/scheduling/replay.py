@@ -51,6 +51,7 @@ class Replay:
                 break
         sensor = self.sensors[late.sensor]
         if snap is None:
+            sensor.counters["late"] += 1
             yield Event(late.t, "late", late.sensor, "older than the replay history; dropped")
             return
         keep = snap.index - self._log_start
@@ -72,19 +73,37 @@ class Replay:
             self.gates[n].counters = snap.gate_counts[n].copy()
         self._replaying = True
         counters = {n: dict(s.counters) for n, s in self.sensors.items()}
+        own: dict[str, int] = {}      # the late message's own outcome in the re-run (used, rejected, ...)
+        events: list[Event] = []      # and what it reported (a rejection, a geometry warning)
         try:
             for msg in rerun:
                 self._record(msg)
-                for out in self._process(msg):
-                    pass
+                if msg is late:
+                    # the late message is new to the run: its outcome, events and NIS are reported as in
+                    # time order (self._live); the others were already, before it arrived
+                    before = dict(sensor.counters)
+                    self._live = True
+                    try:
+                        events += [e for e in self._process(msg) if isinstance(e, Event)]
+                    finally:
+                        self._live = False
+                    own = {k: v - before.get(k, 0) for k, v in sensor.counters.items() if v != before.get(k, 0)}
+                else:
+                    for out in self._process(msg):
+                        pass
                 if self.sensors[msg.sensor].role != "input":   # as a run keeps them: after measurements
                     self._snapshot(rerun=True)
         finally:
             self._replaying = False
+            self._live = False
         for n, s in self.sensors.items():  # re-run messages were already counted
             s.counters.update(counters[n])
-        sensor.counters["used"] += 1
+        # Counted once, by its re-run outcome, not as late (received = used + rejected + malformed + late +
+        # absorbed; its "replayed" event says it came late).
+        for k, v in own.items():
+            sensor.counters[k] += v
         self._snapshot()
+        yield from events
         yield Event(late.t, "replayed", late.sensor, f"re-ran {len(rerun)} messages")
         if self.on_update and self.belief is not None:
             yield Estimate(self.belief.t, self.belief, "update", late.sensor)

@@ -253,7 +253,7 @@ class LiveFeed:
                                 self._log(Event(paced, "replay", None, f"{t - paced:.3g} s of sensor time to the "
                                                 f"next message: waited {cap:g} s / speed at most "
                                                 "(scheduler.max_predict_s)"))
-                                t0 -= t - paced - cap  # type: ignore[operator]
+                                t0 += t - paced - cap  # type: ignore[operator]  # (the origin moves on)
                             paced = t
                             wall0 += self._sleep_until(wall0 + (t - t0) / self.speed)  # type: ignore[operator]
             if self._stop.is_set():

@@ -73,3 +73,20 @@ def test_the_absorbed_column_is_shown_only_when_some_sensor_has_any():
     assert "absorbed" not in _table({"a": {**row, "absorbed": 0}})
     assert "absorbed" not in _table({"a": row})          # a summary from before the counter
     assert "absorbed" in _table({"a": {**row, "absorbed": 0}, "b": {**row, "used": 2, "absorbed": 3}})
+
+
+def test_lines_the_parser_refuses_are_received_and_malformed():
+    """A line of a known sensor that the log parser refuses (wrong field count, a bad number) is a message of
+    that sensor: received and malformed, so the sensor's row still adds up (it used to be malformed only:
+    received 49 of 51 lines, or received 0 and malformed 60). Lines of a sensor the config lacks too."""
+    from fusion import pipeline
+    from fusion.config import load_system
+
+    system = load_system(ROOT / "configs" / "uwb_pv_ukf.yaml")
+    lines = (ROOT / "recordings" / "uwb_route1.log").read_text().splitlines()[:300]
+    n_uwb = sum(",uwb," in line for line in lines)
+    lines += ["15.0,uwb,B1,4.0,B2", "15.01,uwb,B1,4.0,B2,5.0,B3", "15.02,uwb,B1,4x0", "15.03,sonar,1.0,nan"]
+    sensors = pipeline.run(system, lines).summary["sensors"]
+    uwb = sensors["uwb"]
+    assert uwb["received"] == n_uwb + 3 and uwb["malformed"] == 3 and _adds_up(uwb), uwb
+    assert sensors["sonar"]["received"] == sensors["sonar"]["malformed"] == 1 and _adds_up(sensors["sonar"])
