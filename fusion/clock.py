@@ -7,7 +7,8 @@ the base and goes on as usual (a little late is the scheduler's late policy). A 
 
 - the next message of the sensor is on the base again: the held stamp was wild (a bit flip, ``1e20``, a
   cut fragment such as ``560000``); it is dropped and counted malformed, with a ``time`` event;
-- ``agree`` messages in a row agree on a new base (each ahead of the previous by at most ``future_s``):
+- ``agree`` messages in a row agree on a new base (each ahead of the previous by at most ``future_s``, or
+  at all when no other stream has spoken since the first was held: a sensor slower than 1 / ``future_s``):
   the sensor's clock jumped or restarted. If other sensors kept arriving on the old base meanwhile, or the
   new base is behind (a clock reset to 0), the sensor is **re-synchronised**: an offset maps its stamps
   onto the stream's base (the first held message lands at the newest accepted time when it came) and
@@ -248,9 +249,23 @@ class ClockGuard:
         held = self._held.get(sensor)
         if held is not None:
             last_t = held.items[-1][1]
-            if not (0.0 <= t - last_t <= fut):  # not the same new base: the earlier ones were wild
-                events += self._drop(sensor, "the messages after it do not agree on a new time")
-                held = None
+            # Messages agree on a new base when each is ahead of the previous by at most future_s; or, when no
+            # other stream has said anything since the first was held, when each is ahead of the previous at
+            # all: a sensor slower than 1 / future_s alone in the stream (a fix every 8 s) steps on as a pause
+            # of the whole stream does; before, each of its messages was dropped as a wild stamp (tester4 #15)
+            alone = not any(n > held.alive for s, n in self._alive_by.items() if s != sensor)
+            if not (0.0 <= t - last_t <= fut or (alone and t > last_t)):   # the earlier ones were wild
+                # alone, the held stamps step forward: those before this message still agree with it, and
+                # only the later ones (a wild stamp among the slow sensor's) are dropped
+                before = [it for it in held.items if it[1] < t] if alone else []
+                if before and len(before) < len(held.items):
+                    alive, newest_then = held.alive, held.newest
+                    held.items = held.items[len(before):]
+                    events += self._drop(sensor, "the message after it is stamped before it")
+                    held = self._held[sensor] = _Held(items=before, alive=alive, newest=newest_then)
+                else:
+                    events += self._drop(sensor, "the messages after it do not agree on a new time")
+                    held = None
         if held is None:
             held = self._held[sensor] = _Held(alive=self._alive, newest=newest)
         held.items.append((msg, t))

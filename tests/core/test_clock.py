@@ -363,3 +363,18 @@ def test_fewer_messages_than_the_start_waits_for_still_run():
     assert guard.held() == 2
     out = guard.release()
     assert [t for _, t in out] == [0.0, 0.1] and guard.held() == 0 and not guard.busy
+
+
+def test_a_lone_sensor_slower_than_future_s_is_not_dropped_as_wild():
+    """A fix every 8 s, alone in the stream (future_s 5 s): each stamp is past the bound, and the next was
+    8 s on, so 'the messages after it do not agree' dropped every one but the first (tester4 #15). Alone,
+    messages stepping forward agree; a wild stamp among them (going back) is still dropped."""
+    slow = [("uwb", 8.0 * k) for k in range(12)]
+    fed, events = _feed(slow, inputs=())
+    assert fed[:10] == slow[:10]                      # in order and kept (the last ones wait for agreement)
+    assert not any(e.kind == "time" for e in events)
+    wild = slow[:5] + [("uwb", 1e9)] + slow[5:]
+    fed, events = _feed(wild, inputs=())
+    assert ("uwb", 1e9) not in fed and fed[:5] == slow[:5]
+    fed_with_imu, _ = _feed(_merge(slow, _every("imu", 0.0, 90.0, 0.01)))   # another stream on the base:
+    assert [p for p in fed_with_imu if p[0] == "uwb"] == slow                # its messages are on the time
