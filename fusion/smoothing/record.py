@@ -73,7 +73,7 @@ class ForwardLog:
         self.breaks = 0
         self.gap_breaks = 0     # of them, at an input sample held longer than max_hold
         self.max_hold = max_hold
-        self._held_u: np.ndarray | None = None   # the input sample the last prediction ended holding
+        self._held_u: bytes | None = None        # the input sample the last prediction ended holding
         self._held_s = 0.0                       # s it has been held (applied) so far
         self.unmatched = 0      # estimates whose belief is no recent node's (mapped to the open node)
         self._recent: deque[tuple[int, Belief]] = deque(maxlen=self.RECENT)  # (node, a belief it had)
@@ -124,14 +124,14 @@ class ForwardLog:
         by the measurements that arrive during an input gap)."""
         if us is None or self.max_hold is None:
             return False
-        us = np.asarray(us, dtype=float)
-        ages = np.array(dts, dtype=float)
-        if not ages.shape[0]:
+        dl = dts.tolist() if isinstance(dts, np.ndarray) else [float(d) for d in dts]  # ~10 plain floats
+        if not dl:
             return False
-        if self._held_u is not None and np.array_equal(us[0], self._held_u):
-            ages[0] += self._held_s
-        self._held_u, self._held_s = us[-1].copy(), float(ages[-1])
-        return bool(ages.max() > self.max_hold)
+        us = np.asarray(us, dtype=float)
+        if us[0].tobytes() == self._held_u:          # the bytes of a float array: ~0.2 us, not ~3
+            dl[0] += self._held_s
+        self._held_u, self._held_s = us[-1].tobytes(), dl[-1]
+        return max(dl) > self.max_hold
 
     def cut(self, step) -> None:
         """Record the transition ``step`` as a break of the chain (zero gain, see the module): the
