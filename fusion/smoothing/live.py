@@ -46,7 +46,7 @@ class LagSink:
 def attach_fixed_lag(system: System, lag: float, emit: Callable[[Estimate], Any]) -> tuple[System, LagSink]:
     """``(recorded system, sink)`` for fixed-lag smoothing with ``lag`` s (>= 0) alongside a run (see
     the module). ConfigError when the filter has no smoother or the scheduler replays late messages."""
-    from .run import smoother_backend
+    from .run import input_max_hold, smoother_backend
 
     if system.spec.scheduler.late_policy == "replay":
         raise ConfigError("smoothing needs scheduler.late_policy: drop (a replay rewinds the recorded chain)")
@@ -54,6 +54,6 @@ def attach_fixed_lag(system: System, lag: float, emit: Callable[[Estimate], Any]
         raise ConfigError(f"--smooth-lag must be a number of seconds >= 0, got {lag}")
     backend = smoother_backend(system.filter)
     fixed = FixedLag(backend.sqrt, lag, system.process.normalize, state_difference(system.layout), emit)
-    log = ForwardLog(backend, system.layout.n, on_step=fixed.on_step, keep=False)
+    log = ForwardLog(backend, system.layout.n, on_step=fixed.on_step, keep=False, max_hold=input_max_hold(system))
     fixed.log = log
     return dataclasses.replace(system, filter=RecordingFilter(system.filter, log)), LagSink(log, fixed)

@@ -9,7 +9,15 @@ The chain (``ForwardLog``): a *node* is the belief between two predictions; upda
 filtered belief in place (same time); a prediction closes the node with one record (filtered mean and
 covariance or conditional factor, gain, predicted mean and covariance) and opens the next. A belief that
 does not come from the last one (a reset by recovery, a re-initialisation) closes the node with a zero
-gain: the smoothed belief before a break is the filtered one. Each estimate the scheduler emits is noted
+gain: the smoothed belief before a break is the filtered one. So does a prediction that holds one input
+sample for longer than the input sensor's ``max_gap`` (``max_hold``: every stream paused, or the IMU
+silent while the others go on): across such a gap the prediction is not the process model's transition
+but a held input with noise widened by a rule of thumb (the INS's ``hold_after``), and its
+cross-covariance is not one the backward pass can use. Over an 8 s pause of a car's recording the
+linearised EKF transition kept one direction of the attitude noise-free (the hold noise is expressed at
+the attitude before the hold, which then turns under the held rate), and the backward pass regressed the
+attitude correction after the pause onto the estimates before it: 8 deg of error, 0.4 deg filtered (the
+srukf carried the norm of a 90 deg quaternion difference back instead). Each estimate the scheduler emits is noted
 with the node it belongs to, so the backward pass can give the smoothed belief at every output: the
 node whose filtered belief it carries (looked up among the last ``RECENT`` nodes), not merely the open
 one, because a caller may see an estimate after the filter has moved on (``fusion.pipeline.Run.push``
@@ -41,13 +49,16 @@ class ForwardLog:
 
     :param on_step: called with ``(node_index, record)`` after each transition record (the fixed-lag
         smoother keeps a window of them); None for the full smoother.
+    :param max_hold: s: a prediction that holds one input sample longer than this breaks the chain (the
+        input sensor's ``max_gap``, see the module); None: never.
     """
 
     REASONS = ("update", "output")
     RECENT = 256   # nodes whose beliefs are kept to place a late-noted estimate
 
     def __init__(self, backend, n: int, chunk: int = 1024, disk: bool | None = None,
-                 on_step: Callable[[int, dict], Any] | None = None, keep: bool = True):
+                 on_step: Callable[[int, dict], Any] | None = None, keep: bool = True,
+                 max_hold: float | None = None):
         self.backend = backend
         self.sqrt = backend.sqrt
         self.n = n
@@ -60,6 +71,10 @@ class ForwardLog:
         self.current: Belief | None = None
         self.nodes = 0          # index of the open node = records so far
         self.breaks = 0
+        self.gap_breaks = 0     # of them, at an input sample held longer than max_hold
+        self.max_hold = max_hold
+        self._held_u: bytes | None = None        # the input sample the last prediction ended holding
+        self._held_s = 0.0                       # s it has been held (applied) so far
         self.unmatched = 0      # estimates whose belief is no recent node's (mapped to the open node)
         self._recent: deque[tuple[int, Belief]] = deque(maxlen=self.RECENT)  # (node, a belief it had)
         self.on_step = on_step
@@ -68,10 +83,11 @@ class ForwardLog:
         return self
 
     # ------------------------------------------------------------------ the chain
-    def _record(self, step) -> None:
+    def _record(self, step, b1: Belief | None = None) -> None:
+        """Close the open node with ``step`` (its ``b1`` opens the next node, unless ``b1`` is given)."""
         b0 = self.current
         assert b0 is not None
-        b1 = step.b1
+        b1 = step.b1 if b1 is None else b1
         rec = {"x": b0.x, "A": step.A, "G": step.G, "x1": b1.x}
         if not self.sqrt:
             rec["P1"] = b1.P if b1.P is not None else b1.cov
@@ -99,6 +115,32 @@ class ForwardLog:
     def transition(self, step) -> None:
         if step is not None:
             self._record(step)
+
+    def held_too_long(self, us: np.ndarray | None, dts) -> bool:
+        """Note a prediction that applies the input samples ``us`` (k, m), sample j over ``dts[j]`` (s);
+        True when it holds one of them longer than ``max_hold`` s in all. Each sample of a run is a new
+        sample, except the first when it is the one the last prediction ended with (the scheduler
+        gives the held sample first): its time so far is added (a hold cut into several predictions
+        by the measurements that arrive during an input gap)."""
+        if us is None or self.max_hold is None:
+            return False
+        dl = dts.tolist() if isinstance(dts, np.ndarray) else [float(d) for d in dts]  # ~10 plain floats
+        if not dl:
+            return False
+        us = np.asarray(us, dtype=float)
+        if us[0].tobytes() == self._held_u:          # the bytes of a float array: ~0.2 us, not ~3
+            dl[0] += self._held_s
+        self._held_u, self._held_s = us[-1].tobytes(), dl[-1]
+        return max(dl) > self.max_hold
+
+    def cut(self, step) -> None:
+        """Record the transition ``step`` as a break of the chain (zero gain, see the module): the
+        smoothed belief before it is the filtered one; the predicted belief opens the next node."""
+        if step is None:
+            return
+        self.breaks += 1
+        self.gap_breaks += 1
+        self._record(self.backend.broken(self.current), b1=step.b1)
 
     def node_of(self, est: Estimate) -> int:
         """The node whose filtered belief ``est`` carries: the open one, else the newest recent node that
@@ -185,14 +227,20 @@ class RecordingFilter:
         log = self.log
         log.enter(belief)
         b1, step = log.backend.predict(belief, process, u, dt)
-        log.transition(step)
+        if log.held_too_long(None if u is None else np.asarray(u)[None], (dt,)):
+            log.cut(step)
+        else:
+            log.transition(step)
         return b1
 
     def predict_inputs(self, belief: Belief, process, us: np.ndarray, dts: np.ndarray) -> Belief:
         log = self.log
         log.enter(belief)
         b1, step = log.backend.predict_inputs(belief, process, us, dts)
-        log.transition(step)
+        if log.held_too_long(us, dts):
+            log.cut(step)
+        else:
+            log.transition(step)
         return b1
 
     def update(self, belief: Belief, model, z, R, gate=None):

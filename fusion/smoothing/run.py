@@ -27,7 +27,7 @@ from .backward import FixedLag, smooth, smoothed_estimates, state_difference
 from .record import ForwardLog, RecordingFilter
 from .store import ChunkStore
 
-__all__ = ["run_smoothed", "smoother_backend"]
+__all__ = ["run_smoothed", "smoother_backend", "input_max_hold"]
 
 
 def smoother_backend(flt):
@@ -35,6 +35,13 @@ def smoother_backend(flt):
     from fusion_plugins.filters.rts import backend_for
 
     return backend_for(flt)
+
+
+def input_max_hold(system: System) -> float | None:
+    """s: the longest an input sample may be held before the chain breaks (``ForwardLog.max_hold``):
+    the input sensors' ``max_gap`` (the shortest, when several give one), None when none gives one."""
+    gaps = [s.max_gap for s in system.sensors.values() if s.role == "input" and s.max_gap is not None]
+    return min(gaps) if gaps else None
 
 
 class _SmoothedStats:
@@ -114,10 +121,11 @@ def run_smoothed(system: System, source: Any, sinks: Sequence[Any] = (), *, lag:
 
     if lag is not None:
         fixed = FixedLag(backend.sqrt, lag, normalize, diff, emit)
-        log = ForwardLog(backend, system.layout.n, chunk, disk, on_step=fixed.on_step, keep=False)
+        log = ForwardLog(backend, system.layout.n, chunk, disk, on_step=fixed.on_step, keep=False,
+                         max_hold=input_max_hold(system))
         fixed.log = log
     else:
-        log = ForwardLog(backend, system.layout.n, chunk, disk)
+        log = ForwardLog(backend, system.layout.n, chunk, disk, max_hold=input_max_hold(system))
     wrapped = dataclasses.replace(system, filter=RecordingFilter(system.filter, log))
 
     class _Forward:
@@ -168,6 +176,7 @@ def run_smoothed(system: System, source: Any, sinks: Sequence[Any] = (), *, lag:
                     **({"lag_s": lag} if lag is not None else {}),
                     **stats.summary(system),
                     "nodes": nodes, "estimates": stats.count, "breaks": log.breaks,
+                    **({"input_gap_breaks": log.gap_breaks} if log.gap_breaks else {}),
                     "forward_wall_s": result.wall_s, "backward_wall_s": backward_s,
                     "store": {"on_disk": any(s.on_disk or s.bytes_on_disk for s in stores),
                               "bytes_on_disk": sum(s.bytes_on_disk for s in stores)}}
