@@ -23,6 +23,7 @@ from fusion.api import MalformedMessage, Message
 _LABEL = re.compile(r"^[A-Za-z_][A-Za-z0-9_.:\-/]*$")
 _NONFINITE = {"nan", "+nan", "-nan", "inf", "+inf", "-inf", "infinity", "+infinity", "-infinity"}
 _CHECKSUM = re.compile(r"\*([0-9A-Fa-f]{2})$")
+_PASS_THROUGH_CHECKSUM = re.compile(r"\*[0-9A-Fa-f]{2}\*([0-9A-Fa-f]{2})$")   # $...*HH (sentence) *HH (line)
 _SENSOR = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
 
 
@@ -34,6 +35,15 @@ def checksum(body: str) -> str:
     return f"{c:02X}"
 
 
+def _shown(text: str, most: int = 40) -> str:
+    """``text`` quoted for a message, cut to ``most`` characters with its length said: a 1 MiB field made a
+    1 MiB line on stderr (tester3 #18)."""
+    text = text.strip()
+    if len(text) <= most:
+        return repr(text)
+    return f"{text[:most]!r}... ({len(text)} characters)"
+
+
 def _field(tok: str) -> float | str:
     try:
         v = float(tok)
@@ -42,11 +52,11 @@ def _field(tok: str) -> float | str:
         if tok.lower() not in _NONFINITE and _LABEL.match(tok):
             return tok
         # read before any decoder: say so, and what the line would need for a decoder to see it
-        raise MalformedMessage(f"bad number {tok!r} (fields are numbers or labels: a letter or _, then letters, "
+        raise MalformedMessage(f"bad number {_shown(tok)} (fields are numbers or labels: a letter or _, then letters, "
                                "digits, _ . : - /; read before any decoder, which gets the raw text only when "
                                "the values start with '$')") from None
     if v - v != 0.0:  # nan or inf (cheaper than math.isfinite on the hot path)
-        raise MalformedMessage(f"non-finite value {tok.strip()!r}")
+        raise MalformedMessage(f"non-finite value {_shown(tok)}")
     return v
 
 
@@ -135,23 +145,33 @@ def _parse_stripped(line: str, lineno: int | None, head: list[str] | None = None
     try:
         t = float(t_text)
     except ValueError:
-        raise MalformedMessage(f"bad time {t_text.strip()!r}") from None
+        raise MalformedMessage(f"bad time {_shown(t_text)}") from None
     if t - t != 0.0:
-        raise MalformedMessage(f"non-finite time {t_text.strip()!r}")
+        raise MalformedMessage(f"non-finite time {_shown(t_text)}")
     if sensor not in _GOOD_SENSORS:
         raw_sensor = sensor
         sensor = sensor.strip()
         if not _SENSOR.match(sensor):
-            raise MalformedMessage(f"bad sensor name {sensor!r}")
+            raise MalformedMessage(f"bad sensor name {_shown(sensor)}")
         if len(_GOOD_SENSORS) < 1000 and sensor == raw_sensor:
             _GOOD_SENSORS.add(sensor)
     if "$" in rest and rest.lstrip()[:1] == "$":
-        return _new_message(Message, (t, sensor, (rest.strip(),), lineno))
+        sentence = rest.strip()
+        m = _PASS_THROUGH_CHECKSUM.search(sentence)
+        if m:
+            # the sentence's own *HH, then the line's (docs/tui.md recommends one on a serial line): the line
+            # checksum is checked and stripped, the sentence's left to its decoder (tester4 #9: every GPS
+            # line of such a device was malformed)
+            body = line.rstrip()[: -3]
+            if checksum(body) != m.group(1).upper():
+                raise MalformedMessage(f"bad checksum *{m.group(1)} (computed *{checksum(body)})")
+            sentence = sentence[: -3]
+        return _new_message(Message, (t, sensor, (sentence,), lineno))
     parts = rest.split(",")
     if "*" in parts[-1]:
         m = _CHECKSUM.search(line)
         if not m:
-            raise MalformedMessage(f"bad checksum field {parts[-1].strip()!r}")
+            raise MalformedMessage(f"bad checksum field {_shown(parts[-1])}")
         body = line[: m.start()]
         if checksum(body) != m.group(1).upper():
             raise MalformedMessage(f"bad checksum *{m.group(1)} (computed *{checksum(body)})")

@@ -6,6 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fusion.api import MalformedMessage, Message
+from fusion import logformat
 from fusion.logformat import ParsedStream, checksum, format_line, iter_messages, parse_line
 
 
@@ -107,3 +108,28 @@ def test_well_formed_lines_are_never_dropped(records, noise):
     for m, (t, s, vals, _) in zip(got, records):
         assert m.t == t and m.sensor == s
         assert all((a == b) or (isinstance(a, float) and math.isclose(a, b)) for a, b in zip(m.values, vals))
+
+
+def test_a_line_checksum_after_a_passed_through_sentence_is_checked_and_stripped():
+    """docs/tui.md recommends a line checksum on a serial line; on an NMEA pass-through line it follows the
+    sentence's own: '$GPGGA,...*53*21'. It made every GPS line malformed (tester4 #9)."""
+    import pynmea2
+
+    nmea = "GPGGA,000000.00,3724.5000,N,12206.0000,W,1,08,0.9,10.0,M,0.0,M,,"
+    body = f"12.5,gps,${nmea}*{logformat.checksum(nmea)}"                  # the sentence's own checksum
+    sentence = body.split(",", 2)[2]
+    m = logformat.parse_line(f"{body}*{logformat.checksum(body)}")
+    assert m.values == (sentence,) and pynmea2.parse(m.values[0]).num_sats == "08"
+    assert logformat.parse_line(body).values == (sentence,)              # without one: as before
+    with pytest.raises(logformat.MalformedMessage, match="bad checksum"):
+        logformat.parse_line(body + "*00")
+
+
+def test_a_huge_bad_field_is_quoted_cut():
+    """A 1 MiB number made a 1 MiB line on stderr (tester3 #18): the message quotes 40 characters and says
+    how long the field was."""
+    for line, what in ((f"1.0,uwb,B1,{'1' * 1_000_000}", "non-finite value"), (f"1.0,uwb,B1,{'x' * 500}!", "bad number"),
+                       (f"{'1' * 100_000},uwb,B1,2", "non-finite time"), (f"{'z' * 100_000},uwb,B1,2", "bad time")):
+        with pytest.raises(logformat.MalformedMessage, match=what) as exc:
+            logformat.parse_line(line)
+        assert len(str(exc.value)) < 300 and "characters)" in str(exc.value)
