@@ -23,7 +23,11 @@ window (the filter's initial position, ``initial.from_sensor``). ``origin`` / ``
 
 Counted, never fused: a bad or missing checksum and a sentence pynmea2 cannot parse raise
 MalformedMessage (counted ``malformed``); an epoch without a valid fix (GGA quality 0, RMC status V, an
-empty position) raises RejectedMessage (counted ``rejected``), once per epoch. An epoch left incomplete
+empty position) raises RejectedMessage (counted ``rejected``), once per epoch. GGA fix quality is a code,
+not a scale (NMEA 0183: 0 invalid, 1 GPS, 2 DGPS, 3 PPS, 4 RTK fixed, 5 RTK float, 6 estimated / dead
+reckoning, 7 manual input, 8 simulation): ``min_quality`` ranks the measured fixes 1-5 only, and 6-8,
+which are no measurement (a receiver in a tunnel keeps sending its own extrapolation as quality 6), are
+rejected unless ``qualities`` lists them. An epoch left incomplete
 when the next one starts is dropped and counted in ``counters['incomplete']``.
 """
 from __future__ import annotations
@@ -32,11 +36,13 @@ import math
 from typing import Any, ClassVar
 
 import numpy as np
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 
 from fusion.api import BuildContext, Decoder, MalformedMessage, Message, Params, RejectedMessage
 
 KNOT = 1852.0 / 3600.0   # m/s
+# GGA fix quality codes that are no measurement (NMEA 0183): used only when ``qualities`` lists them
+NOT_MEASURED = {6: "estimated (dead reckoning)", 7: "manual input", 8: "simulation"}
 _KNOWN = ("GGA", "RMC", "VTG", "GSA")
 
 
@@ -57,8 +63,26 @@ class NmeaParams(Params):
                             "given (the static start); 0: the first valid fix is the origin")
     epoch: list[str] = Field(["GGA", "RMC"], min_length=1, description="sentences that make one epoch "
                              "complete (the fix is emitted when all of them are in)")
-    min_quality: int = Field(1, ge=1, description="lowest GGA fix quality used (1 GPS, 2 DGPS, 4 RTK, ...)")
+    min_quality: int = Field(1, ge=1, le=5, description="lowest GGA fix quality used among the measured "
+                             "fixes 1 GPS, 2 DGPS, 3 PPS, 4 RTK fixed, 5 RTK float (4: 4 and 5 pass); 6 "
+                             "dead reckoning, 7 manual and 8 simulation never pass (see qualities)")
+    qualities: list[int] | None = Field(None, min_length=1, description="the GGA fix qualities used, "
+                                        "exactly (e.g. [1, 2, 4, 5]); replaces min_quality; list 6 to fuse a "
+                                        "receiver's dead reckoning")
     min_satellites: int = Field(4, ge=0, description="fewer satellites than this: the fix is rejected")
+
+    @field_validator("qualities")
+    @classmethod
+    def _codes(cls, v: list[int] | None) -> list[int] | None:
+        if v is not None and any(not 1 <= q <= 8 for q in v):
+            raise ValueError(f"GGA fix qualities are 1-8 (0 is no fix), got {v}")
+        return v
+
+    @model_validator(mode="after")
+    def _one_rule(self):
+        if self.qualities is not None and "min_quality" in self.model_fields_set:
+            raise ValueError("give min_quality or qualities (the exact list), not both")
+        return self
 
     @field_validator("epoch")
     @classmethod
@@ -106,6 +130,8 @@ class NmeaDecoder(Decoder):
         super().__init__(params, context)
         p: NmeaParams = self.params  # type: ignore[assignment]
         self._need = frozenset(p.epoch)
+        self._qualities = (frozenset(p.qualities) if p.qualities is not None
+                           else frozenset(range(p.min_quality, 6)))
         self.origin: tuple[float, float, float] | None = None
         self.origin_source = "config" if p.origin is not None else f"mean of the fixes of the first {p.origin_s:g} s"
         if p.origin is not None:
@@ -182,8 +208,9 @@ class NmeaDecoder(Decoder):
         sats = _num(gga.num_sats)
         rmc = epoch.get("RMC")
         why = None
-        if quality < p.min_quality:
-            why = f"GGA fix quality {quality}"
+        if quality not in self._qualities:
+            kind = NOT_MEASURED.get(quality)
+            why = f"GGA fix quality {quality}" + (f" ({kind}: not a measured fix)" if kind else "")
         elif rmc is not None and rmc.status != "A":
             why = f"RMC status {rmc.status!r}"
         elif not gga.lat or not gga.lon or not math.isfinite(_num(gga.altitude)):

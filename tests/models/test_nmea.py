@@ -195,3 +195,40 @@ def test_bad_fixes_in_the_static_window_do_not_move_it_into_the_drive():
     assert outs[0].t == 9.0 and outs[0].values[9] == 1.0        # the origin fix: one fix, not an average
     np.testing.assert_allclose(d.origin, pymap3d.ned2geodetic(*drive[9], lat0, lon0, h0), atol=1e-3, rtol=0)
     np.testing.assert_allclose(outs[-1].values[:3], drive[-1] - drive[9], atol=2e-3)
+
+
+def _epoch_with_quality(d: NmeaDecoder, q: int):
+    gga = sentence(f"GPGGA,123519,4807.038,N,01131.000,E,{q},08,0.9,545.4,M,46.9,M,,")
+    assert d.decode(msg(gga)) is None
+    return d.decode(msg(RMC))
+
+
+@pytest.mark.parametrize("q", [6, 7, 8])
+@pytest.mark.parametrize("min_quality", [1, 4])
+def test_dead_reckoning_manual_and_simulated_fixes_are_refused(q, min_quality):
+    # GGA quality is a code: 6 (dead reckoning), 7 (manual), 8 (simulation) are no measurement, whatever
+    # min_quality is (tester4 #2: they passed min_quality 4, "RTK only", as better than RTK)
+    d = dec(origin=ORIGIN, min_quality=min_quality)
+    with pytest.raises(RejectedMessage, match=f"quality {q} .*not a measured fix"):
+        _epoch_with_quality(d, q)
+    assert d.counters["invalid"] == 1
+
+
+def test_min_quality_ranks_the_measured_fixes_and_qualities_lists_them_exactly():
+    passed = {q for q in range(1, 9) if _passes(dict(min_quality=4), q)}
+    assert passed == {4, 5}
+    assert {q for q in range(1, 9) if _passes({}, q)} == {1, 2, 3, 4, 5}
+    assert {q for q in range(1, 9) if _passes(dict(qualities=[1, 2, 6]), q)} == {1, 2, 6}
+    with pytest.raises(ValueError, match="not both"):
+        NmeaParams(min_quality=2, qualities=[1])
+    with pytest.raises(ValueError):
+        NmeaParams(qualities=[0])
+    with pytest.raises(ValueError):
+        NmeaParams(min_quality=6)
+
+
+def _passes(params: dict, q: int) -> bool:
+    try:
+        return _epoch_with_quality(dec(origin=ORIGIN, **params), q) is not None
+    except RejectedMessage:
+        return False
