@@ -75,3 +75,18 @@ def test_bad_nmea_lines_are_counted_not_fatal(tmp_path):
     s = run(tmp_path, "--input", str(log))
     gps = s["sensors"]["gps"]
     assert gps["malformed"] == 3
+
+
+def test_a_gps_stream_starting_after_the_imu_still_starts_the_filter_on_the_car(tmp_path):
+    """tester3 #8: with the GPS sentences starting TTFF s after the IMU, the origin window (origin_s of GPS
+    messages) ran into the drive; the filter started at the origin at rest while the car moved (4 m/s, sd
+    0.05) and diverged to km, exit 0. Now the first moving fix ends the window and starts the filter."""
+    lines = (ROOT / "recordings" / "car_gps_mag.log").read_text().splitlines()
+    for ttff in (5.0, 30.0):
+        keep = [ln for ln in lines if ln.startswith("#") or ",gps," not in ln or float(ln.split(",")[0]) >= ttff]
+        log = tmp_path / f"late{ttff:g}.log"
+        log.write_text("\n".join(keep) + "\n")
+        s = run(tmp_path, "--input", str(log))
+        assert s["errors"]["position_rmse_m"] < RAW_GPS_RMS / 2, ttff
+        assert s["sensors"]["gps"]["rejected"] <= 2, ttff
+        assert "static fixes before the first moving one" in s["info"]["gps"]["decoder"]["origin_source"]
