@@ -90,3 +90,22 @@ def test_a_gps_stream_starting_after_the_imu_still_starts_the_filter_on_the_car(
         assert s["errors"]["position_rmse_m"] < RAW_GPS_RMS / 2, ttff
         assert s["sensors"]["gps"]["rejected"] <= 2, ttff
         assert "static fixes before the first moving one" in s["info"]["gps"]["decoder"]["origin_source"]
+
+
+def test_without_magnetometer_samples_in_the_alignment_the_heading_is_left_to_the_gps(tmp_path):
+    """tester3 #11: no magnetometer line reaches the alignment; the filter started from the config's yaw
+    guess (here 90 deg off the truth) held at its sd 0.02 rad and every GPS fix was gated out (1655 m,
+    exit 0). The heading is now unknown (sd ~104 deg) and a sigma-point filter takes it from the GPS
+    velocity. (The EKF's linearisation cannot bridge a 90 deg heading error: tester3 #11's report.)"""
+    lines = (ROOT / "recordings" / "car_gps_mag.log").read_text().splitlines()
+    log = tmp_path / "nomag.log"
+    log.write_text("\n".join(ln for ln in lines if ",mag," not in ln) + "\n")
+    text = CONFIG.read_text().replace("q: [1, 0, 0, 0]", "q: [0.7071068, 0, 0, 0.7071068]")
+    assert "0.7071068" in text
+    cfg = tmp_path / "yaw90.yaml"
+    cfg.write_text(text.replace("recording: ../recordings/car_gps_mag.log", f"recording: {log}"))
+    out = tmp_path / "s.json"
+    assert main(["run", str(cfg), "-q", "--filter", "ukf", "--summary-json", str(out)]) == 0
+    s = json.loads(out.read_text())
+    assert s["errors"]["position_rmse_m"] < RAW_GPS_RMS / 2
+    assert s["sensors"]["gps"]["rejected"] <= 2
