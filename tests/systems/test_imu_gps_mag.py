@@ -109,3 +109,18 @@ def test_without_magnetometer_samples_in_the_alignment_the_heading_is_left_to_th
     s = json.loads(out.read_text())
     assert s["errors"]["position_rmse_m"] < RAW_GPS_RMS / 2
     assert s["sensors"]["gps"]["rejected"] <= 2
+
+
+@pytest.mark.parametrize("filter_name", ["ekf", "ukf"])
+def test_a_pause_of_every_stream_in_a_corner_is_bridged(tmp_path, filter_name):
+    """tester3 #4: all streams silent for 10 s from 80 s, in the first corner (~90 deg at 0.33 rad/s). The
+    held sample (the corner's rate) was integrated over the 10 s: the attitude 100+ deg off, every later
+    fix gated out, 50-107 km RMSE, exit 0. Now the state coasts past hold_after with a bounded hold noise,
+    and the gps recovery re-sets a filter that is locked out all the same (the UKF, once)."""
+    lines = (ROOT / "recordings" / "car_gps_mag.log").read_text().splitlines()
+    log = tmp_path / "pause.log"
+    log.write_text("\n".join(ln for ln in lines if ln.startswith("#") or not 80.0 <= float(ln.split(",")[0]) < 90.0)
+                   + "\n")
+    s = run(tmp_path, "--input", str(log), "--filter", filter_name)
+    assert s["errors"]["position_rmse_m"] < 10.0
+    assert s["sensors"]["gps"]["rejected"] < 10 and s["health"]["resets"] <= 1
