@@ -19,14 +19,17 @@ the fixes after bring the velocity.
 The origin is the config's ``origin``, else the first accepted fix (the recording's header ``origin``, to
 which ``fusion import`` also refers the reference: docs/import.md), so a flight log started in the air
 needs no static period. A fix below ``min_fix`` (2: 2-D, 3: 3-D) or with fewer than ``min_satellites``
-is rejected (counted), never fused; a line of another layout is malformed.
+is rejected (counted), never fused; a line of another layout is malformed. The fix type is a code, not a
+scale: ``min_fix`` ranks the measured fixes 2-6 (2-D, 3-D, DGPS, RTK float, RTK fixed: PX4's
+``sensor_gps.fix_type``, ArduPilot's GPS status), and 7 and 8 (PX4: 8 "extrapolated", the receiver's own
+dead reckoning; MAVLink: 7 static, 8 PPP) are rejected unless ``fix_types`` lists them.
 """
 from __future__ import annotations
 
 import math
 from typing import Any, ClassVar
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from fusion.api import BuildContext, Decoder, MalformedMessage, Message, Params, RejectedMessage
 
@@ -50,11 +53,22 @@ class GpsFieldsParams(Params):
     """YAML parameters of ``gps_fields``."""
 
     origin: Origin | None = Field(None, description="origin of the local NED frame; None: the first accepted fix")
-    min_fix: int = Field(MIN_FIX, ge=1, description="lowest fix type used (2: 2-D, 3: 3-D, 4: DGPS, 5/6: RTK)")
+    min_fix: int = Field(MIN_FIX, ge=1, le=6, description="lowest fix type used among 2: 2-D, 3: 3-D, 4: "
+                         "DGPS, 5: RTK float, 6: RTK fixed; 7 and 8 (PX4 8: extrapolated) never pass (fix_types)")
+    fix_types: list[int] | None = Field(None, min_length=1, description="the fix types used, exactly (e.g. "
+                                        "[3, 4, 5, 6, 8] for a MAVLink source whose 8 is PPP); replaces min_fix")
     position_only_s: float = Field(0.0, ge=0, description="s after the origin fix during which fixes carry "
                                    "their position only (velocity nan): set it >= initial.align_s, the "
                                    "filter's initial fix (the latest before the start) being a position")
     min_satellites: int = Field(MIN_SATELLITES, ge=0, description="fewer satellites: rejected (PX4 EKF2_REQ_NSATS default 6)")
+
+    @model_validator(mode="after")
+    def _one_rule(self):
+        if self.fix_types is not None and "min_fix" in self.model_fields_set:
+            raise ValueError("give min_fix or fix_types (the exact list), not both")
+        if self.fix_types is not None and any(not 1 <= f <= 8 for f in self.fix_types):
+            raise ValueError(f"fix types are 1-8, got {self.fix_types}")
+        return self
 
 
 class GpsFieldsDecoder(Decoder):
@@ -69,6 +83,7 @@ class GpsFieldsDecoder(Decoder):
         self.origin: tuple[float, float, float] | None = None   # lat deg, lon deg, ellipsoidal height m
         self.origin_source = "config" if p.origin is not None else "the first accepted fix"
         self._t0 = 0.0                                          # s, time of the origin fix
+        self._fix_types = frozenset(p.fix_types) if p.fix_types is not None else frozenset(range(p.min_fix, 7))
         self.counters: dict[str, int] = {"fixes": 0, "rejected": 0}
 
     def info(self) -> dict[str, Any]:
@@ -95,10 +110,12 @@ class GpsFieldsDecoder(Decoder):
         hacc, vacc, geoid = f.get("hacc", math.nan), f.get("vacc", math.nan), f.get("geoid", 0.0)
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 360.0) or not math.isfinite(alt):
             raise MalformedMessage(f"gps_fields: position out of range (lat {lat}, lon {lon}, alt {alt})")
-        if fix < p.min_fix or nsat < p.min_satellites:
+        if fix not in self._fix_types or nsat < p.min_satellites:
             self.counters["rejected"] += 1
-            raise RejectedMessage(f"gps_fields: fix type {fix:g} with {nsat:g} satellites (need fix >= "
-                                  f"{p.min_fix}, satellites >= {p.min_satellites})")
+            need = (f"fix type in {sorted(self._fix_types)}" if p.fix_types is not None
+                    else f"fix >= {p.min_fix} and <= 6 (7, 8: no measured fix)")
+            raise RejectedMessage(f"gps_fields: fix type {fix:g} with {nsat:g} satellites (need {need}, "
+                                  f"satellites >= {p.min_satellites})")
         h = alt + geoid                                   # ellipsoidal height (m)
         if self.origin is None:
             self._t0 = message.t

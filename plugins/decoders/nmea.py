@@ -21,9 +21,23 @@ the origin, and one position fix at the origin (NED 0, ``averaged`` = N) is emit
 window (the filter's initial position, ``initial.from_sensor``). ``origin`` / ``origin_source`` /
 ``info()`` tell which origin was used.
 
+The window is the static start, not only a duration: a fix whose speed over ground (RMC, VTG) is above
+``static_speed`` is moving and is never averaged. It ends the window early (a GPS stream that starts after
+the IMU, so that its first ``origin_s`` seconds run into the drive): the static fixes before it make the
+origin, and the moving fix itself is emitted with its velocity and its own sd (``averaged`` = 1), so the
+filter starts where the vehicle is, at the speed it has, instead of at the origin at rest. A stream
+without a static fix (the first valid fix already moving) takes that fix as the origin, emitted the same
+way. Either case is told once in ``events`` (a ``warning``, taken by :meth:`take_events`), in
+``origin_source`` and in ``counters['moving_start']``. Without a speed (an epoch of GGA alone) the window
+is the duration alone.
+
 Counted, never fused: a bad or missing checksum and a sentence pynmea2 cannot parse raise
 MalformedMessage (counted ``malformed``); an epoch without a valid fix (GGA quality 0, RMC status V, an
-empty position) raises RejectedMessage (counted ``rejected``), once per epoch. An epoch left incomplete
+empty position) raises RejectedMessage (counted ``rejected``), once per epoch. GGA fix quality is a code,
+not a scale (NMEA 0183: 0 invalid, 1 GPS, 2 DGPS, 3 PPS, 4 RTK fixed, 5 RTK float, 6 estimated / dead
+reckoning, 7 manual input, 8 simulation): ``min_quality`` ranks the measured fixes 1-5 only, and 6-8,
+which are no measurement (a receiver in a tunnel keeps sending its own extrapolation as quality 6), are
+rejected unless ``qualities`` lists them. An epoch left incomplete
 when the next one starts is dropped and counted in ``counters['incomplete']``.
 """
 from __future__ import annotations
@@ -32,11 +46,13 @@ import math
 from typing import Any, ClassVar
 
 import numpy as np
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 
-from fusion.api import BuildContext, Decoder, MalformedMessage, Message, Params, RejectedMessage
+from fusion.api import BuildContext, Decoder, Event, MalformedMessage, Message, Params, RejectedMessage
 
 KNOT = 1852.0 / 3600.0   # m/s
+# GGA fix quality codes that are no measurement (NMEA 0183): used only when ``qualities`` lists them
+NOT_MEASURED = {6: "estimated (dead reckoning)", 7: "manual input", 8: "simulation"}
 _KNOWN = ("GGA", "RMC", "VTG", "GSA")
 
 
@@ -57,8 +73,29 @@ class NmeaParams(Params):
                             "given (the static start); 0: the first valid fix is the origin")
     epoch: list[str] = Field(["GGA", "RMC"], min_length=1, description="sentences that make one epoch "
                              "complete (the fix is emitted when all of them are in)")
-    min_quality: int = Field(1, ge=1, description="lowest GGA fix quality used (1 GPS, 2 DGPS, 4 RTK, ...)")
+    min_quality: int = Field(1, ge=1, le=5, description="lowest GGA fix quality used among the measured "
+                             "fixes 1 GPS, 2 DGPS, 3 PPS, 4 RTK fixed, 5 RTK float (4: 4 and 5 pass); 6 "
+                             "dead reckoning, 7 manual and 8 simulation never pass (see qualities)")
+    qualities: list[int] | None = Field(None, min_length=1, description="the GGA fix qualities used, "
+                                        "exactly (e.g. [1, 2, 4, 5]); replaces min_quality; list 6 to fuse a "
+                                        "receiver's dead reckoning")
     min_satellites: int = Field(4, ge=0, description="fewer satellites than this: the fix is rejected")
+    static_speed: float = Field(0.5, gt=0, description="m/s: a fix with a higher speed over ground is moving: "
+                                "it ends the origin's window and is never averaged into the origin (5x a "
+                                "receiver's ~0.1 m/s velocity noise at rest)")
+
+    @field_validator("qualities")
+    @classmethod
+    def _codes(cls, v: list[int] | None) -> list[int] | None:
+        if v is not None and any(not 1 <= q <= 8 for q in v):
+            raise ValueError(f"GGA fix qualities are 1-8 (0 is no fix), got {v}")
+        return v
+
+    @model_validator(mode="after")
+    def _one_rule(self):
+        if self.qualities is not None and "min_quality" in self.model_fields_set:
+            raise ValueError("give min_quality or qualities (the exact list), not both")
+        return self
 
     @field_validator("epoch")
     @classmethod
@@ -106,6 +143,8 @@ class NmeaDecoder(Decoder):
         super().__init__(params, context)
         p: NmeaParams = self.params  # type: ignore[assignment]
         self._need = frozenset(p.epoch)
+        self._qualities = (frozenset(p.qualities) if p.qualities is not None
+                           else frozenset(range(p.min_quality, 6)))
         self.origin: tuple[float, float, float] | None = None
         self.origin_source = "config" if p.origin is not None else f"mean of the fixes of the first {p.origin_s:g} s"
         if p.origin is not None:
@@ -116,12 +155,18 @@ class NmeaDecoder(Decoder):
         self._window_t0: float | None = None  # the first GPS message's time: the static start's window opens
         self._origin_ecef: tuple | None = None  # (origin, its ECEF) for _ned
         self.counters: dict[str, int] = {"epochs": 0, "invalid": 0, "incomplete": 0, "origin_fixes": 0}
+        self.events: list[Event] = []          # a moving start's warning, until take_events()
 
     # ------------------------------------------------------------------ public
     def info(self) -> dict[str, Any]:
         """The origin used (deg, deg, m) and where it came from, and the epoch counters."""
         o = None if self.origin is None else {"lat_deg": self.origin[0], "lon_deg": self.origin[1], "alt_m": self.origin[2]}
         return {"origin": o, "origin_source": self.origin_source, **self.counters}
+
+    def take_events(self) -> list[Event]:
+        """The events since the last call (a moving start's ``warning``), forgotten once taken."""
+        events, self.events = self.events, []
+        return events
 
     def decode(self, message: Message) -> Message | None:
         if self._window_t0 is None:
@@ -182,8 +227,9 @@ class NmeaDecoder(Decoder):
         sats = _num(gga.num_sats)
         rmc = epoch.get("RMC")
         why = None
-        if quality < p.min_quality:
-            why = f"GGA fix quality {quality}"
+        if quality not in self._qualities:
+            kind = NOT_MEASURED.get(quality)
+            why = f"GGA fix quality {quality}" + (f" ({kind}: not a measured fix)" if kind else "")
         elif rmc is not None and rmc.status != "A":
             why = f"RMC status {rmc.status!r}"
         elif not gga.lat or not gga.lon or not math.isfinite(_num(gga.altitude)):
@@ -220,6 +266,9 @@ class NmeaDecoder(Decoder):
         if "GSA" in epoch and math.isfinite(_num(epoch["GSA"].hdop)):
             hdop = _num(epoch["GSA"].hdop)
         averaged = 1.0
+        if self.origin is None and math.isfinite(speed) and speed > p.static_speed:
+            return self._moving_start(pymap3d, message, (lat, lon, h), speed,
+                                      (vn, ve, hdop, vdop, sats, float(quality)))
         if self.origin is None:
             ecef = np.array(pymap3d.geodetic2ecef(lat, lon, h), dtype=float)
             if not self._avg and p.origin_s > 0 and message.t - self._window_t0 >= p.origin_s:  # type: ignore[operator]
@@ -240,3 +289,30 @@ class NmeaDecoder(Decoder):
             n, e, d = self._ned(pymap3d, lat, lon, h)
         return Message(message.t, message.sensor, (float(n), float(e), float(d), vn, ve, hdop, vdop, sats,
                                                    float(quality), averaged), message.line)
+
+    def _moving_start(self, pymap3d, message: Message, fix: tuple[float, float, float], speed: float,
+                      rest: tuple) -> Message:
+        """The origin when the first moving fix (speed m/s) comes before the window's end: the mean of the
+        static fixes before it, else this fix; the fix itself is emitted with its velocity (module doc)."""
+        p: NmeaParams = self.params  # type: ignore[assignment]
+        t = float(message.t)
+        if self._avg:
+            mean = np.mean(self._avg, axis=0)
+            self.origin = tuple(float(v) for v in pymap3d.ecef2geodetic(*mean))  # type: ignore[assignment]
+            self.origin_source = (f"mean of the {len(self._avg)} static fixes before the first moving one, at "
+                                  f"{t:.3f} s ({speed:.2f} m/s)")
+            why = (f"the GPS stream's static start ended at {t:.3f} s ({speed:.2f} m/s > static_speed "
+                   f"{p.static_speed:g}), before its origin_s {p.origin_s:g} s: the origin is the mean of the "
+                   f"{len(self._avg)} static fixes, the filter starts from the moving fix and its velocity")
+            self._avg = []
+            n, e, d = self._ned(pymap3d, *fix)
+        else:
+            self.origin = fix
+            self.origin_source = f"the first valid fix, at {t:.3f} s, moving at {speed:.2f} m/s (no static fix)"
+            why = (f"no static GPS fix: the first valid fix, at {t:.3f} s, moves at {speed:.2f} m/s (> static_speed "
+                   f"{p.static_speed:g}); it is the origin and the filter starts from it and its velocity, "
+                   "not from a fix of the static start")
+            n = e = d = 0.0
+        self.counters["moving_start"] = 1          # only then in info(): a static start's summary is unchanged
+        self.events.append(Event(t, "warning", message.sensor, f"nmea: {why}"))
+        return Message(message.t, message.sensor, (float(n), float(e), float(d), *rest, 1.0), message.line)

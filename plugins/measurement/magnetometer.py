@@ -1,13 +1,14 @@
 """Measurement ``magnetometer``: the Earth's field seen in the body frame, ``h = C_n^b(q) m_n`` (paper 002 sec. 2.3)."""
 from __future__ import annotations
 
+import math
 from typing import ClassVar, Literal, Sequence
 
 import numpy as np
 from pydantic import Field, model_validator
 
 from fusion import quaternion as quat
-from fusion.api import (BuildContext, ConfigError, MalformedMessage, MeasurementModel, Message, Observation, Params,
+from fusion.api import (BuildContext, ConfigError, Event, MalformedMessage, MeasurementModel, Message, Observation, Params,
                         RejectedMessage)
 
 
@@ -78,6 +79,9 @@ class MagnetometerParams(FieldParams):
         return self
 
 
+# Heading sd (rad) after an alignment without a magnetometer sample: a uniform heading has sd pi / sqrt(3);
+# a linearised quaternion filter cannot carry more (the q block's errors are about unit components)
+HEADING_UNKNOWN_SD = math.pi / math.sqrt(3.0)
 _FLIP = np.array([1.0, -1.0, -1.0, -1.0])
 _ROT, _NORM = quat.ROTATION_FORM, quat.NORM_TERMS
 _K4 = quat.ROTATION_FORM.reshape(4, 4, 3, 3)          # [i, j, r, c]: R(q)_rc = q_i q_j K4[i, j, r, c]
@@ -112,6 +116,7 @@ class Magnetometer(MeasurementModel):
             self._set_field(self.params.field())  # type: ignore[attr-defined]
         self._aligned = False      # set by align_state: the static start is over
         self._heading_sd: float | None = None   # deg, field_source: alignment: of the attitude it rotated by
+        self.events: list[Event] = []          # an alignment without samples: its warning, until take_events()
 
     def _set_field(self, m: np.ndarray) -> None:
         self.m_n = m / np.linalg.norm(m) if self.direction_only else np.asarray(m, dtype=float)
@@ -169,8 +174,10 @@ class Magnetometer(MeasurementModel):
             if self._heading_sd <= self.params.max_heading_sd_deg:  # type: ignore[attr-defined]
                 self._set_field(np.mean(quat.rotate(q0, np.array([o.z for o in observations])), axis=0))
             return x0, P0
-        if method == "none" or not observations:
+        if method == "none":
             return x0, P0
+        if not observations:
+            return self._heading_unknown(x0, P0)
         layout = self.context.layout
         x0 = np.array(x0, dtype=float, copy=True)
         P0 = np.array(P0, dtype=float, copy=True)
@@ -201,6 +208,38 @@ class Magnetometer(MeasurementModel):
             P0[self._q, ba] = cross
             P0[ba, self._q] = cross.T
         return x0, P0
+
+    def _heading_unknown(self, x0: np.ndarray, P0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(x0, P0) of an alignment without a magnetometer sample: the attitude the process levelled (roll
+        and pitch from the mean specific force) with its tilt sd from the accelerometer side of TRIAD, and
+        the heading unknown (sd HEADING_UNKNOWN_SD rad) instead of the config's guess held at its sd; one
+        ``warning`` in ``events``."""
+        from fusion_plugins.measurement.attitude import covariance_in_state
+
+        layout = self.context.layout
+        x0 = np.array(x0, dtype=float, copy=True)
+        P0 = np.array(P0, dtype=float, copy=True)
+        q = x0[self._q]
+        q = quat.normalize(q) if np.any(q) else np.array([1.0, 0.0, 0.0, 0.0])
+        var = self.params.align_accel_sd ** 2  # type: ignore[attr-defined]
+        if "ba" in layout:  # type: ignore[operator]
+            var += float(np.trace(P0[layout["ba"], layout["ba"]])) / 3.0  # type: ignore[index]
+        g = float(self.context.extra.get("gravity", 9.80665))
+        tilt = var / g ** 2
+        P0[self._q, :] = 0.0
+        P0[:, self._q] = 0.0
+        P0[self._q, self._q] = covariance_in_state(q, np.diag([tilt, tilt, HEADING_UNKNOWN_SD ** 2]))
+        self.events.append(Event(math.nan, "warning", self.context.sensor,
+                                 "no magnetometer sample in the alignment window (initial.align_s): heading "
+                                 f"unknown (sd {math.degrees(HEADING_UNKNOWN_SD):.0f} deg), roll and pitch from "
+                                 "the accelerometer; the heading comes from the later magnetometer samples or "
+                                 "the GPS velocity"))
+        return x0, P0
+
+    def take_events(self) -> list[Event]:
+        """The events since the last call (an alignment without samples), forgotten once taken."""
+        events, self.events = self.events, []
+        return events
 
     def observe(self, message: Message) -> Observation | None:
         """Observation of a sample ``mx my mz`` (FRD); None after the static start with ``updates: false``."""

@@ -14,6 +14,16 @@ from .ins_noise import InsNoise
 from .ins_params import (ADIS16364_ACCEL_BIAS_RW, ADIS16364_ACCEL_ND, ADIS16364_GYRO_BIAS_RW, ADIS16364_GYRO_ND,  # noqa: F401
                          EARTH_RATE, STANDARD_GRAVITY, Density, InsParams, density_variance, somigliana_gravity)
 
+def coast(x: np.ndarray, e: float) -> np.ndarray:
+    """States x (..., n) (``p v`` first, m, m/s) after e s without an IMU sample: attitude, velocity and
+    sensor states kept, ``p += v e`` (a new array). Past ``hold_after`` the held sample is no estimate of
+    the input any more (a turn's rate held for seconds turns the estimate through tens of degrees): the
+    mean coasts and the hold noise (ins_batch.add_hold_noise) carries what the vehicle may have done."""
+    y = np.array(x, dtype=float, copy=True)
+    y[..., 0:3] += e * y[..., 3:6]
+    return y
+
+
 class Ins(InsNoise, ProcessModel):
     """Strapdown INS driven by the IMU (paper 000 eqs. 33-52), NED navigation frame, FRD body frame.
 
@@ -53,7 +63,8 @@ class Ins(InsNoise, ProcessModel):
     (rank 3: nothing along q itself, plus ``quat_norm_variance`` q q^T/|q|^2 if set); biases
     Q_ba = N_ba^2 dt, Q_bw = N_bw^2 dt (eqs. 51-52 with W of variance N^2/dt). Cross terms between the
     bias random walks and v, q are second order in dt and neglected. A sample held past ``hold_after``
-    (an IMU gap) adds hold noise (``ins_batch.add_hold_noise``).
+    (an IMU gap) is integrated over ``hold_after`` only, then the state coasts (:func:`coast`), and the
+    hold noise covers the excess time (``ins_batch.add_hold_noise``).
 
     A run of samples in one step (the filters' ``predict_inputs``): :meth:`f_inputs` (exact, vectorised
     over the samples) and :meth:`Q_inputs` (the noise of the interval through the error dynamics).
@@ -143,11 +154,19 @@ class Ins(InsNoise, ProcessModel):
 
     def f(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
         """Propagate states x (..., 16) over dt (s) with the IMU sample u (6,) or (..., 6); see the class doc.
+        A sample held longer than ``hold_after`` (an IMU gap) is integrated over ``hold_after`` only, then
+        the state coasts (:func:`coast`: attitude and velocity kept, p += v e over the excess e).
 
         Evaluated once on the whole sigma-point array, stored component-first ((16, N)), so each line is
         one numpy call on whole rows: no loop over points, no stacked 4x4 products."""
         if u is None:
             raise ValueError("process 'ins' needs the IMU sample u = [ax ay az gx gy gz]")
+        if self._hold is not None and dt > self._hold:
+            return coast(self._f(x, u, self._hold), dt - self._hold)
+        return self._f(x, u, dt)
+
+    def _f(self, x: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
+        """:meth:`f` without the hold: the sample integrated over the whole dt."""
         x = np.asarray(x, dtype=float)
         u = np.asarray(u, dtype=float)
         lead = x.shape[:-1]
@@ -201,11 +220,13 @@ class Ins(InsNoise, ProcessModel):
 
         Vectorised over the samples as well as the points (``ins_batch.integrate_inputs``: within a run
         the biases are constant and the rotation increments do not depend on the attitude). With eta > 0
-        (|q| enters every step) or the Earth rate (it depends on the attitude): k calls of :meth:`f`."""
+        (|q| enters every step), the Earth rate (it depends on the attitude) or a sample held past
+        ``hold_after`` (an IMU gap: the coast is not a sample): k calls of :meth:`f`."""
         us = np.asarray(us, dtype=float)
         dts = np.asarray(dts, dtype=float)
         x = np.asarray(x, dtype=float)
-        if dts.shape[0] == 1 or self.params.eta or self.w_ie is not None:  # type: ignore[attr-defined]
+        held = self._hold is not None and float(dts.max()) > self._hold
+        if dts.shape[0] == 1 or self.params.eta or self.w_ie is not None or held:  # type: ignore[attr-defined]
             for u, dt in zip(us, dts):
                 x = self.f(x, u, dt)
             return x
@@ -230,9 +251,18 @@ class Ins(InsNoise, ProcessModel):
         return d * dt
 
     def jacobian(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
-        """Analytic F = df/dx (16, 16) at x (16,) (for the EKF), consistent with f including eq. 50."""
+        """Analytic F = df/dx (16, 16) at x (16,) (for the EKF), consistent with f including eq. 50 and the
+        coast past ``hold_after``."""
         if u is None:
             raise ValueError("process 'ins' needs the IMU sample u = [ax ay az gx gy gz]")
+        if self._hold is not None and dt > self._hold:
+            F = self._jacobian(x, u, self._hold)
+            F[0:3] += (dt - self._hold) * F[3:6]                 # coast: p += v e
+            return F
+        return self._jacobian(x, u, dt)
+
+    def _jacobian(self, x: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
+        """:meth:`jacobian` without the hold."""
         x = np.asarray(x, dtype=float)
         u = np.asarray(u, dtype=float)
         q = x[6:10]

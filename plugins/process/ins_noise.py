@@ -41,7 +41,8 @@ class InsNoise:
             Qqq += qq * (qnv / (q @ q))
         Qm[6:10, 6:10] = Qqq
         if self._hold is not None and dt > self._hold:
-            add_hold_noise(Qm, q, dt - self._hold, self.params.hold_accel_rw, self.params.hold_rate_rw)  # type: ignore[attr-defined]
+            add_hold_noise(Qm, q, dt - self._hold, self.params.hold_accel_rw, self.params.hold_rate_rw,  # type: ignore[attr-defined]
+                           self.params.hold_max_attitude_sd)  # type: ignore[attr-defined]
         return Qm
 
     def Q_batch(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
@@ -78,5 +79,5 @@ class InsNoise:
             e = float(np.maximum(np.asarray(dts) - self._hold, 0.0).sum())
             if e > 0.0:
                 add_hold_noise(Qm, np.asarray(x1, dtype=float)[6:10], e, self.params.hold_accel_rw,  # type: ignore[attr-defined]
-                               self.params.hold_rate_rw)  # type: ignore[attr-defined]
+                               self.params.hold_rate_rw, self.params.hold_max_attitude_sd)  # type: ignore[attr-defined]
         return Qm

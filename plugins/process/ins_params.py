@@ -67,10 +67,15 @@ class InsParams(Params):
     max_specific_force: float | None = Field(None, gt=0, description="sensor range (m/s^2, any axis)")
     max_rate: float | None = Field(None, gt=0, description="sensor range (rad/s, any axis)")
     hold_after: float | None = Field(None, gt=0, description="s: a sample held longer than this (an IMU gap) "
-                                     "adds hold noise over the excess time (None: never)")
+                                     "is integrated over hold_after only, then the state coasts (attitude and "
+                                     "velocity kept) with hold noise over the excess time (None: the sample "
+                                     "is held over the whole gap, no hold noise)")
     hold_accel_rw: float = Field(0.7, ge=0, description="m/s^3/sqrt(Hz): random walk of the true specific "
                                  "force away from a held sample (the vehicle's manoeuvres)")
     hold_rate_rw: float = Field(1.0, ge=0, description="rad/s^2/sqrt(Hz): the same for the angular rate")
+    hold_max_attitude_sd: float = Field(0.5, gt=0, description="rad: the hold noise's attitude sd at most (per "
+                                        "axis): what a linearised (EKF) quaternion block can carry; a vehicle "
+                                        "that turns further during a gap needs a re-alignment (recovery)")
     align_gyro_bias: bool = Field(True, description="initial alignment also takes the mean static gyro "
                                   "rate as the gyro bias")
     states: Literal[10, 16, 22] = Field(16, description="state set (paper 002): 10 [p v q], 16 + biases "

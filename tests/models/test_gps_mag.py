@@ -120,3 +120,32 @@ def test_magnetometer_params():
         MagnetometerParams(field_ned=(1, 0, 0), intensity=3.0)
     with pytest.raises(MalformedMessage):
         mag().observe(Message(0.0, "mag", (1.0, 2.0)))
+
+
+def test_an_alignment_without_magnetometer_samples_leaves_the_heading_unknown():
+    """tester3 #11: no magnetometer sample in initial.align_s (none, later, or late): the filter started from
+    the config's yaw guess at its sd 0.02 rad (a 90 deg error held at 1.1 deg) and diverged. Now the heading
+    sd is that of an unknown heading, roll and pitch keep the accelerometer's levelling sd, and one warning
+    says so."""
+    from fusion_plugins.measurement.attitude import error_to_quaternion
+
+    from fusion_plugins.measurement.magnetometer import HEADING_UNKNOWN_SD
+
+    m = mag()
+    x0 = np.zeros(22)
+    x0[6:10] = Rotation.from_euler("xyz", [0.02, -0.01, 0.0]).as_quat(scalar_first=True)   # levelled, yaw 0
+    x0[16:22] = 1.0
+    P0 = np.eye(22) * 0.02 ** 2
+    P0[10:13, 10:13] = np.eye(3) * 0.1 ** 2                    # ba sd 0.1 m/s^2
+    x1, P1 = m.align_state(x0, P0, np.r_[0.0, 0.0, -9.8, 0.0, 0.0, 0.0], [], np.eye(3) * 0.04)
+    np.testing.assert_array_equal(x1, x0)                      # the levelled attitude, the yaw guess
+    G = error_to_quaternion(x0[6:10])
+    P_theta = 16.0 * G.T @ P1[6:10, 6:10] @ G                  # G^T G = I / 4
+    sd = np.sqrt(np.diag(P_theta))
+    assert sd[2] == pytest.approx(HEADING_UNKNOWN_SD, rel=1e-6) and HEADING_UNKNOWN_SD > 1.5
+    tilt = np.hypot(0.01, 0.1) / 9.80665                       # align_accel_sd and the ba sd, over g
+    np.testing.assert_allclose(sd[:2], tilt, rtol=1e-3)
+    assert not np.any(P1[6:10, :6]) and not np.any(P1[6:10, 10:])   # no stale cross-covariances
+    (w,) = m.take_events()
+    assert w.kind == "warning" and "no magnetometer sample in the alignment" in w.detail and "heading unknown" in w.detail
+    assert m.take_events() == []

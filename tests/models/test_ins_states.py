@@ -163,3 +163,42 @@ def test_state_sets_report_the_eta_clamp_as_the_16_state_model(states):
     dts = np.array([0.01, 0.05, 0.01, 0.02])                    # eta dt: 0.5, 2.5, 0.5, 1.0
     assert [e.kind for e in m.step_events(1.0, dts)] == [e.kind for e in make(eta=50.0).step_events(1.0, dts)]
     assert len(m.step_events(1.0, dts)) == 2 and make(states=states).step_events(1.0, dts) == ()
+
+
+@pytest.mark.parametrize("states", [10, 16, 22])
+def test_a_sample_held_past_hold_after_is_integrated_over_hold_after_then_the_state_coasts(states):
+    """tester3 #4: a 10 s pause of every stream during a turn was predicted by integrating the last IMU
+    sample (the turn's yaw rate) over the 10 s: 27-40 deg of attitude error, every GPS fix gated out. Past
+    hold_after the sample is no estimate of the input: attitude, velocity and sensor states are kept and
+    p += v e over the excess e; F agrees (numerical Jacobian) and a run of samples with the gap too."""
+    rng = np.random.default_rng(8)
+    m = make(states=states, hold_after=0.03)
+    x, u = random_state(rng, states), imu(rng)
+    short = m.f(x, u, 0.03)
+    long = m.f(x, u, 10.0)
+    np.testing.assert_array_equal(long[3:], short[3:])                   # no rotation, no velocity change past 0.03 s
+    np.testing.assert_allclose(long[:3], short[:3] + 9.97 * short[3:6], rtol=1e-12)
+    Fn = numerical_jacobian(lambda X: m.f(X, u, 10.0), x)
+    np.testing.assert_allclose(m.jacobian(x, u, 10.0), Fn, atol=2e-6 * max(1.0, np.abs(Fn).max()))
+    us = np.array([imu(rng) for _ in range(4)])
+    dts = np.array([0.02, 10.0, 0.02, 0.02])
+    ref = x
+    for ui, dt in zip(us, dts):
+        ref = m.f(ref, ui, dt)
+    np.testing.assert_allclose(m.f_inputs(x[None], us, dts)[0], ref, atol=1e-12)
+    plain = make(states=states)                                          # no hold_after: the sample over dt
+    assert not np.allclose(plain.f(x, u, 10.0)[6:10], x[6:10], atol=1e-3)
+
+
+def test_the_hold_noise_covers_the_excess_time_and_its_attitude_sd_is_bounded():
+    from fusion_plugins.measurement.attitude import error_to_quaternion
+
+    m = make(states=22, hold_after=0.03, hold_max_attitude_sd=0.5)
+    x = random_state(np.random.default_rng(9), 22)
+    x[6:10] = quat.normalize(x[6:10])
+    G = error_to_quaternion(x[6:10])
+    for dt, want in ((0.5, 1.0 * 0.47 ** 1.5 / np.sqrt(3.0)), (10.0, 0.5)):   # rate walk e^1.5 / sqrt 3, then the bound
+        Q = m.Q(x, imu(np.random.default_rng(1)), dt)
+        P_theta = 16.0 * G.T @ Q[6:10, 6:10] @ G
+        np.testing.assert_allclose(np.sqrt(np.diag(P_theta)), want, rtol=0.02)
+        assert np.sqrt(Q[3, 3]) >= 0.7 * (dt - 0.03) ** 1.5 / np.sqrt(3.0)   # velocity: the accel walk

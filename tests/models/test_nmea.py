@@ -102,8 +102,9 @@ def test_incomplete_epoch_dropped_and_counted():
     assert d.counters == {"epochs": 1, "invalid": 0, "incomplete": 1, "origin_fixes": 0}
 
 
-def _fixes(lat0, lon0, h0, ned, start=0):
-    """GGA+RMC pairs of positions given in NED about (lat0, lon0, h0), as a receiver formats them."""
+def _fixes(lat0, lon0, h0, ned, start=0, knots=None):
+    """GGA+RMC pairs of positions given in NED about (lat0, lon0, h0), as a receiver formats them; RMC speed
+    ``knots[k]`` (course 90 deg, east) or 0."""
     from fusion_plugins.simulators.gps import _lat, _lon
     out = []
     for k, (n, e, d) in enumerate(ned):
@@ -112,7 +113,8 @@ def _fixes(lat0, lon0, h0, ned, start=0):
         lo, ew = _lon(float(lon))
         hms = f"1400{(start + k) % 60:02d}.00"
         out.append(sentence(f"GPGGA,{hms},{la},{ns},{lo},{ew},1,08,1.0,{float(h):.3f},M,0.0,M,,"))
-        out.append(sentence(f"GPRMC,{hms},A,{la},{ns},{lo},{ew},0.0,0.0,100608,,,A"))
+        kn = 0.0 if knots is None else knots[k]
+        out.append(sentence(f"GPRMC,{hms},A,{la},{ns},{lo},{ew},{kn:.3f},90.0,100608,,,A"))
     return out
 
 
@@ -195,3 +197,89 @@ def test_bad_fixes_in_the_static_window_do_not_move_it_into_the_drive():
     assert outs[0].t == 9.0 and outs[0].values[9] == 1.0        # the origin fix: one fix, not an average
     np.testing.assert_allclose(d.origin, pymap3d.ned2geodetic(*drive[9], lat0, lon0, h0), atol=1e-3, rtol=0)
     np.testing.assert_allclose(outs[-1].values[:3], drive[-1] - drive[9], atol=2e-3)
+
+
+def _epoch_with_quality(d: NmeaDecoder, q: int):
+    gga = sentence(f"GPGGA,123519,4807.038,N,01131.000,E,{q},08,0.9,545.4,M,46.9,M,,")
+    assert d.decode(msg(gga)) is None
+    return d.decode(msg(RMC))
+
+
+@pytest.mark.parametrize("q", [6, 7, 8])
+@pytest.mark.parametrize("min_quality", [1, 4])
+def test_dead_reckoning_manual_and_simulated_fixes_are_refused(q, min_quality):
+    # GGA quality is a code: 6 (dead reckoning), 7 (manual), 8 (simulation) are no measurement, whatever
+    # min_quality is (tester4 #2: they passed min_quality 4, "RTK only", as better than RTK)
+    d = dec(origin=ORIGIN, min_quality=min_quality)
+    with pytest.raises(RejectedMessage, match=f"quality {q} .*not a measured fix"):
+        _epoch_with_quality(d, q)
+    assert d.counters["invalid"] == 1
+
+
+def test_min_quality_ranks_the_measured_fixes_and_qualities_lists_them_exactly():
+    passed = {q for q in range(1, 9) if _passes(dict(min_quality=4), q)}
+    assert passed == {4, 5}
+    assert {q for q in range(1, 9) if _passes({}, q)} == {1, 2, 3, 4, 5}
+    assert {q for q in range(1, 9) if _passes(dict(qualities=[1, 2, 6]), q)} == {1, 2, 6}
+    with pytest.raises(ValueError, match="not both"):
+        NmeaParams(min_quality=2, qualities=[1])
+    with pytest.raises(ValueError):
+        NmeaParams(qualities=[0])
+    with pytest.raises(ValueError):
+        NmeaParams(min_quality=6)
+
+
+def _passes(params: dict, q: int) -> bool:
+    try:
+        return _epoch_with_quality(dec(origin=ORIGIN, **params), q) is not None
+    except RejectedMessage:
+        return False
+
+
+def _drive(d: NmeaDecoder, sentences, t0: float = 0.0):
+    outs = [d.decode(msg(s, t0 + float(k // 2))) for k, s in enumerate(sentences)]
+    return [o for o in outs if o is not None]
+
+
+def test_a_gps_stream_starting_late_ends_the_window_at_the_first_moving_fix():
+    """tester3 #8: the GPS stream starts 30 s after the IMU, 10 s before the drive; the window of origin_s
+    (39 s) of GPS messages ran 29 s into the drive, averaged it into the origin (76 m off) and started the
+    filter there at rest. Now the first moving fix (RMC speed) ends the window: the origin is the mean of
+    the static fixes, and that fix is emitted with its velocity (the filter starts where the car is)."""
+    lat0, lon0, h0 = 35.1, 139.1, 40.0
+    rng = np.random.default_rng(2)
+    static = rng.normal(0, 2.0, (10, 3))
+    v = 1.0 + np.arange(10.0)                                 # m/s, east, from the 11th fix on
+    moving = np.c_[np.zeros(10), np.cumsum(v), np.zeros(10)]
+    knots = [0.1] * 10 + list(v / KNOT)
+    d = dec(origin_s=39.0)
+    outs = _drive(d, _fixes(lat0, lon0, h0, np.vstack([static, moving]), knots=knots), t0=30.0)
+    first = outs[0]
+    assert first.t == 40.0 and first.values[9] == 1.0          # the moving fix, its own sd
+    np.testing.assert_allclose(first.values[3:5], [0.0, 1.0], atol=1e-3)   # with its velocity
+    ecef = np.array([pymap3d.geodetic2ecef(*pymap3d.ned2geodetic(*p, lat0, lon0, h0)) for p in static]).mean(axis=0)
+    np.testing.assert_allclose(d.origin, pymap3d.ecef2geodetic(*ecef), atol=1e-3, rtol=0)
+    np.testing.assert_allclose(first.values[:3], moving[0] - static.mean(axis=0), atol=0.05)
+    assert len(outs) == 10 and d.counters["moving_start"] == 1 and "static fixes before" in d.info()["origin_source"]
+    (w,) = d.take_events()
+    assert w.kind == "warning" and "static start ended at 40.000 s" in w.detail and d.take_events() == []
+
+
+def test_a_gps_stream_without_a_static_fix_starts_from_its_first_fix_and_velocity():
+    lat0, lon0, h0 = 35.1, 139.1, 40.0
+    moving = np.c_[np.zeros(5), 10.0 * np.arange(5.0), np.zeros(5)]
+    d = dec(origin_s=39.0)
+    outs = _drive(d, _fixes(lat0, lon0, h0, moving, knots=[10.0 / KNOT] * 5), t0=45.0)
+    assert outs[0].t == 45.0 and outs[0].values[:3] == (0.0, 0.0, 0.0) and outs[0].values[9] == 1.0
+    np.testing.assert_allclose(outs[0].values[3:5], [0.0, 10.0], atol=1e-3)
+    np.testing.assert_allclose(d.origin[:2], pymap3d.ned2geodetic(0, 0, 0, lat0, lon0, h0)[:2], atol=1e-7)
+    np.testing.assert_allclose(outs[-1].values[:3], moving[-1], atol=2e-3)
+    assert "no static fix" in d.info()["origin_source"] and "no static GPS fix" in d.take_events()[0].detail
+
+
+def test_static_speed_noise_does_not_end_the_window():
+    lat0, lon0, h0 = 35.1, 139.1, 40.0
+    d = dec(origin_s=9.0)
+    outs = _drive(d, _fixes(lat0, lon0, h0, np.zeros((12, 3)), knots=[0.9] * 12))   # 0.46 m/s: at rest
+    assert outs[0].t == 9.0 and outs[0].values[9] == 10.0 and d.take_events() == []
+    assert "moving_start" not in d.info()

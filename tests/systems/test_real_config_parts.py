@@ -52,6 +52,23 @@ def test_gps_fields_rejects_weak_fixes_and_refuses_other_layouts():
     assert math.isnan(ardupilot.values[10]) and dec.origin[2] == ALT
 
 
+@pytest.mark.parametrize("fix", [7, 8])
+def test_gps_fields_fix_types_7_and_8_are_not_measured_fixes(fix):
+    # PX4's fix_type 8 is "extrapolated" (the receiver's dead reckoning): it passed min_fix 3 as better than
+    # RTK (tester4 #2, the same ordinal test as the nmea decoder's GGA quality)
+    dec = GpsFieldsDecoder(GpsFieldsDecoder.Params())
+    with pytest.raises(RejectedMessage, match=f"fix type {fix} .*no measured fix"):
+        dec.decode(_fix(LAT, LON, ALT, fix=fix))
+    assert dec.origin is None and dec.counters["rejected"] == 1
+    assert dec.decode(_fix(LAT, LON, ALT, fix=6)) is not None                   # RTK fixed passes
+    listed = GpsFieldsDecoder(GpsFieldsDecoder.Params(fix_types=[3, 8]))       # a MAVLink source: 8 is PPP
+    assert listed.decode(_fix(LAT, LON, ALT, fix=8)) is not None
+    with pytest.raises(RejectedMessage, match=r"in \[3, 8\]"):
+        listed.decode(_fix(LAT, LON, ALT, fix=4))
+    with pytest.raises(ValueError, match="not both"):
+        GpsFieldsDecoder.Params(min_fix=3, fix_types=[3])
+
+
 def test_receiver_accuracy_with_the_configured_floors():
     ctx = BuildContext(layout=LAYOUT)
     gps = Gps(GpsParams(accuracy="receiver", horizontal_sd=0.5, vertical_sd=0.75, velocity_sd=0.3), ctx)
