@@ -73,6 +73,11 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         # Private copies: components keep diagnostics (counters, a solver's open cycle); the System stays
         # as wired (one deepcopy call, so objects shared between components stay shared).
         self.process, self.filter, self.sensors = copy.deepcopy((system.process, system.filter, system.sensors))
+        # Per sensor, the components that queue events for the run (a Solver's ``events``; a decoder's or
+        # model's own ``take_events``: the nmea decoder's moving start, an alignment without magnetometer)
+        self._drainers = {n: [c.take_events for c in (s.preprocessor, s.decoder, s.model)
+                              if c is not None and callable(getattr(c, "take_events", None))]
+                          for n, s in self.sensors.items()}
         self.on_nis = on_nis  # called (sensor, t, nis, dim, accepted) after every update tried
         spec = system.spec
         self.max_latency = spec.scheduler.max_latency
@@ -180,7 +185,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                     yield from deferred
                 for out in outs:
                     yield from self._measure(sensor, out)
-                yield from self._drain_solver_events(sensor)
+            yield from self._drain_solver_events(sensor)
         if self._pending:
             yield from self._flush_inputs()
         for name, (n, why) in self._update_failures.items():
@@ -406,6 +411,9 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             self._last_u = good[-1][1]
         if self.belief is None:
             good = self._align(good, sensor)
+            if self.belief is not None:              # aligned now: what the aligning models said about it
+                for name in self._aligners:
+                    yield from self._drain_solver_events(self.sensors[name])
         if not good:
             return
         end = until if until is not None and until >= good[-1][0] else None

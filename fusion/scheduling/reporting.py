@@ -91,13 +91,12 @@ class Reporting:
         return Event(msg.t, kind, sensor.name, f"line {msg.line}: {exc}")
 
     def _drain_solver_events(self, sensor: SensorRuntime) -> Iterator[Event]:
-        """The events a preprocessor (fusion.api.Solver) appended to its ``events`` since the last call."""
-        pre = sensor.preprocessor
-        if pre is None:
-            return
-        events = pre.take_events()
-        if events:
-            yield from events
+        """The events the sensor's components queued since the last call: a preprocessor's (fusion.api.Solver
+        ``events``), and a decoder's or model's that has ``take_events`` (Scheduler._drainers)."""
+        for take in self._drainers.get(sensor.name, ()):
+            events = take()
+            if events:
+                yield from events
 
     def _count_wild(self, sensor: str, n: int) -> None:
         """Held messages the clock guard dropped as wild stamps: malformed (their time is)."""

@@ -111,6 +111,22 @@ def test_without_magnetometer_samples_in_the_alignment_the_heading_is_left_to_th
     assert s["sensors"]["gps"]["rejected"] <= 2
 
 
+def test_the_decoder_and_the_aligning_model_say_so_in_the_run():
+    """The nmea decoder's moving start and the magnetometer's alignment without samples queue a warning
+    (take_events); the run now reports what a decoder or a model queues, as it does a solver's."""
+    from fusion import pipeline
+    from fusion.config import load_system
+
+    lines = (ROOT / "recordings" / "car_gps_mag.log").read_text().splitlines()
+    cases = {"heading unknown": [ln for ln in lines if ",mag," not in ln],
+             "no static GPS fix": [ln for ln in lines if ",gps," not in ln or ln.startswith("#")
+                                   or float(ln.split(",")[0]) >= 45.0]}
+    for needle, log in cases.items():
+        events = []
+        pipeline.run(load_system(CONFIG), log, on_event=events.append)
+        assert [e for e in events if e.kind == "warning" and needle in e.detail], needle
+
+
 @pytest.mark.parametrize("filter_name", ["ekf", "ukf"])
 def test_a_pause_of_every_stream_in_a_corner_is_bridged(tmp_path, filter_name):
     """tester3 #4: all streams silent for 10 s from 80 s, in the first corner (~90 deg at 0.33 rad/s). The
