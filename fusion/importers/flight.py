@@ -26,7 +26,9 @@ def gps_origin(gps: Stream) -> tuple[float, float, float, float] | None:
         return None
     f = list(gps.fields)
     v = np.asarray(gps.values, float)
-    ok = np.flatnonzero((v[:, f.index("fix")] >= MIN_FIX) & (v[:, f.index("nsat")] >= MIN_SATELLITES))
+    fix = v[:, f.index("fix")]
+    # fix types are codes, not a scale: 7 and 8 (PX4 8: extrapolated) are no measured fix (gps_decoder)
+    ok = np.flatnonzero((fix >= MIN_FIX) & (fix <= 6) & (v[:, f.index("nsat")] >= MIN_SATELLITES))
     if ok.size == 0:
         return None
     i = ok[0]

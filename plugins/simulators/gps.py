@@ -32,16 +32,22 @@ class GpsParams(SimParams):
     hdop: float = Field(1.0, gt=0, description="HDOP reported in GGA")
 
 
-def _lat(deg: float) -> tuple[str, str]:
-    a = abs(deg)
+def _degrees_minutes(a: float, width: int) -> str:
+    """ddmm.mmmmmmm of a >= 0 deg; minutes that round to 60.0000000 carry into the degrees (3460.0000000 N
+    is refused by the decoder as malformed)."""
     d = int(a)
-    return f"{d:02d}{(a - d) * 60:010.7f}", "N" if deg >= 0 else "S"
+    m = (a - d) * 60
+    if round(m, 7) >= 60.0:
+        d, m = d + 1, 0.0
+    return f"{d:0{width}d}{m:010.7f}"
+
+
+def _lat(deg: float) -> tuple[str, str]:
+    return _degrees_minutes(abs(deg), 2), "N" if deg >= 0 else "S"
 
 
 def _lon(deg: float) -> tuple[str, str]:
-    a = abs(deg)
-    d = int(a)
-    return f"{d:03d}{(a - d) * 60:010.7f}", "E" if deg >= 0 else "W"
+    return _degrees_minutes(abs(deg), 3), "E" if deg >= 0 else "W"
 
 
 def nmea(body: str) -> str:

@@ -277,3 +277,20 @@ def test_two_d_fixes_are_not_exported_as_nmea(tmp_path, capsys):
     assert "5 fix(es) not 3-D or better left out (5 of type 2" in capsys.readouterr().err
     ggas = [pynmea2.parse(r[0]) for r in Recording(tmp_path / "f.log").rows["gps"] if r[0].startswith("$GPGGA")]
     assert len(ggas) == 15 and all(abs(float(g.altitude) - ORIGIN[2]) < 1e-3 for g in ggas)
+
+
+def test_an_extrapolated_fix_is_never_the_header_origin():
+    """Fix types are codes: PX4's 8 (extrapolated) passed 'fix >= 3' and could become the origin."""
+    from fusion.api import Stream
+    from fusion.importers.flight import gps_origin
+    from fusion.importers.gps_decoder import LAYOUTS
+
+    fields = LAYOUTS[12]
+    row = dict(zip(fields, [0.0] * len(fields)))
+
+    def fix(t, ftype, lat):
+        return [{**row, "lat": lat, "lon": 8.5, "alt": 400.0, "fix": ftype, "nsat": 12}[f] for f in fields]
+
+    gps = Stream("gps", tuple(fields), np.array([1.0, 2.0, 3.0]),
+                 np.array([fix(1.0, 8, 47.0), fix(2.0, 7, 47.1), fix(3.0, 3, 47.2)]))
+    assert gps_origin(gps) == (3.0, 47.2, 8.5, 400.0)

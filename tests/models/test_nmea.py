@@ -118,6 +118,19 @@ def _fixes(lat0, lon0, h0, ned, start=0, knots=None):
     return out
 
 
+def test_simulated_sentences_carry_minutes_that_round_to_sixty():
+    """34.99999999999 deg was written 3459.9999999... -> '3460.0000000', which the decoder refuses; the
+    minutes now carry into the degrees. Decoded back, each is the angle to the text's resolution."""
+    from fusion_plugins.simulators.gps import _lat, _lon
+
+    for deg in (34.99999999999, -35.0 + 1e-12, 34.5, 0.0, 89.999999999999):
+        text, hemi = _lat(deg)
+        d, m = int(text[:2]), float(text[2:])
+        assert m < 60.0 and abs((d + m / 60.0) * (1 if hemi == "N" else -1) - deg) < 2e-9
+    text, hemi = _lon(-179.999999999999)
+    assert text == "18000.0000000" and hemi == "W"
+
+
 def test_ned_round_trip_through_sentences():
     """NED -> geodetic (pymap3d) -> GGA text -> decoder -> NED: equal to the text's resolution (mm)."""
     rng = np.random.default_rng(3)
