@@ -38,7 +38,9 @@ FIELDS = ("lat", "lon", "alt", "vn", "ve", "vd", "hacc", "vacc", "hdop", "fix", 
 # GPA (accuracies, no geoid: 0), ArduPilot without GPA (no accuracies either).
 MIN_FIX = 3          # a 3-D fix
 MIN_SATELLITES = 6   # PX4 EKF2_REQ_NSATS default; the importers' header origin is the first fix passing both
-LAYOUTS = {12: FIELDS, 11: FIELDS[:11], 9: ("lat", "lon", "alt", "vn", "ve", "vd", "hdop", "fix", "nsat")}
+LAYOUTS = {12: FIELDS, 11: FIELDS[:11], 9: ("lat", "lon", "alt", "vn", "ve", "vd", "hdop", "fix", "nsat"),
+           # PX4 with samples whose velocity the receiver flags invalid: vok 0 there (position only)
+           13: FIELDS + ("vok",)}
 
 
 class Origin(Params):
@@ -99,7 +101,7 @@ class GpsFieldsDecoder(Decoder):
         v = message.values
         names = LAYOUTS.get(len(v))
         if names is None:
-            raise MalformedMessage(f"gps_fields expects 12, 11 or 9 values ({' '.join(FIELDS)}, as fusion import "
+            raise MalformedMessage(f"gps_fields expects 13, 12, 11 or 9 values ({' '.join(FIELDS)}, as fusion import "
                                    f"writes them), got {len(v)}")
         try:
             f = dict(zip(names, (float(x) for x in v)))
@@ -107,6 +109,8 @@ class GpsFieldsDecoder(Decoder):
             raise MalformedMessage(f"gps_fields: a value is not a number in {v!r}") from None
         lat, lon, alt, vn, ve = f["lat"], f["lon"], f["alt"], f["vn"], f["ve"]
         fix, nsat, hdop = f["fix"], f["nsat"], f["hdop"]
+        if f.get("vok", 1.0) < 0.5:                       # the receiver said its velocity is not valid
+            vn = ve = math.nan
         hacc, vacc, geoid = f.get("hacc", math.nan), f.get("vacc", math.nan), f.get("geoid", 0.0)
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 360.0) or not math.isfinite(alt):
             raise MalformedMessage(f"gps_fields: position out of range (lat {lat}, lon {lon}, alt {alt})")

@@ -74,6 +74,7 @@ def as_nmea(s: Stream, start_utc: str | None, notes: list[str] | None = None) ->
     lat, lon, alt = col("lat"), col("lon"), col("alt")
     geoid, vn, ve = col("geoid", 0.0), col("vn", 0.0), col("ve", 0.0)
     fix, nsat, hdop = col("fix", 3.0), col("nsat", 0.0), col("hdop")
+    vok = col("vok", 1.0)      # a velocity the receiver flagged invalid: GGA only (a position-only epoch)
     ts, rows = [], []
     usable = np.isin(fix, list(_USABLE))
     if notes is not None and not usable.all():
@@ -86,6 +87,10 @@ def as_nmea(s: Stream, start_utc: str | None, notes: list[str] | None = None) ->
         when = base + dt.timedelta(seconds=t)
         gga, rmc = gga_rmc(when, lat[k], lon[k], alt[k], geoid[k], vn[k], ve[k],
                            _QUALITY[int(fix[k])], int(nsat[k]), hdop[k])
+        if vok[k] < 0.5:
+            ts.append(t)
+            rows.append((gga,))
+            continue
         ts += [t, t]
         rows += [(gga,), (rmc,)]
     meta = dict(s.meta)

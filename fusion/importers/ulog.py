@@ -265,6 +265,7 @@ def _gps(d, t: np.ndarray, request: ImportRequest, notes: list[str]) -> Stream:
     fields = ["lat", "lon", "alt"]
     cols = [lat, lon, alt]
     fmts = [fmt, fmt, ".3f"]
+    vel_ok = None     # per sample, when the receiver flags some velocities invalid (and others valid)
     if all(f"vel_{a}_m_s" in data for a in "ned"):
         if "vel_ned_valid" in data and not np.any(np.asarray(data["vel_ned_valid"])):
             notes.append(f"gps: {d.name} never flags its velocity valid: no vn ve vd")
@@ -272,6 +273,8 @@ def _gps(d, t: np.ndarray, request: ImportRequest, notes: list[str]) -> Stream:
             fields += ["vn", "ve", "vd"]
             cols += [np.asarray(data[f"vel_{a}_m_s"], float) for a in "ned"]
             fmts += [F32] * 3
+            if "vel_ned_valid" in data and not np.all(np.asarray(data["vel_ned_valid"])):
+                vel_ok = np.asarray(data["vel_ned_valid"]) != 0
     for name, src in (("hacc", "eph"), ("vacc", "epv"), ("hdop", "hdop")):
         if src in data:
             fields.append(name)
@@ -292,6 +295,17 @@ def _gps(d, t: np.ndarray, request: ImportRequest, notes: list[str]) -> Stream:
         fields.append("geoid")
         cols.append(ell - alt)
         fmts.append(".3f")
+    if vel_ok is not None and len(fields) == 11 and "hacc" in fields:
+        # the 13-value layout (gps_decoder.LAYOUTS): the per-sample flag after the geoid (0: not logged)
+        fields.append("geoid")
+        cols.append(np.zeros(len(t)))
+        fmts.append(".3f")
+    if vel_ok is not None and len(fields) == 12:
+        fields.append("vok")
+        cols.append(vel_ok.astype(float))
+        fmts.append("d")
+        notes.append(f"gps: {int(np.sum(~vel_ok[ok]))} of {int(np.sum(ok))} fix(es) with the velocity flagged "
+                     "invalid (vel_ned_valid 0): written with vok 0, fused as position only")
     units = "deg deg m(AMSL)" + (" m/s m/s m/s (NED)" if "vn" in fields else "") + \
             (" m m (eph epv)" if "hacc" in fields else "") + (" - (hdop)" if "hdop" in fields else "") + \
             " - - (fix type, satellites)" + (" m (geoid height above the WGS84 ellipsoid)" if "geoid" in fields else "")

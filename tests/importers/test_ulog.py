@@ -296,3 +296,37 @@ def test_full_disk_is_one_error_and_leaves_no_file(tmp_path, capsys):
     assert fusion_import(src, "-o", "/dev/full", "--sensors", "imu") == 2
     line = one_error_line(capsys)
     assert "/dev/full" in line and "space" in line.lower()
+
+
+def test_a_velocity_the_receiver_flags_invalid_is_not_fused(tmp_path, capsys):
+    """vel_ned_valid was only checked for 'ever true': the velocities of the samples flagged invalid were
+    written and fused (tester4 #16). They are written with vok 0 (the 13-value gps layout) and the
+    gps_fields decoder makes those epochs position only; the NMEA route writes them as GGA alone."""
+    from ulog_builder import UlogWriter
+
+    from fusion.api import Message
+    from fusion.importers.gps_decoder import GpsFieldsDecoder
+
+    w = UlogWriter(start_us=1_000_000)
+    w.topic("vehicle_gps_position", [("int32_t", "lat"), ("int32_t", "lon"), ("int32_t", "alt"), ("float", "eph"),
+                                     ("float", "epv"), ("float", "hdop"), ("float", "vel_n_m_s"), ("float", "vel_e_m_s"),
+                                     ("float", "vel_d_m_s"), ("bool", "vel_ned_valid"), ("uint8_t", "fix_type"),
+                                     ("uint8_t", "satellites_used")])
+    w.subscribe("vehicle_gps_position")
+    for k in range(20):
+        w.data("vehicle_gps_position", timestamp=1_000_000 + 200_000 * k, lat=473977420, lon=85455940, alt=488000,
+               eph=0.9, epv=1.4, hdop=0.7, vel_n_m_s=2.0, vel_e_m_s=0.0, vel_d_m_s=0.0, vel_ned_valid=k >= 8,
+               fix_type=3, satellites_used=14)
+    w.save(tmp_path / "v.ulg")
+    assert fusion_import(tmp_path / "v.ulg", "-o", tmp_path / "v.log", "--sensors", "gps") == 0
+    assert "8 of 20 fix(es) with the velocity flagged invalid" in capsys.readouterr().err
+    rec = Recording(tmp_path / "v.log")
+    assert rec.header.fields["gps"][-1] == "vok"
+    np.testing.assert_array_equal(rec.column("gps", "vok"), [0] * 8 + [1] * 12)
+    dec = GpsFieldsDecoder()
+    out = [dec.decode(Message(t, "gps", tuple(v))) for t, v in zip(rec.t["gps"], rec.rows["gps"])]
+    assert all(np.isnan(o.values[3]) and np.isnan(o.values[4]) for o in out[:8])
+    assert all(o.values[3] == pytest.approx(2.0) for o in out[8:])
+    assert fusion_import(tmp_path / "v.ulg", "-o", tmp_path / "n.log", "--sensors", "gps", "--gps", "nmea") == 0
+    sentences = [r[0][:6] for r in Recording(tmp_path / "n.log").rows["gps"]]
+    assert sentences.count("$GPGGA") == 20 and sentences.count("$GPRMC") == 12
