@@ -54,6 +54,12 @@ def _keyed(s: Stream, k: int) -> Iterator[tuple[float, int, str]]:
         yield from zip(t[a:a + _CHUNK].tolist(), [k] * len(lines), lines)
 
 
+def _text(value) -> str:
+    """A header value on one printable line: a log's info string may carry NULs or newlines (PX4's sys_name
+    'PX4\\0\\0' made the recording a binary file to grep, tester4)."""
+    return " ".join("".join(c if c.isprintable() else " " for c in str(value)).split())
+
+
 def render(log: ImportedLog) -> Iterator[str]:
     """Lines (with newline) of the whole recording: header, then every stream merged by time (stable: at
     equal times, streams keep their order), formatted a chunk at a time (memory bounded by the streams)."""
@@ -62,14 +68,14 @@ def render(log: ImportedLog) -> Iterator[str]:
             raise ConfigError(f"sensor name {s.sensor!r} is not valid in the log format (letters, digits, _ . -)")
     yield "# fusion-log 1\n"
     for k, v in log.meta.items():
-        yield f"# {k}: {v}\n"
+        yield f"# {k}: {_text(v)}\n"
     for t, text in log.messages[:MAX_MESSAGES]:
         yield f"# message {t:.3f}: {' '.join(str(text).split())}\n"
     if len(log.messages) > MAX_MESSAGES:
         yield f"# message: ... and {len(log.messages) - MAX_MESSAGES} more\n"
     for s in log.streams:
         for k, v in s.meta.items():
-            yield f"# {s.sensor} {k}: {v}\n"
+            yield f"# {s.sensor} {k}: {_text(v)}\n"
     for s in log.streams:
         yield f"# fields {s.sensor} " + " ".join(s.fields) + (" ..." if s.repeat else "") + "\n"
     for _, _, line in heapq.merge(*[_keyed(s, k) for k, s in enumerate(log.streams)]):

@@ -235,3 +235,14 @@ def test_dataflash_log_concatenated_with_itself_is_said_and_not_doubled(tmp_path
     for s in ("imu", "gps"):
         np.testing.assert_array_equal(one.times(s), two.times(s))
         np.testing.assert_array_equal(one.values(s), two.values(s))
+
+
+def test_header_values_are_one_printable_line():
+    """A log's info string with NULs (PX4 sys_name 'PX4\\0\\0') made the recording a binary file to grep."""
+    from fusion.api.importing import ImportedLog
+    from fusion.importers.writer import render
+
+    log = ImportedLog()
+    log.meta["vehicle"] = "PX4\x00\x00 v1.14\nboard"
+    head = "".join(render(log))
+    assert "# vehicle: PX4 v1.14 board\n" in head and "\x00" not in head
