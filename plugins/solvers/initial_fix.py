@@ -122,6 +122,8 @@ class StateFix(MeasurementModel):
     attitude). Built by :func:`observe_initial`; not a registry component."""
 
     name = "initial fix"
+    #: the run updates with it ungated (fusion.scheduler): it replaces the config's wide prior
+    initialises = True
 
     def __init__(self, context, with_attitude: bool):
         super().__init__(None, context)
