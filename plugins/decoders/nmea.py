@@ -3,8 +3,12 @@
 A receiver sends several sentences per fix (GGA: position, fix quality, satellites, HDOP; RMC: status,
 speed and course over ground; optionally VTG: the same velocity; GSA: the dilutions of precision). This
 decoder checks each sentence's checksum, gathers one epoch's sentences (by their UTC time, sentences
-without a time joining the epoch being gathered) and, when the epoch's ``epoch`` sentences are all in,
-emits one message::
+without a time joining the epoch being gathered, or the next one when they come before its first timed
+sentence, as a u-blox receiver sends VTG before GGA) and, when the epoch's ``epoch`` sentences are all in,
+emits one message, stamped at the log time of the sentence that completed the epoch (a logger that
+stamps lines on arrival spreads a burst over up to a few hundred ms at 4800 baud: the fix is then that
+much late; give the GPS sensor a ``time_offset``, or put GGA last in ``epoch`` when the receiver sends it
+last)::
 
     pn pe pd vn ve hdop vdop satellites quality averaged
 
@@ -127,6 +131,9 @@ def _minutes_ok(field: str, degree_digits: int) -> bool:
         return False
 
 
+_TIMED = frozenset(("GGA", "RMC"))   # the sentences that carry the epoch's UTC time
+
+
 class NmeaDecoder(Decoder):
     """NMEA GGA + RMC (+ VTG, GSA) via pynmea2, one local-NED fix per epoch; see the module docstring.
 
@@ -179,8 +186,12 @@ class NmeaDecoder(Decoder):
             return None                      # GSV, GLL, ZDA, proprietary: nothing this decoder fuses
         key = getattr(sentence, "timestamp", None) if kind in ("GGA", "RMC") else None
         if key is not None and self._key is not None and key != self._key and self._epoch:
-            self.counters["incomplete"] += 1  # the previous epoch never completed
-            self._epoch = {}
+            if self._epoch.keys() & _TIMED:
+                self.counters["incomplete"] += 1  # the previous epoch never completed
+                self._epoch = {}
+            # else only sentences without a time wait (a VTG or GSA sent before this epoch's GGA or RMC, as a
+            # u-blox receiver orders them): they belong to this epoch; dropping them made every fix of an
+            # [GGA, VTG] epoch wait for the next second's VTG, 1 s late (tester3 #5)
         if key is not None:
             self._key = key
         self._epoch[kind] = sentence

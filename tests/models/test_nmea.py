@@ -94,6 +94,22 @@ def test_lost_fix_is_rejected_once_per_epoch():
     assert d.decode(msg(GGA2, 2.0)) is None and d.decode(msg(RMC2, 2.0)) is not None   # and goes on
 
 
+def test_a_vtg_sent_before_its_gga_is_of_that_epoch():
+    """u-blox order (VTG, then GGA): the time-less VTG of second k waited while GGA_k dropped it as an
+    incomplete epoch, so every fix was emitted with the next second's VTG, 1 s late (tester3 #5)."""
+    d = dec(origin=ORIGIN, epoch=["GGA", "VTG"])
+    fixes = []
+    for k in range(4):
+        hms = f"1235{19 + k:02d}"
+        vtg = sentence(f"GPVTG,{90.0:.1f},T,,M,{10.0 + k:.3f},N,{(10.0 + k) * 1.852:.3f},K,A")
+        gga = sentence(f"GPGGA,{hms},4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,")
+        assert d.decode(msg(vtg, float(k))) is None
+        fixes.append(d.decode(msg(gga, float(k))))
+    assert all(f is not None for f in fixes) and [f.t for f in fixes] == [0.0, 1.0, 2.0, 3.0]
+    np.testing.assert_allclose([f.values[4] for f in fixes], [(10.0 + k) * KNOT for k in range(4)])   # east
+    assert d.counters["incomplete"] == 0
+
+
 def test_incomplete_epoch_dropped_and_counted():
     d = dec(origin=ORIGIN)
     assert d.decode(msg(GGA)) is None                        # RMC of 12:35:19 never comes
