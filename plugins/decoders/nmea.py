@@ -7,8 +7,8 @@ without a time joining the epoch being gathered, or the next one when they come 
 sentence, as a u-blox receiver sends VTG before GGA) and, when the epoch's ``epoch`` sentences are all in,
 emits one message, stamped at the log time of the sentence that completed the epoch (a logger that
 stamps lines on arrival spreads a burst over up to a few hundred ms at 4800 baud: the fix is then that
-much late; give the GPS sensor a ``time_offset``, or put GGA last in ``epoch`` when the receiver sends it
-last)::
+much late: give the GPS sensor a ``time_offset`` of minus that spread, or an ``epoch`` of the sentences
+sent first)::
 
     pn pe pd vn ve hdop vdop satellites quality averaged
 
