@@ -62,6 +62,16 @@ class Unicycle(ProcessModel):
         return np.diag([self.params.q * dt, self.params.q * dt, 0.01 * dt])
 
 
+class UnicycleRunNoise(Unicycle):
+    """The unicycle with InputRunNoise: the sigma-point filters batch its runs of input samples (one draw
+    of points), with Q of the interval at the predicted mean and the mean input."""
+
+    name = "test_unicycle_run_noise"
+
+    def Q_inputs(self, x0, x1, us, dts):
+        return self.Q(x1, np.mean(us, axis=0), float(np.sum(dts)))
+
+
 def smooth_sequence(flt, process, steps, x0, P0, chunk=1024, disk=None):
     """Run ``flt`` (recorded) over ``steps``: each ``(kind, args)`` with kind ``predict`` (u, dt),
     ``inputs`` (us, dts) or ``update`` (model, z, R); an estimate is noted after every step. Returns
