@@ -74,14 +74,18 @@ class UnicycleRunNoise(Unicycle):
 
 def smooth_sequence(flt, process, steps, x0, P0, chunk=1024, disk=None):
     """Run ``flt`` (recorded) over ``steps``: each ``(kind, args)`` with kind ``predict`` (u, dt),
-    ``inputs`` (us, dts) or ``update`` (model, z, R); an estimate is noted after every step. Returns
-    (filtered beliefs, smoothed beliefs) at the noted estimates."""
+    ``inputs`` (us, dts) or ``update`` (model, z, R); an estimate is noted after every step (``call``:
+    ``args()`` is called, e.g. to switch a fault on; nothing is noted). Returns (filtered beliefs,
+    smoothed beliefs) at the noted estimates."""
     log = ForwardLog(backend_for(flt), len(x0), chunk=chunk, disk=disk)
     rec = RecordingFilter(flt, log)
     b = rec.initial_belief(0.0, x0, P0)
     filtered = [b]
     log.note_estimate(Estimate(b.t, b, "output"))
     for kind, args in steps:
+        if kind == "call":
+            args()
+            continue
         if kind == "predict":
             b = rec.predict(b, process, *args)
         elif kind == "inputs":
