@@ -17,7 +17,9 @@ cross-covariance is not one the backward pass can use. Over an 8 s pause of a ca
 linearised EKF transition kept one direction of the attitude noise-free (the hold noise is expressed at
 the attitude before the hold, which then turns under the held rate), and the backward pass regressed the
 attitude correction after the pause onto the estimates before it: 8 deg of error, 0.4 deg filtered (the
-srukf carried the norm of a 90 deg quaternion difference back instead). Each estimate the scheduler emits is noted
+srukf carried the norm of a 90 deg quaternion difference back instead). And so does a prediction or update
+that takes a finite belief to a non-finite one (the filter diverged): the backward pass stops a non-finite
+smoothed belief at a break, so the estimates before the divergence are smoothed as in the run cut there. Each estimate the scheduler emits is noted
 with the node it belongs to, so the backward pass can give the smoothed belief at every output: the
 node whose filtered belief it carries (looked up among the last ``RECENT`` nodes), not merely the open
 one, because a caller may see an estimate after the filter has moved on (``fusion.pipeline.Run.push``
