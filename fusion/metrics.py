@@ -21,7 +21,8 @@ What is compared (by element name, so any state layout works):
 
 Errors are evaluated at **every** estimate passed to ``add`` (reason ``update`` and ``output`` alike), once
 per call, after the first ``settle_s`` seconds (from the first time seen), where truth exists at that time
-(linear interpolation). When a run emits both fixed-rate outputs and per-update estimates, both count, so
+(linear interpolation). An estimate with a non-finite error (NaN after the filter diverged) is left out of
+the statistics and counted (``nonfinite_samples``): RMSE, max and ``samples`` are over the finite ones. When a run emits both fixed-rate outputs and per-update estimates, both count, so
 the RMSE weights the more frequent kind more; pass ``reasons={"output"}`` to evaluate only one kind.
 """
 from __future__ import annotations
@@ -108,7 +109,8 @@ class ErrorTracker:
         self.nees_stat = ChiSquareStat()
         self._t_first: float | None = None
         self.truth = None
-        self.compared = 0
+        self.compared = 0     # estimates in the error statistics (settled, truth there, errors finite)
+        self.nonfinite = 0    # settled estimates with truth left out for a non-finite error
         if truth is not None and len(truth):
             self.set_truth(truth)
 
@@ -219,7 +221,13 @@ class ErrorTracker:
         if self.nees_dof:
             out["nees"] = self._nees(estimate.belief.cov, e, dth)
             out["nees_dof"] = self.nees_dof
-        if settled:
+        if settled and not np.isfinite(e).all():
+            # a diverged filter's estimate: left out of the errors (counted), so RMSE, max and samples
+            # are over the same finite estimates; its NaN NEES is counted skipped
+            self.nonfinite += 1
+            if "nees" in out:
+                self.nees_stat.add(out["nees"], self.nees_dof)
+        elif settled:
             self.compared += 1
             self._ess += e * e
             np.fmax(self._emax, np.abs(e), out=self._emax)
@@ -267,7 +275,9 @@ class ErrorTracker:
 
         errors: ``position_rmse_m``, ``position_max_m``, ``velocity_rmse_mps`` (+ ``velocity_max_mps``),
         ``attitude_rmse_deg``, ``attitude_max_deg``, plus ``element_rmse`` {element: RMSE in its SI unit,
-        e.g. bias ``bax`` in m/s^2} and ``samples`` (estimates compared). Empty without truth.
+        e.g. bias ``bax`` in m/s^2} and ``samples`` (estimates compared). Estimates with a non-finite
+        error (a diverged filter) are left out of all of them and counted in ``nonfinite_samples`` (only
+        when there are any; then ``samples`` is given even when it is 0). Empty without truth.
 
         consistency: ``nees_mean``, ``nees_in_95_fraction``, ``nees_dof`` (+ ``nees_samples``,
         ``nees_skipped``) when truth covers some element; ``nis_mean``, ``nis_in_95_fraction``,
@@ -287,6 +297,9 @@ class ErrorTracker:
                 errors["attitude_max_deg"] = a.max
             errors["element_rmse"] = dict(zip(self._elems, np.sqrt(self._ess / self.compared).tolist()))
             errors["samples"] = self.compared
+        if self.truth is not None and self.nonfinite:
+            errors["samples"] = self.compared
+            errors["nonfinite_samples"] = self.nonfinite
         consistency: dict = {}
         st = self.nees_stat
         if st.count or st.skipped:

@@ -65,8 +65,9 @@ class IntegratesInputRuns(Protocol):
 @runtime_checkable
 class InputRunNoise(Protocol):
     """A process model that gives the process noise of a run of input samples (the INS: the noise of the
-    interval propagated through the error dynamics). Without it a batched prediction uses
-    ``Q(x1, mean u, sum dts)``."""
+    interval propagated through the error dynamics). Without it the sigma-point filters predict a run
+    sample by sample (one ``Q`` over the whole interval would leave out the early samples' noise carried
+    through the later dynamics)."""
 
     def Q_inputs(self, x0: np.ndarray, x1: np.ndarray, us: np.ndarray, dts: np.ndarray) -> np.ndarray:
         """Q (n, n) of the run, from the mean before (x0, (n,)) and after (x1, (n,))."""

@@ -58,7 +58,13 @@ def _steps() -> tuple:
 
 
 def _back(rec: dict, xs: np.ndarray, Cs: np.ndarray, sqrt: bool, normalize, diff) -> tuple[np.ndarray, np.ndarray]:
+    """One backward step over the transition ``rec`` from the smoothed belief (xs, Cs) after it. A
+    non-finite one (the filter diverged later) stops at a break of the chain (G = 0; the forward log
+    breaks where a belief turns non-finite): the smoothed belief before it is the filtered one, where
+    the formula would give 0 * NaN = NaN."""
     rts_step, rts_step_sqrt = _STEPS or _steps()
+    if not math.isfinite(float(xs.sum()) + float(Cs.sum())) and not rec["G"].any():
+        return np.array(rec["x"], dtype=float), np.array(rec["A"], dtype=float)
     if sqrt:
         xs, Cs = rts_step_sqrt(rec["x"], rec["A"], rec["G"], rec["x1"], xs, Cs, diff)
     else:

@@ -17,7 +17,9 @@ cross-covariance is not one the backward pass can use. Over an 8 s pause of a ca
 linearised EKF transition kept one direction of the attitude noise-free (the hold noise is expressed at
 the attitude before the hold, which then turns under the held rate), and the backward pass regressed the
 attitude correction after the pause onto the estimates before it: 8 deg of error, 0.4 deg filtered (the
-srukf carried the norm of a 90 deg quaternion difference back instead). Each estimate the scheduler emits is noted
+srukf carried the norm of a 90 deg quaternion difference back instead). And so does a prediction or update
+that takes a finite belief to a non-finite one (the filter diverged): the backward pass stops a non-finite
+smoothed belief at a break, so the estimates before the divergence are smoothed as in the run cut there. Each estimate the scheduler emits is noted
 with the node it belongs to, so the backward pass can give the smoothed belief at every output: the
 node whose filtered belief it carries (looked up among the last ``RECENT`` nodes), not merely the open
 one, because a caller may see an estimate after the filter has moved on (``fusion.pipeline.Run.push``
@@ -26,6 +28,7 @@ hands its sinks every estimate of a message only once the scheduler has released
 from __future__ import annotations
 
 import copy
+import math
 from collections import deque
 from typing import Any, Callable
 
@@ -36,6 +39,13 @@ from fusion.api import Belief, Estimate, Message
 from .store import ChunkStore
 
 __all__ = ["ForwardLog", "RecordingFilter"]
+
+
+def _finite(b: Belief) -> bool:
+    """The belief's mean and covariance (or factor) are finite (a sum is ~1 us; NaN or inf anywhere makes
+    it non-finite, and finite values summing past 1e308 do not occur in a filter that has not diverged)."""
+    C = b.S if b.S is not None else b.P
+    return math.isfinite(float(b.x.sum()) + (float(C.sum()) if C is not None else 0.0))
 
 
 def _same(a: Belief, b: Belief | None) -> bool:
@@ -72,6 +82,7 @@ class ForwardLog:
         self.nodes = 0          # index of the open node = records so far
         self.breaks = 0
         self.gap_breaks = 0     # of them, at an input sample held longer than max_hold
+        self.nonfinite_breaks = 0   # of them, where the belief became non-finite (the filter diverged)
         self.max_hold = max_hold
         self._held_u: bytes | None = None        # the input sample the last prediction ended holding
         self._held_s = 0.0                       # s it has been held (applied) so far
@@ -133,14 +144,40 @@ class ForwardLog:
         self._held_u, self._held_s = us[-1].tobytes(), dl[-1]
         return max(dl) > self.max_hold
 
-    def cut(self, step) -> None:
+    def cut(self, step, gap: bool = True) -> None:
         """Record the transition ``step`` as a break of the chain (zero gain, see the module): the
-        smoothed belief before it is the filtered one; the predicted belief opens the next node."""
+        smoothed belief before it is the filtered one; the predicted belief opens the next node.
+        ``gap``: a hold longer than ``max_hold``, else a non-finite prediction."""
         if step is None:
             return
         self.breaks += 1
-        self.gap_breaks += 1
+        if gap:
+            self.gap_breaks += 1
+        else:
+            self.nonfinite_breaks += 1
         self._record(self.backend.broken(self.current), b1=step.b1)
+
+    def predicted(self, b1: Belief, step, us: np.ndarray | None, dts) -> None:
+        """Record a prediction to ``b1`` with the terms ``step`` (None: the belief did not move): a
+        transition, or a break when it holds an input sample too long (:meth:`held_too_long`) or when
+        it takes a finite belief to a non-finite one (the filter diverged: NaN times a zero gain is
+        still NaN, so without the break the backward pass would carry the NaN over the whole run)."""
+        if self.held_too_long(us, dts):
+            self.cut(step)
+        elif step is not None and not _finite(b1) and _finite(self.current):
+            self.cut(step, gap=False)
+        else:
+            self.transition(step)
+
+    def updated(self, b: Belief) -> None:
+        """The open node's filtered belief is now the updated ``b``; an update that makes a finite belief
+        non-finite breaks the chain there (see :meth:`predicted`)."""
+        if not _finite(b) and _finite(self.current):
+            self.breaks += 1
+            self.nonfinite_breaks += 1
+            self._record(self.backend.broken(self.current), b1=b)
+        else:
+            self.set_current(b)
 
     def node_of(self, est: Estimate) -> int:
         """The node whose filtered belief ``est`` carries: the open one, else the newest recent node that
@@ -227,20 +264,14 @@ class RecordingFilter:
         log = self.log
         log.enter(belief)
         b1, step = log.backend.predict(belief, process, u, dt)
-        if log.held_too_long(None if u is None else np.asarray(u)[None], (dt,)):
-            log.cut(step)
-        else:
-            log.transition(step)
+        log.predicted(b1, step, None if u is None else np.asarray(u)[None], (dt,))
         return b1
 
     def predict_inputs(self, belief: Belief, process, us: np.ndarray, dts: np.ndarray) -> Belief:
         log = self.log
         log.enter(belief)
         b1, step = log.backend.predict_inputs(belief, process, us, dts)
-        if log.held_too_long(us, dts):
-            log.cut(step)
-        else:
-            log.transition(step)
+        log.predicted(b1, step, us, dts)
         return b1
 
     def update(self, belief: Belief, model, z, R, gate=None):
@@ -248,6 +279,6 @@ class RecordingFilter:
         log.enter(belief)
         result = self.inner.update(belief, model, z, R, gate)
         if result.accepted:
-            log.set_current(result.belief)
+            log.updated(result.belief)
         return result
 

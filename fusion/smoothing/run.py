@@ -177,6 +177,7 @@ def run_smoothed(system: System, source: Any, sinks: Sequence[Any] = (), *, lag:
                     **stats.summary(system),
                     "nodes": nodes, "estimates": stats.count, "breaks": log.breaks,
                     **({"input_gap_breaks": log.gap_breaks} if log.gap_breaks else {}),
+                    **({"nonfinite_breaks": log.nonfinite_breaks} if log.nonfinite_breaks else {}),
                     "forward_wall_s": result.wall_s, "backward_wall_s": backward_s,
                     "store": {"on_disk": any(s.on_disk or s.bytes_on_disk for s in stores),
                               "bytes_on_disk": sum(s.bytes_on_disk for s in stores)}}

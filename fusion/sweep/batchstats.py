@@ -142,7 +142,7 @@ class BatchStats:
         self.truth = bool(names) and truth_t is not None and truth_t.size > 0
         tr = _tracker(system, names if self.truth else None)
         self.truth = self.truth and bool(tr._elems)      # truth that names no state element: no errors
-        self.compared = np.zeros(N, np.int64)
+        self.compared = np.zeros(N, np.int64)     # estimates in the errors (those with finite errors)
         self.nees_count = np.zeros(N, np.int64)
         self.nees_skipped = np.zeros(N, np.int64)
         self.nees_inside = np.zeros(N, np.int64)
@@ -233,7 +233,8 @@ class BatchStats:
         e = x[:, :, self.ex] - xt
         if self.wrap.size:
             e[:, :, self.wrap] = (e[:, :, self.wrap] + math.pi) % (2.0 * math.pi) - math.pi
-        self.compared += e.shape[0]
+        fin = np.isfinite(e).all(axis=2)                               # (k, N): ErrorTracker leaves the others out
+        self.compared += fin.sum(axis=0)
         for key, cols in (("position", self.pos), ("velocity", self.vel)):
             if cols is None:
                 continue
@@ -243,8 +244,8 @@ class BatchStats:
             norm = np.sqrt(sq)
             ss, mx = self.acc[key]
             with np.errstate(invalid="ignore"):
-                top = np.fmax.reduce(norm, axis=0)
-            self.acc[key] = (_acc(ss, norm * norm), np.fmax(mx, top))
+                top = np.fmax.reduce(np.where(fin, norm, np.nan), axis=0)
+            self.acc[key] = (_acc(ss, np.where(fin, norm * norm, 0.0)), np.fmax(mx, top))
         if self.dof:
             k, N = e.shape[:2]
             ni = self.nees_idx

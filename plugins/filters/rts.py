@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fusion.api import Belief, ConfigError, InputRunNoise, IntegratesInputRuns, ProcessModel, has
+from fusion.api import Belief, ConfigError, IntegratesInputRuns, ProcessModel, has
 
 from .base import KalmanBase, covariance_of
 from .jacobian import process_jacobian
@@ -131,11 +131,10 @@ class RtsBackend:
     def predict_inputs(self, b0: Belief, process: ProcessModel, us: np.ndarray, dts: np.ndarray
                        ) -> tuple[Belief, Step | None]:
         """``flt.predict_inputs`` and the terms of the whole run: one sigma-point step when the filter
-        batches it, else the composition of the per-sample steps (the filter's own per-sample path)."""
+        batches it (``SigmaPointFilter.batches_inputs``), else the composition of the per-sample steps
+        (the filter's own per-sample path, so the recorded terms are those of the forward pass)."""
         flt = self.flt
-        k = len(dts)
-        batched = (self.mode == "sigma" and k > 1 and flt._batch_inputs and not flt._augmented
-                   and not flt.use_linear_prediction(process))
+        batched = self.mode == "sigma" and flt.batches_inputs(process, len(dts))
         if not batched and not self.sqrt and (self.mode == "linear" or flt.use_linear_prediction(process)):
             # the EKF chain: C = P_k (F_m ... F_1)^T, one gain for the run
             b, Phi = b0, None
@@ -163,7 +162,6 @@ class RtsBackend:
         dts = np.asarray(dts, dtype=float)
         b1 = flt.predict_inputs(b0, process, us, dts)
         f_inputs = process.f_inputs if has(process, IntegratesInputRuns) else None
-        Q_inputs = process.Q_inputs if has(process, InputRunNoise) else None
 
         def propagate(X):
             if f_inputs is not None:
@@ -172,9 +170,7 @@ class RtsBackend:
                 X = process.f(X, u, float(dt))
             return X
 
-        Q = Q_inputs(b0.x, b1.x, us, dts) if Q_inputs is not None else process.Q(b1.x, us.mean(axis=0),
-                                                                                   float(dts.sum()))
-        return b1, self.sigma_step(b0, propagate, Q, b1)
+        return b1, self.sigma_step(b0, propagate, process.Q_inputs(b0.x, b1.x, us, dts), b1)
 
     # ------------------------------------------------------------------ covariance form
     def linear_step(self, b0: Belief, F: np.ndarray, b1: Belief, Q: np.ndarray) -> Step:

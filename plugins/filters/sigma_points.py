@@ -43,7 +43,8 @@ class UnscentedParams(Params):
                             "model is linear; always = with its (numerical) Jacobian; never = sigma points")
     batch_inputs: bool = Field(
         True, description="integrate a run of input samples (IMU) between measurements with one draw of "
-                          "sigma points and the noise of the whole interval (predict_inputs); false: one "
+                          "sigma points and the noise of the whole interval (predict_inputs; a process "
+                          "model without Q_inputs is predicted sample by sample all the same); false: one "
                           "sigma-point prediction per sample")
 
 

@@ -111,6 +111,35 @@ def test_rmse_by_hand_2d():
     assert s["consistency"]["nees_mean"] == pytest.approx(np.mean(np.sum(errs ** 2, axis=1)))
 
 
+def test_nonfinite_estimates_are_left_out_and_counted():
+    """A diverged filter's NaN estimates: RMSE, max, element RMSE and samples over the finite ones, the
+    others counted in nonfinite_samples (tester3 #15: a finite max next to a None RMSE, samples counting
+    the NaN ones); all NaN: no error value at all, the count."""
+    lay = StateLayout.parse("p:2 v:2")
+    ts = np.arange(0.0, 10.0, 0.5)
+    truth = Truth.from_messages(truth_messages(ts, np.zeros((ts.size, 4)), lay.names), lay.names)
+    tr = ErrorTracker(lay, truth)
+    errs = np.random.default_rng(1).normal(size=(12, 4))
+    for k, e in enumerate(errs):
+        x = e if k < 7 else e * np.nan if k % 2 else np.r_[e[:3], np.inf]   # diverged from the 8th on
+        out = tr.add(est(0.5 * k, x, np.eye(4)))
+        assert (out["position_m"] == out["position_m"]) == (k < 7 or k % 2 == 0)  # still given per estimate
+    s = tr.summary()
+    pos, ok = np.hypot(errs[:, 0], errs[:, 1]), errs[:7]
+    assert s["errors"]["position_rmse_m"] == pytest.approx(math.sqrt(np.mean(pos[:7] ** 2)))
+    assert s["errors"]["position_max_m"] == pytest.approx(pos[:7].max())
+    assert s["errors"]["velocity_rmse_mps"] == pytest.approx(math.sqrt(np.mean(np.hypot(ok[:, 2], ok[:, 3]) ** 2)))
+    assert s["errors"]["element_rmse"]["px"] == pytest.approx(math.sqrt(np.mean(ok[:, 0] ** 2)))
+    assert s["errors"]["samples"] == 7 and s["errors"]["nonfinite_samples"] == 5
+    assert s["consistency"]["nees_samples"] == 7 and s["consistency"]["nees_skipped"] == 5
+    tr = ErrorTracker(lay, truth)
+    tr.add(est(0.0, [np.nan] * 4, np.eye(4)))
+    assert tr.summary()["errors"] == {"samples": 0, "nonfinite_samples": 1}
+    tr = ErrorTracker(lay, truth)
+    tr.add(est(0.0, [1.0, 0.0, 0.0, 0.0], np.eye(4)))
+    assert "nonfinite_samples" not in tr.summary()["errors"]        # only when there are any
+
+
 def test_settle_and_reasons_and_no_truth():
     lay = StateLayout.parse("p:2")
     ts = np.arange(0.0, 10.0, 1.0)

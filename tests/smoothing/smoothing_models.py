@@ -62,16 +62,30 @@ class Unicycle(ProcessModel):
         return np.diag([self.params.q * dt, self.params.q * dt, 0.01 * dt])
 
 
+class UnicycleRunNoise(Unicycle):
+    """The unicycle with InputRunNoise: the sigma-point filters batch its runs of input samples (one draw
+    of points), with Q of the interval at the predicted mean and the mean input."""
+
+    name = "test_unicycle_run_noise"
+
+    def Q_inputs(self, x0, x1, us, dts):
+        return self.Q(x1, np.mean(us, axis=0), float(np.sum(dts)))
+
+
 def smooth_sequence(flt, process, steps, x0, P0, chunk=1024, disk=None):
     """Run ``flt`` (recorded) over ``steps``: each ``(kind, args)`` with kind ``predict`` (u, dt),
-    ``inputs`` (us, dts) or ``update`` (model, z, R); an estimate is noted after every step. Returns
-    (filtered beliefs, smoothed beliefs) at the noted estimates."""
+    ``inputs`` (us, dts) or ``update`` (model, z, R); an estimate is noted after every step (``call``:
+    ``args()`` is called, e.g. to switch a fault on; nothing is noted). Returns (filtered beliefs,
+    smoothed beliefs) at the noted estimates."""
     log = ForwardLog(backend_for(flt), len(x0), chunk=chunk, disk=disk)
     rec = RecordingFilter(flt, log)
     b = rec.initial_belief(0.0, x0, P0)
     filtered = [b]
     log.note_estimate(Estimate(b.t, b, "output"))
     for kind, args in steps:
+        if kind == "call":
+            args()
+            continue
         if kind == "predict":
             b = rec.predict(b, process, *args)
         elif kind == "inputs":

@@ -8,7 +8,7 @@ import pytest
 from scipy.linalg import cho_factor, cho_solve
 
 from fusion import testing
-from smoothing_models import Swing, Unicycle, cov, smooth_sequence
+from smoothing_models import Swing, Unicycle, UnicycleRunNoise, cov, smooth_sequence
 
 import filterpy.kalman as filterpy_kalman  # the test extra: a missing one is a failure, not a skip
 
@@ -151,11 +151,11 @@ def test_ukf_equals_filterpy_unscented_rts(alpha, beta, kappa):
     assert np.abs(np.array([cov(b) for b in ours]) - ps).max() < 1e-9
 
 
-def _unicycle_steps(seed, N=30, k=5, batched=True):
+def _unicycle_steps(seed, N=30, k=5, batched=True, cls=Unicycle):
     """Runs of ``k`` input samples between range updates (``inputs``), or the same samples one
     ``predict`` each (a node per sample)."""
     rng = np.random.default_rng(seed)
-    proc = Unicycle()
+    proc = cls()
     meas = testing.RangeMeasurement(testing.RangeMeasurement.Params(beacons=BEACONS, n=3))
     R = np.eye(4) * 0.1 ** 2
     x = np.array([3.0, 2.0, 0.3])
@@ -178,10 +178,12 @@ def _at_updates(steps, beliefs):
 
 
 @pytest.mark.parametrize("name,params", [("ekf", {}), ("ukf", {"batch_inputs": False}),
-                                         ("srukf", {"batch_inputs": False})])
+                                         ("srukf", {"batch_inputs": False}), ("ukf", {}), ("srukf", {})])
 def test_run_of_inputs_composes_exactly(name, params):
     """A run of k samples in one predict_inputs (one recorded transition, composed gains) smooths to
-    the same numbers as the samples predicted one node each."""
+    the same numbers as the samples predicted one node each. Also with batch_inputs (the default): the
+    unicycle has no Q_inputs, so the sigma-point filters predict it sample by sample and the recorder
+    composes the per-sample transitions (tester4 #7)."""
     x0, P0 = np.array([3.0, 2.0, 0.3]), np.diag([0.3, 0.3, 0.1])
     proc, steps_b = _unicycle_steps(6, batched=True)
     _, steps_s = _unicycle_steps(6, batched=False)
@@ -192,13 +194,17 @@ def test_run_of_inputs_composes_exactly(name, params):
     assert np.abs(np.array([cov(e) for e in a]) - np.array([cov(e) for e in b])).max() < 1e-10
 
 
-@pytest.mark.parametrize("problem", ["swing", "unicycle_batched", "unicycle_samples"])
+@pytest.mark.parametrize("problem", ["swing", "unicycle_batched", "unicycle_samples", "unicycle_run_noise"])
 def test_square_root_equals_covariance_form(problem):
+    """unicycle_batched: runs of inputs the filters predict sample by sample (no Q_inputs), recorded as
+    composed per-sample transitions; unicycle_run_noise: the same runs with Q_inputs, one sigma-point
+    step (and one recorded transition) a run."""
     if problem == "swing":
         proc, _, _, steps, _ = _swing_steps(7)
         x0, P0 = np.array([0.8, 0.1]), np.diag([0.2, 0.2])
     else:
-        proc, steps = _unicycle_steps(8, batched=problem == "unicycle_batched")
+        proc, steps = _unicycle_steps(8, batched=problem != "unicycle_samples",
+                                      cls=UnicycleRunNoise if problem == "unicycle_run_noise" else Unicycle)
         x0, P0 = np.array([3.0, 2.0, 0.3]), np.diag([0.3, 0.3, 0.1])
     for zeroth in ("recentred", "cholupdate"):
         _, sm_u, _ = smooth_sequence(testing.build("filter", "ukf", {"alpha": 0.5}), proc, steps, x0, P0)

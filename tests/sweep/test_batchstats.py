@@ -151,8 +151,8 @@ def test_edge_cases_of_the_truth_stream(seed):
 
 
 def test_nan_estimates_covariances_and_nis():
-    """A NaN mean (errors NaN: RMSE NaN, max ignores it), a covariance that is not positive definite and
-    one with a NaN (NEES skipped), NaN NIS (not counted)."""
+    """A NaN mean (left out of the errors, RMSE and max over the others, as ErrorTracker: tester3 #15), a
+    covariance that is not positive definite and one with a NaN (NEES skipped), NaN NIS (not counted)."""
     rng = np.random.default_rng(5)
     tt = np.arange(0, 20, 0.05)
     stream = make_stream(rng, tt, np.sort(rng.uniform(0, 20, 300)))
@@ -165,7 +165,8 @@ def test_nan_estimates_covariances_and_nis():
     got = vectorised(LAYOUT, NAMES, 0.0, stream, ["uwb"])
     want = reference(LAYOUT, NAMES, 0.0, stream, ["uwb"])
     compare(got, want)
-    assert math.isnan(want[0]["position_rmse_m"]) and not math.isnan(want[0]["position_max_m"])
+    assert math.isfinite(want[0]["position_rmse_m"]) and math.isfinite(want[0]["position_max_m"])
+    assert want[0]["estimates"] == want[1]["estimates"] - 1     # the NaN one is not counted
 
 
 def test_estimates_without_truth_and_truth_without_estimates():
