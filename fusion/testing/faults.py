@@ -1,4 +1,5 @@
-"""A full disk without root, for testing what a sink or an output does when a write fails.
+"""Faults for tests: a full disk without root (what a sink or an output does when a write fails), and a
+recording with lines cut out (a pause, a dropout: :func:`cut_recording`).
 
 ``full_disk_after(monkeypatch, nbytes)`` makes every temporary file that :class:`fusion.outputs.OutputFile`
 writes (every built-in output, and a plugin's sink that writes through it) fail with ``ENOSPC`` once
@@ -19,7 +20,7 @@ import errno
 import os
 from typing import Any
 
-__all__ = ["FullAfter", "full_disk_after"]
+__all__ = ["FullAfter", "full_disk_after", "cut_recording"]
 
 
 class FullAfter:
@@ -60,3 +61,24 @@ def full_disk_after(monkeypatch: Any, nbytes: int) -> None:
         return FullAfter(f, nbytes) if mode.startswith("w") else f
 
     monkeypatch.setattr(outputs.os, "fdopen", fdopen)
+
+
+def cut_recording(source: Any, drop: Any = None, end: float | None = None) -> list[str]:
+    """The lines of a recording (a path, or its lines) up to ``end`` s, without the data lines for which
+    ``drop(t, line)`` is true (a pause of every stream, one sensor's dropout, an outage); header and comment
+    lines are kept. What a pipeline run or ``fusion run --input`` takes::
+
+        paused = cut_recording("recordings/car_gps_mag.log", lambda t, ln: 80.0 <= t < 85.0, end=120.0)
+    """
+    lines = source if not isinstance(source, (str, os.PathLike)) else open(source, encoding="utf-8").read().splitlines()
+    out = []
+    for ln in lines:
+        if ln.startswith("#"):
+            out.append(ln)
+            continue
+        t = float(ln.split(",", 1)[0])
+        if end is not None and t > end:
+            break
+        if drop is None or not drop(t, ln):
+            out.append(ln)
+    return out

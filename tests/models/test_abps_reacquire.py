@@ -11,23 +11,15 @@ import numpy as np
 
 from fusion import pipeline
 from fusion.config import load_system
+from fusion.testing.faults import cut_recording
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "configs" / "abps_ins.yaml"
 
 
 def _lines(cut=None, end=80.0):
-    out = []
-    for ln in (ROOT / "recordings" / "abps_mine.log").read_text().splitlines():
-        if ln.startswith("#"):
-            out.append(ln)
-            continue
-        t = float(ln.split(",", 1)[0])
-        if t > end:
-            break
-        if cut is None or not cut[0] < t < cut[1]:
-            out.append(ln)
-    return out
+    return cut_recording(ROOT / "recordings" / "abps_mine.log",
+                         None if cut is None else lambda t, ln: cut[0] < t < cut[1], end=end)
 
 
 def _run_cut(config: Path):

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from fusion import pipeline, testing
+from fusion.testing.faults import cut_recording
 from fusion.api import Estimate
 from fusion.config import load_system
 from fusion.smoothing import run_smoothed
@@ -35,18 +36,8 @@ def _lines(imu_only: bool = False, end: float = END):
     """The car config and its recording up to ``end`` s without the lines of the pause (every stream, or
     with ``imu_only`` the IMU alone: the others go on)."""
     system = load_system(ROOT / "configs" / "imu_gps_mag_ekf.yaml")
-    out = []
-    with open(system.recording) as fh:
-        for ln in fh:
-            if ln.startswith("#"):
-                out.append(ln)
-                continue
-            t = float(ln.split(",", 1)[0])
-            if t > end:
-                break
-            if not (PAUSE <= t < PAUSE + LENGTH and (not imu_only or ",imu," in ln)):
-                out.append(ln)
-    return system, out
+    return system, cut_recording(system.recording, lambda t, ln: PAUSE <= t < PAUSE + LENGTH
+                                 and (not imu_only or ",imu," in ln), end=end)
 
 
 @pytest.fixture(scope="module")
