@@ -253,7 +253,7 @@ class ClockGuard:
             # other stream has said anything since the first was held, when each is ahead of the previous at
             # all: a sensor slower than 1 / future_s alone in the stream (a fix every 8 s) steps on as a pause
             # of the whole stream does; before, each of its messages was dropped as a wild stamp (tester4 #15)
-            alone = not any(n > held.alive for s, n in self._alive_by.items() if s != sensor)
+            alone = not self._spoken_since(sensor, held)
             if not (0.0 <= t - last_t <= fut or (alone and t > last_t)):   # the earlier ones were wild
                 # alone, the held stamps step forward: those before this message still agree with it, and
                 # only the later ones (a wild stamp among the slow sensor's) are dropped
@@ -276,8 +276,7 @@ class ClockGuard:
         first_t = held.items[0][1]
         new_lo = first_t - off - fut
         # another stream admitted since the first was held, on the old base (not already on the new one)
-        others_alive = any(n > held.alive and self._last_by.get(s, -math.inf) < new_lo
-                           for s, n in self._alive_by.items() if s != sensor)
+        others_alive = self._spoken_since(sensor, held, before=new_lo)
         ahead = first_t - off > newest
         if ahead and not others_alive:
             gap = first_t - off - newest
@@ -306,6 +305,12 @@ class ClockGuard:
             out += resynced
         self.busy = bool(self._held or self.offsets or self._near)
         return out, events
+
+    def _spoken_since(self, sensor: str, held: _Held, before: float = math.inf) -> bool:
+        """Another stream than ``sensor`` admitted since ``held``'s first message was held, its last stamp
+        before ``before`` (s): on the old base."""
+        return any(n > held.alive and self._last_by.get(s, -math.inf) < before
+                   for s, n in self._alive_by.items() if s != sensor)
 
     def _same_base(self, sensor: str, lo: float, hi: float,
                    only_compared: bool = False) -> list[tuple[str, Message, float]]:

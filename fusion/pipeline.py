@@ -32,6 +32,7 @@ import numpy as np
 
 from fusion.api import (Belief, Closes, Estimate, Event, FusionError, InputError, MalformedMessage, Message, Opens,
                         ReceivesEvents, Source, UpdateResult, has)
+from fusion.clock import COMPARED
 from fusion.config import System
 from fusion.logformat import ParsedStream, iter_messages, parse_values
 from fusion.run_stats import COUNTERS, RunStats
@@ -39,9 +40,6 @@ from fusion.scheduler import ProcessModelFailed, Scheduler
 
 __all__ = ["run", "Run", "RunResult", "RunStats", "Collect", "COUNTERS"]
 
-# Streams compared against, never fused: run() reads their plain-number lines with the values left as text
-# (fusion.logformat.iter_messages raw_streams), parsed only where truth is interpolated.
-_COMPARED = frozenset(("truth", "reference"))
 
 
 class Collect:
@@ -115,7 +113,8 @@ class Run:
         self.scheduler.on_nis = self._on_nis
         self.sinks = list(sinks)
         # A plugin's sink (not one of fusion's own) sees read-only copies, as the hooks do (read_only)
-        self._foreign_sinks = [s for s in self.sinks if not _is_own(s)]
+        self._sink_views = [(s, not _is_own(s)) for s in self.sinks]
+        self._copies = any(foreign for _, foreign in self._sink_views)
         self._event_sinks = [s.on_event for s in self.sinks if has(s, ReceivesEvents)]
         self.on_event = on_event
         self.progress = progress
@@ -235,15 +234,11 @@ class Run:
         if out.__class__ is Estimate:
             self.last = out
             self.stats.add_estimate(out)
-            if self._foreign_sinks:
-                seen = read_only(out)
-                for sink in self.sinks:
-                    sink.on_estimate(seen if sink in self._foreign_sinks else out)
-            else:
-                for sink in self.sinks:
-                    sink.on_estimate(out)
+            seen = read_only(out) if self._copies or self._hook_estimate is not None else out
+            for sink, foreign in self._sink_views:
+                sink.on_estimate(seen if foreign else out)
             if self._hook_estimate is not None:
-                _call(self._hook_estimate, "fusion_on_estimate", estimate=read_only(out), system=self.system)
+                _call(self._hook_estimate, "fusion_on_estimate", estimate=seen, system=self.system)
             if self.progress is not None:
                 self.progress(out.t)
         else:
@@ -303,7 +298,7 @@ class Run:
         return self.finished
 
     def close_sinks(self) -> None:
-        sinks, self.sinks = self.sinks, []
+        sinks, self.sinks, self._sink_views = self.sinks, [], []
         errors = []
         for sink in sinks:
             try:
@@ -489,7 +484,7 @@ def run(system: System, source: Any, sinks: Sequence[Any] = (), *, on_event: Cal
     interrupted = False
     source_error = component_error = None
     try:
-        session.consume(iter_messages(_guarded(lines), session.parsed, raw_streams=_COMPARED))
+        session.consume(iter_messages(_guarded(lines), session.parsed, raw_streams=COMPARED))
     except KeyboardInterrupt:
         interrupted = True
     except _SourceLost as exc:

@@ -251,18 +251,14 @@ def _zero_of(spec: TimeSpec, first: float | None) -> float:
         return float(z)                     # s
     except ValueError:
         pass
-    # a date-time: POSIX seconds, whatever the column's unit (a numeric column is then POSIX time in its unit)
-    for parse in ((lambda: _abs_time(z, spec)) if spec.unit == "iso" else None,
-                  lambda: dt.datetime.fromisoformat(z.strip())):
-        if parse is None:
-            continue
+    # a date-time: POSIX seconds, whatever the column's unit (a numeric column is then POSIX time in its unit);
+    # read as the column's own date-times are (its format first, if any), else as ISO 8601
+    iso = spec.model_copy(update={"unit": "iso", "format": None})
+    for s in ((spec,) if spec.unit == "iso" and spec.format else ()) + (iso,):
         try:
-            d = parse()
+            return _abs_time(z, s)
         except ValueError:
             continue
-        if isinstance(d, float):
-            return d
-        return (d if d.tzinfo is not None else d.replace(tzinfo=dt.timezone.utc)).timestamp()
     raise ConfigError(f"time.zero: {z!r} is neither 'first', 'none', a number (s) nor an ISO 8601 date-time")
 
 

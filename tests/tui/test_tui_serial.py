@@ -258,8 +258,7 @@ def test_what_a_socket_device_sends_before_the_port_is_open_is_kept(monkeypatch)
     assert got == lines                       # whole, the first line too (a socket stream starts whole)
 
 
-@pty_only
-@pytest.mark.skipif(not hasattr(__import__("signal"), "SIGHUP"), reason="POSIX signals")
+@pty_only   # (a system with a pty pair has SIGHUP and SIGTERM: POSIX)
 @pytest.mark.parametrize("signame,code", [("SIGTERM", 143), ("SIGHUP", 129), ("SIGINT", 130)])
 def test_a_stop_signal_closes_the_view_and_restores_the_terminal(signame, code):
     """kill / timeout / a dropped ssh session while the live view runs: Textual handles none of them, and the
