@@ -10,6 +10,7 @@ from pydantic import Field
 from fusion import quaternion as quat
 from fusion.api import (MAX_MAGNITUDE, BuildContext, ConfigError, Fix, MalformedMessage, MeasurementModel, Message,
                         Observation, Params)
+from fusion.lapack import lapack
 
 
 _SYM3 = np.array([[3, 4, 5], [4, 6, 7], [5, 7, 8]])   # indices into a 9-value fix of its symmetric covariance
@@ -195,19 +196,22 @@ class Position(MeasurementModel[PositionParams]):
         if not self.params.use_fix_covariance:
             return None
         R = cov[:self.dim, :self.dim]
-        if R.shape != (self.dim, self.dim) or not np.all(np.isfinite(R)):   # cholesky passes NaN through
+        bad = R.shape != (self.dim, self.dim)
+        if not bad:   # one sum (a nan or inf propagates), the element test only when it is not finite
+            total = float(R.sum())
+            bad = total - total != 0.0 and not np.all(np.isfinite(R))
+        if bad:       # (dpotrf below passes NaN through)
             raise MalformedMessage(f"position: the fix's covariance {R.tolist()} (m^2) is not a finite "
                                    f"{self.dim} x {self.dim} matrix")
-        try:
-            np.linalg.cholesky(R)
-        except np.linalg.LinAlgError:
+        if lapack.dpotrf(R, lower=1)[1] != 0:   # np.linalg.cholesky's test (its lower triangle), ~5x cheaper
             raise MalformedMessage(f"position: the fix's covariance {R.tolist()} (m^2) is not positive "
-                                   "definite") from None
+                                   "definite")
         return R
 
     def _observe_fix(self, fix: Fix) -> Observation:
         z = np.asarray(fix.value, dtype=float)
-        if z.ndim != 1 or z.size < self.dim or not np.all(np.isfinite(z)) or np.any(np.abs(z) > MAX_MAGNITUDE):
+        # not (max |z| <= MAX_MAGNITUDE): a nan, an inf or a too large coordinate, in one reduction
+        if z.ndim != 1 or z.size < self.dim or not (float(np.abs(z).max()) <= MAX_MAGNITUDE):
             raise MalformedMessage(f"position: a fix needs {self.dim} finite coordinates, got {fix.value!r}")
         if fix.age < 0.0:
             raise MalformedMessage(f"position: negative fix age {fix.age}")

@@ -25,6 +25,8 @@ from fusion_plugins.solvers.trilateration import pack_fix, trilaterate, unpack_f
 REASONS = ("too_few_beacons", "degenerate", "inconsistent", "ambiguous")
 REACQUIRE_AFTER = 3  # compensated cycles refused in a row after which a cycle is solved without the belief
 MAX_SD_M = 1e6   # m (m/s^2 for accel_sd): its square must stay finite through the fix covariance; no sensor is worse
+_LOWER3 = np.tril_indices(3, -1)
+
 __all__ = ["NoFix", "trilaterate", "pack_fix", "unpack_fix", "OlsParams", "OlsTrilateration"]
 
 
@@ -219,7 +221,7 @@ class OlsTrilateration(Solver):
         times = np.array([c[0] for c in cycle])
         ranges = np.array([c[2] for c in cycle])
         B = np.array([self.beacon_positions[n] for n in names])
-        t_end = float(times.max())
+        t_end = float(max([c[0] for c in cycle]))     # the largest stamp (max of a list: no numpy reduction)
         t_m = float(times.sum()) / len(times)
         t_fix, age = t_m, 0.0
         v, Pv, start = None, None, None
@@ -250,7 +252,8 @@ class OlsTrilateration(Solver):
                 self.counters["reacquired"] = self.counters.get("reacquired", 0) + 1
                 self.events.append(Event(t_end, "reacquired", self._sensor, f"fix without the belief's velocity after "
                                          f"{self._refused} cycles refused in a row (lost lock)"))
-            if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(cov))):
+            total = float(pos.sum()) + float(cov.sum())   # a nan or inf propagates; an overflow is checked below
+            if total - total != 0.0 and not (np.all(np.isfinite(pos)) and np.all(np.isfinite(cov))):
                 raise NoFix("inconsistent", f"the fix is not finite (ranges {ranges.tolist()} m)")
         except NoFix as exc:
             if exc.reason == "inconsistent":
@@ -274,7 +277,8 @@ class OlsTrilateration(Solver):
         self.last_fix = (t_m, pos, cov, info)
         # the fix as a typed value (the position model's observe takes it); the covariance mirrored from its
         # upper triangle, as a fix line of a recording (pack_fix) is read
-        cov = np.triu(cov) + np.triu(cov, 1).T
+        cov = cov.copy()
+        cov[_LOWER3] = cov.T[_LOWER3]          # = np.triu(cov) + np.triu(cov, 1).T, without the two triu calls
         return [Fix(t_fix, np.asarray(pos, dtype=float), cov, float(age) if age > 0.0 else 0.0,
                     tuple(names[j] for j in info["used"]), self._sensor, self._line)]
 
