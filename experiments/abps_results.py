@@ -354,7 +354,7 @@ def page(results: list[tuple[str, dict, dict]], bench: dict, ukf_diff: tuple[flo
     add("configured ranges (5 g, 300 deg/s) and a 1 s IMU gap: NaN lines are counted as malformed by the parser,")
     add("out-of-range samples as rejected by `ins.input_from` (neither is integrated), the gap is reported (`max_gap:")
     add("0.05` s) and bridged: past `hold_after` the held sample is not integrated further, the state coasts with hold")
-    add("noise (the true input walks away from it), so the fixes during and after the gap are not refused by the gate")
+    add("noise (the vehicle's own motion over the gap: docs/results/imu_dropout.md), so the fixes during and after the gap are not refused by the gate")
     add("and the horizontal RMSE stays under")
     add("0.10 m (0.07 m).")
     add("")

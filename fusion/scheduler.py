@@ -33,8 +33,8 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from fusion.api import (AlignsState, Belief, Estimate, Event, FusionError, GateRun, HasThreshold, MalformedMessage,
-                        Message, PredictsInputRuns, PseudoMeasurement, ReadsBelief, UsesInput, has)
+from fusion.api import (AlignsState, Belief, Estimate, Event, FusionError, GateRun, HasThreshold, HoldsInput,
+                        MalformedMessage, Message, PredictsInputRuns, PseudoMeasurement, ReadsBelief, UsesInput, has)
 from fusion.clock import ClockGuard
 from fusion.recovery import LockoutWatch, recover
 from fusion.config import SensorRuntime, System
@@ -122,6 +122,9 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         self.resets = 0
         # Batched input integration (filter.predict_inputs) needs no per-sample replay log.
         self._batch = has(self.filter, PredictsInputRuns) and self.late_policy != "replay"
+        # An input gap cut into several predictions by the other sensors: each is told how long the sample
+        # it holds has been held already (fusion.api.HoldsInput), so the gap is one hold, not many.
+        self._hold_after = self.process.hold_after if has(self.process, HoldsInput) else None
         self._pending: list[Message] = []
         self._warned: set[str] = set()  # sensors whose model's check() currently warns
         self._checked: dict[str, float] = {}  # sensor time of each sensor's last check()
@@ -134,6 +137,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         self._align_u: list[np.ndarray] = []
         self._align_t0: float | None = None
         self._last_input_t: float | None = None
+        self._u_t: float | None = None   # the time of the sample in self.u (how long it has been held)
         # The input sensor whose silence is reported while the other sensors go on (its max_gap)
         gaps = [(n, s.max_gap) for n, s in self.sensors.items() if s.role == "input" and s.max_gap is not None]
         self._input_gap = gaps[0] if gaps else None
@@ -293,8 +297,13 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             self.belief = self.belief.with_(t=t)  # type: ignore[union-attr]
             return
         t0 = time.perf_counter()
+        process = self.process
+        if self._hold_after is not None and self._u_t is not None:
+            age = self.belief.t - self._u_t  # type: ignore[union-attr,operator]
+            if age > 0.0 and age + dt > self._hold_after:
+                process = process.held(age)  # type: ignore[attr-defined]
         try:
-            belief = self.filter.predict(self.belief, self.process, self.u, dt)
+            belief = self.filter.predict(self.belief, process, self.u, dt)
         except FusionError:
             raise
         except Exception as exc:  # a process model's f or Q that raises: see _predict_failed
@@ -418,6 +427,11 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             return
         end = until if until is not None and until >= good[-1][0] else None
         last_t = good[-1][0] if end is None else end
+        if (self._hold_after is not None and self._u_t is not None and self.belief is not None
+                and self.belief.t > self._u_t and good[0][0] - self._u_t > self._hold_after):  # type: ignore[union-attr]
+            # the end of an input gap the other sensors cut into predictions: its last stretch is one more
+            # prediction of the held sample at its age (_step), not a fresh hold in the run below
+            yield from self._predict_to(good[0][0])
         if self._batch and (len(good) > 1 or end is not None) and self.u is not None and self._next_output > last_t:
             # Whole run of samples in one call (the filter integrates them in order, DESIGN: same math).
             ts = np.array([self.belief.t] + [t for t, _ in good] + ([end] if end is not None else []))  # type: ignore[union-attr]
@@ -447,12 +461,12 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                         self.belief = self.belief.with_(t=last_t)
                 if self._filter_events:
                     yield from self._take_filter_events()
-            self.u = good[-1][1]
+            self.u, self._u_t = good[-1][1], good[-1][0]
             sensor.counters["used"] += len(good)
         else:
             for t, u in good:
                 yield from self._predict_to(t)
-                self.u = u
+                self.u, self._u_t = u, t
                 sensor.counters["used"] += 1
         self._snapshot()
 

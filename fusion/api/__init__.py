@@ -19,7 +19,7 @@ from fusion.errors import ConfigError, FusionError, InputError, MalformedMessage
 from fusion.kinds import KINDS
 
 from .capabilities import (CAPABILITIES, Aligns, AlignsState, CapabilityWarning, ChecksGeometry, Closes,
-                           HasThreshold, InputRunNoise, IntegratesInputRuns, KeepsGateState, LinearisesInputRuns,
+                           HasThreshold, HoldsInput, InputRunNoise, IntegratesInputRuns, KeepsGateState, LinearisesInputRuns,
                            NonAdditiveMeasurementNoise, NonAdditiveProcessNoise, Opens, PositionFromFix,
                            PredictsInputRuns, PseudoMeasurement, ReadsBelief, ReceivesEvents, ReportsIdle,
                            ReportsInfo, ReportsStatus, ReportsStepEvents, UsesInput, capabilities_of, has,
@@ -60,7 +60,7 @@ __all__ = [
     "Importer", "ImportRequest", "Stream", "ImportedLog",
     # optional capabilities (fusion.api.capabilities)
     "Aligns", "IntegratesInputRuns", "InputRunNoise", "LinearisesInputRuns", "NonAdditiveProcessNoise",
-    "ReportsStepEvents", "ChecksGeometry", "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState",
+    "ReportsStepEvents", "HoldsInput", "ChecksGeometry", "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState",
     "UsesInput", "PseudoMeasurement", "PredictsInputRuns", "HasThreshold", "KeepsGateState", "ReadsBelief",
     "ReportsInfo", "Opens", "Closes", "ReportsIdle", "ReportsStatus", "ReceivesEvents", "CAPABILITIES",
     "CapabilityWarning", "has", "capabilities_of", "near_misses",

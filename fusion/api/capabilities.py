@@ -23,7 +23,7 @@ from .state import Belief
 __all__ = [
     # process models
     "Aligns", "IntegratesInputRuns", "InputRunNoise", "LinearisesInputRuns", "NonAdditiveProcessNoise",
-    "ReportsStepEvents",
+    "ReportsStepEvents", "HoldsInput",
     # measurement models
     "ChecksGeometry", "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState", "UsesInput",
     "PseudoMeasurement",
@@ -109,6 +109,23 @@ class ReportsStepEvents(Protocol):
 
     def step_events(self, t: float, dts: np.ndarray) -> tuple[Event, ...]:
         """Events of the propagation over the intervals ``dts`` (k,) (s) that ended at time ``t`` (s)."""
+        ...
+
+
+@runtime_checkable
+class HoldsInput(Protocol):
+    """A process model that treats an input sample held past ``hold_after`` seconds (an input gap) other
+    than a fresh one (the ``ins`` coasts, with the vehicle's motion as noise). A gap is usually cut into
+    several predictions by the other sensors' messages; for each prediction that starts ``age`` seconds
+    after the sample it holds, with ``age + dt > hold_after``, the run predicts with ``held(age)`` instead
+    of the model itself, so the sample is integrated over ``hold_after`` since its own time, not since
+    each prediction's start. ``hold_after`` None: the sample is always integrated (never called)."""
+
+    hold_after: float | None
+
+    def held(self, age: float) -> Any:
+        """The model (a ProcessModel, same class, layout and input) for a prediction that starts ``age``
+        s (> 0) after the input sample it holds."""
         ...
 
 
@@ -285,7 +302,7 @@ class ReceivesEvents(Protocol):
 #: Every capability protocol, by the member names it is detected by.
 CAPABILITIES: tuple[type, ...] = (
     Aligns, IntegratesInputRuns, InputRunNoise, LinearisesInputRuns, NonAdditiveProcessNoise, ReportsStepEvents,
-    ChecksGeometry, PositionFromFix, NonAdditiveMeasurementNoise, AlignsState, UsesInput, PseudoMeasurement,
+    HoldsInput, ChecksGeometry, PositionFromFix, NonAdditiveMeasurementNoise, AlignsState, UsesInput, PseudoMeasurement,
     PredictsInputRuns, HasThreshold, KeepsGateState, ReportsInfo, ReadsBelief, Opens, Closes, ReportsIdle,
     ReportsStatus, ReceivesEvents,
 )

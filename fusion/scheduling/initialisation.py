@@ -46,7 +46,7 @@ class Initialisation:
                     s = self.sensors[name]
                     self._x0, self._P0 = s.model.align_state(self._x0, self._P0, u_mean, observations, s.R)  # type: ignore[union-attr]
             self._start(t)
-            self.u = u
+            self.u, self._u_t = u, t
             sensor.counters["used"] += 1
             return good[i + 1:]
         return []

@@ -21,6 +21,7 @@ class _Snapshot:
     index: int  # position in the processed-message log after which this snapshot was taken
     gates: dict[str, Any]  # sensor -> its gate's state (fusion.api.GateRun.state)
     gate_counts: dict[str, Any]  # sensor -> its gate's counters then: a replay re-counts from here
+    u_t: float | None = None  # the time of the input sample u
 
 
 class Replay:
@@ -41,7 +42,7 @@ class Replay:
         self._history.append(_Snapshot(self.belief.t, self.belief, self.u, self._next_output,
                                        self._log_start + len(self._log),
                                        {n: g.state for n, g in self.gates.items()},
-                                       {n: g.counters.copy() for n, g in self.gates.items()}))
+                                       {n: g.counters.copy() for n, g in self.gates.items()}, self._u_t))
 
     def _replay(self, late: Message) -> Iterator[Estimate | Event]:
         snap = None
@@ -65,7 +66,7 @@ class Replay:
             self._log.pop()
         while self._history and self._history[-1] is not snap:
             self._history.pop()
-        self.belief, self.u, self._next_output = snap.belief, snap.u, snap.next_output
+        self.belief, self.u, self._next_output, self._u_t = snap.belief, snap.u, snap.next_output, snap.u_t
         for n, state in snap.gates.items():
             # the gate decides the re-run messages again, and its counts are those of the re-run decisions
             # (the late message's included), not the ones made before the late message arrived

@@ -12,7 +12,7 @@ does not come from the last one (a reset by recovery, a re-initialisation) close
 gain: the smoothed belief before a break is the filtered one. So does a prediction that holds one input
 sample for longer than the input sensor's ``max_gap`` (``max_hold``: every stream paused, or the IMU
 silent while the others go on): across such a gap the prediction is not the process model's transition
-but a held input with noise widened by a rule of thumb (the INS's ``hold_after``), and its
+but a coast with the vehicle's assumed motion as noise (the INS's ``hold_after`` model), and its
 cross-covariance is not one the backward pass can use. Over an 8 s pause of a car's recording the
 linearised EKF transition kept one direction of the attitude noise-free (the hold noise is expressed at
 the attitude before the hold, which then turns under the held rate), and the backward pass regressed the

@@ -1,6 +1,7 @@
 """Process ``ins``: IMU-driven 16-state strapdown INS (paper 000, sec. V-A, eqs. 33-52)."""
 from __future__ import annotations
 
+import copy
 from typing import ClassVar
 
 import numpy as np
@@ -132,6 +133,20 @@ class Ins(InsNoise, ProcessModel):
         # Nothing is counted inside the model: clamps are step_events, counted by the run.
         self._max_f, self._max_w = p.max_specific_force, p.max_rate
         self._hold = p.hold_after
+        self.hold_after = p.hold_after        # fusion.api.HoldsInput (``_hold`` is what is left of it: held())
+        self._excess0 = 0.0                   # s the held sample is already past hold_after (held())
+
+    def held(self, age: float) -> "Ins":
+        """fusion.api.HoldsInput: this model for a prediction that starts ``age`` s after the sample it
+        holds: the sample is integrated over what is left of ``hold_after`` (none once it has passed),
+        then the state coasts with the hold noise. A shallow copy (the caches are shared: a held step
+        within what is left of ``hold_after`` is an ordinary step)."""
+        if self._hold is None or age <= 0.0:
+            return self
+        c = copy.copy(self)
+        c._hold = max(0.0, self._hold - age)
+        c._excess0 = max(0.0, age - self._hold)
+        return c
 
     # ------------------------------------------------------------------ propagation
     def _eta_dt(self, dt: float) -> float:
@@ -161,8 +176,9 @@ class Ins(InsNoise, ProcessModel):
         one numpy call on whole rows: no loop over points, no stacked 4x4 products."""
         if u is None:
             raise ValueError("process 'ins' needs the IMU sample u = [ax ay az gx gy gz]")
-        if self._hold is not None and dt > self._hold:
-            return coast(self._f(x, u, self._hold), dt - self._hold)
+        h = self._hold
+        if h is not None and dt > h:
+            return coast(self._f(x, u, h) if h > 0.0 else x, dt - h)
         return self._f(x, u, dt)
 
     def _f(self, x: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
@@ -255,9 +271,10 @@ class Ins(InsNoise, ProcessModel):
         coast past ``hold_after``."""
         if u is None:
             raise ValueError("process 'ins' needs the IMU sample u = [ax ay az gx gy gz]")
-        if self._hold is not None and dt > self._hold:
-            F = self._jacobian(x, u, self._hold)
-            F[0:3] += (dt - self._hold) * F[3:6]                 # coast: p += v e
+        h = self._hold
+        if h is not None and dt > h:
+            F = self._jacobian(x, u, h) if h > 0.0 else np.eye(16)
+            F[0:3] += (dt - h) * F[3:6]                          # coast: p += v e
             return F
         return self._jacobian(x, u, dt)
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from fusion import quaternion as quat
 
-__all__ = ["integrate_inputs", "interval_noise", "add_hold_noise", "K10T", "T16T"]
+__all__ = ["integrate_inputs", "interval_noise", "add_hold_noise", "integrated_gm_variance", "gm_rate_noise", "K10T", "T16T"]
 
 # [R(q).ravel(), |q|^2] = outer(q, q).ravel() @ K10 (one product gives the rotation matrix and its normaliser)
 K10 = np.concatenate([quat.ROTATION_FORM, np.eye(16)[:, quat.NORM_TERMS].sum(axis=1, keepdims=True)], axis=1)
@@ -191,22 +191,72 @@ def interval_noise(x0: np.ndarray, x1: np.ndarray, dts: np.ndarray, g_n: np.ndar
     return Qm
 
 
-def add_hold_noise(Qm: np.ndarray, q: np.ndarray, e: float, accel_rw: float, rate_rw: float,
-                   max_angle_sd: float = math.inf) -> None:
-    """Add to Qm (16, 16), in place, the noise of a sample held ``e`` s longer than ``hold_after`` (an IMU
-    gap): the true input walks away from the held one (random walks of densities ``accel_rw`` m/s^3/sqrt(Hz)
-    and ``rate_rw`` rad/s^2/sqrt(Hz) started at the hold), so velocity and attitude errors grow as e^1.5 and
-    the position error as e^2.5: negligible for one dropped sample, wide enough after a long gap that the
-    fixes are not gated out. q (4,) is the attitude the quaternion block is expressed at.
+def integrated_gm_variance(sd: float, tau: float, e: float) -> float:
+    """Variance of the integral over ``e`` s of a first-order Gauss-Markov process of stationary sd ``sd``
+    and correlation time ``tau`` (s), started in its stationary state: ``2 sd^2 tau^2 (x - 1 + exp(-x))``
+    with x = e / tau; ``sd^2 e^2`` for e << tau (an unknown constant), ``2 sd^2 tau e`` for e >> tau (a
+    random walk). The series near 0, where the closed form cancels."""
+    if e <= 0.0 or sd == 0.0:
+        return 0.0
+    x = e / tau
+    h = x * x * (0.5 - x / 6.0 + x * x / 24.0) if x < 1e-3 else x - 1.0 + math.exp(-x)
+    return 2.0 * sd * sd * tau * tau * h
 
-    The attitude's sd stops at ``max_angle_sd`` (rad, per axis): the rate walk's e^3 / 3 grows without
-    bound (18 rad after 10 s at 1 rad/s^2/sqrt(Hz)), and a linearised filter cannot carry such a q block:
-    the magnetometer leaves the rotation about the field unobserved, and an EKF update at a nearly
-    unobserved direction of sd ~1 rad turns the estimate through tens of degrees (tester3 #4)."""
-    na, e2 = accel_rw ** 2, e * e
-    Qm[3:6, 3:6] += _EYE3 * (na * e2 * e / 3.0)
-    Qm[0:3, 3:6] += _EYE3 * (na * e2 * e2 / 8.0)
-    Qm[3:6, 0:3] += _EYE3 * (na * e2 * e2 / 8.0)
-    Qm[0:3, 0:3] += _EYE3 * (na * e2 * e2 * e / 20.0)
-    angle_var = min(rate_rw ** 2 * e2 * e / 3.0, max_angle_sd ** 2)    # rad^2 per axis
-    Qm[6:10, 6:10] += (np.diag(np.full(4, q @ q)) - q[:, None] * q) * (angle_var / 4.0)
+
+def gm_rate_noise(sd: float, tau: float, e0: float, e1: float) -> tuple[float, float, float]:
+    """(vv, pv, pp): the noise that a velocity error with :func:`integrated_gm_variance` G as its variance
+    adds from ``e0`` to ``e1`` s, and its pull on the position, modelled as a white noise of intensity
+    q(t) = dG/dt = 2 sd^2 tau (1 - exp(-t / tau)) (a Markov model with the known time since the hold began):
+    ``vv = int q``, ``pv = int q (e1 - t)``, ``pp = int q (e1 - t)^2`` over [e0, e1] (closed forms). The
+    velocity's variance is then G exactly, and the noise of a gap the same however it is cut into
+    predictions; the position's is ``int_0^e q (e - t)^2 dt``, the true double integral for e >> tau and
+    2/3 of it for e << tau (an unknown constant acceleration), where the gap is short anyway."""
+    d = e1 - e0
+    if d <= 0.0 or sd == 0.0:
+        return 0.0, 0.0, 0.0
+    c = 2.0 * sd * sd * tau
+    a0, a1 = math.exp(-e0 / tau), math.exp(-e1 / tau)
+    vv = integrated_gm_variance(sd, tau, e1) - integrated_gm_variance(sd, tau, e0)
+    pv = c * (0.5 * d * d - tau * tau * ((d / tau - 1.0) * a0 + a1))
+    pp = c * (d * d * d / 3.0 - (tau * a0 * (d * d - 2.0 * tau * d + 2.0 * tau * tau) - 2.0 * tau ** 3 * a1))
+    return vv, max(pv, 0.0), max(pp, 0.0)
+
+
+def add_hold_noise(Qm: np.ndarray, q: np.ndarray, e0: float, e1: float, accel_sd: float, yaw_rate_sd: float,
+                   tilt_rate_sd: float, tau: float, max_angle_sd: float = math.inf) -> None:
+    """Add to Qm (16, 16), in place, the noise of coasting from ``e0`` to ``e1`` s past ``hold_after`` (an
+    IMU gap: the mean keeps its attitude and velocity, ``p += v e``): the vehicle's own motion, which no
+    sample reports, in the navigation frame (NED). The acceleration (sd ``accel_sd``, m/s^2, each axis) and
+    the rotation rates about north and east (``tilt_rate_sd``) and down (``yaw_rate_sd``, rad/s) are
+    first-order Gauss-Markov processes of correlation time ``tau`` s, so the velocity and attitude errors
+    of the coast are their integrals (:func:`integrated_gm_variance` G): a missed sample or two cost
+    nothing (G ~ sd^2 e^2), a long gap grows like a random walk (G ~ 2 sd^2 tau e).
+
+    A gap is usually cut into several predictions by the other sensors' messages; each adds what accrued
+    over its own stretch, ``G(e1) - G(e0)`` (the run tells the model how long the sample has been held,
+    fusion.api.HoldsInput), so the variances a gap adds are those of the whole gap however it is cut.
+    The position follows through :func:`gm_rate_noise` (the same invariance). The attitude variance one prediction adds is at most
+    ``max_angle_sd^2`` (rad^2) per axis: what a linearised quaternion block can carry in one step (a long
+    pause of every stream is one prediction); over a gap that measurements cut into steps it may grow
+    further, the measurements in between holding what they observe. Separate tilt and
+    heading because a vehicle turns freely but stays near level: an isotropic attitude noise let the
+    magnetometer, the only attitude measurement during a gap, tilt the estimate (one field vector leaves
+    the rotation about itself unobserved), and the EKF diverged when the IMU came back
+    (docs/results/imu_dropout.md). q (4,) is the attitude the quaternion block is expressed at."""
+    d = e1 - e0
+    if d <= 0.0:
+        return
+    vv, pv, pp = gm_rate_noise(accel_sd, tau, e0, e1)
+    Qm[3:6, 3:6] += _EYE3 * vv
+    Qm[0:3, 3:6] += _EYE3 * pv
+    Qm[3:6, 0:3] += _EYE3 * pv
+    Qm[0:3, 0:3] += _EYE3 * pp
+    cap = max_angle_sd * max_angle_sd
+
+    def added(sd: float) -> float:
+        return min(integrated_gm_variance(sd, tau, e1) - integrated_gm_variance(sd, tau, e0), cap)
+
+    vt, vy = added(tilt_rate_sd), added(yaw_rate_sd)
+    q0, q1, q2, q3 = (float(c) for c in q)
+    Xi = np.array(((-q1, -q2, -q3), (q0, q3, -q2), (-q3, q0, q1), (q2, -q1, q0)))   # [0, v] (x) q = Xi v
+    Qm[6:10, 6:10] += (Xi * (0.25 * np.array((vt, vt, vy)))) @ Xi.T

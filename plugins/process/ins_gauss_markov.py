@@ -18,6 +18,8 @@ by name (``position``'s ``offset_block``).
 """
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from fusion.api import (Block, BuildContext, Event, LinearisesInputRuns, Message, ReportsStepEvents, StateLayout,
@@ -52,6 +54,17 @@ class InsGaussMarkov(InsProcess):
         self.g, self.g_n = self.core.g, self.core.g_n
         self._tau = np.concatenate([np.full(b.size, b.tau) for b in p.gauss_markov])   # s, (k,)
         self._var = np.concatenate([np.full(b.size, b.sd * b.sd) for b in p.gauss_markov])
+        self.hold_after = p.hold_after        # fusion.api.HoldsInput
+
+    def held(self, age: float) -> "InsGaussMarkov":
+        """fusion.api.HoldsInput: this model for a prediction that starts ``age`` s after the sample it
+        holds (the INS part's ``held``; the blocks do not depend on the input)."""
+        core = self.core.held(age)
+        if core is self.core:
+            return self
+        c = copy.copy(self)
+        c.core = core
+        return c
 
     # ------------------------------------------------------------------ the blocks alone
     def decay(self, T: float) -> np.ndarray:

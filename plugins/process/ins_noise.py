@@ -41,9 +41,15 @@ class InsNoise:
             Qqq += qq * (qnv / (q @ q))
         Qm[6:10, 6:10] = Qqq
         if self._hold is not None and dt > self._hold:
-            add_hold_noise(Qm, q, dt - self._hold, self.params.hold_accel_rw, self.params.hold_rate_rw,  # type: ignore[attr-defined]
-                           self.params.hold_max_attitude_sd)  # type: ignore[attr-defined]
+            e0 = self._excess0            # how long past hold_after the sample already was (Ins.held)
+            self._add_hold_noise(Qm, q, e0, e0 + dt - self._hold)
         return Qm
+
+    def _add_hold_noise(self, Qm: np.ndarray, q: np.ndarray, e0: float, e1: float) -> None:
+        """ins_batch.add_hold_noise with this model's hold parameters."""
+        p = self.params
+        add_hold_noise(Qm, q, e0, e1, p.hold_accel_sd, p.hold_yaw_rate_sd, p.hold_tilt_rate_sd,  # type: ignore[attr-defined]
+                       p.hold_motion_tau, p.hold_max_attitude_sd)  # type: ignore[attr-defined]
 
     def Q_batch(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
         """:meth:`Q` for states x (N, 16) at once, (N, 16, 16) (batched filters, fusion.batch): with isotropic
@@ -76,8 +82,8 @@ class InsNoise:
         Qm = interval_noise(x0, x1, dts, self.g_n, self._var_a, self._var_w, self._var_ba, self._var_bw,
                             self._qc_diag, self.params.quat_norm_variance)  # type: ignore[attr-defined]
         if self._hold is not None:
-            e = float(np.maximum(np.asarray(dts) - self._hold, 0.0).sum())
-            if e > 0.0:
-                add_hold_noise(Qm, np.asarray(x1, dtype=float)[6:10], e, self.params.hold_accel_rw,  # type: ignore[attr-defined]
-                               self.params.hold_rate_rw, self.params.hold_max_attitude_sd)  # type: ignore[attr-defined]
+            q1 = np.asarray(x1, dtype=float)[6:10]
+            for e in (np.asarray(dts, dtype=float) - self._hold).tolist():   # each sample of a run is a new one
+                if e > 0.0:
+                    self._add_hold_noise(Qm, q1, 0.0, e)
         return Qm

@@ -67,15 +67,25 @@ class InsParams(Params):
     max_specific_force: float | None = Field(None, gt=0, description="sensor range (m/s^2, any axis)")
     max_rate: float | None = Field(None, gt=0, description="sensor range (rad/s, any axis)")
     hold_after: float | None = Field(None, gt=0, description="s: a sample held longer than this (an IMU gap) "
-                                     "is integrated over hold_after only, then the state coasts (attitude and "
-                                     "velocity kept) with hold noise over the excess time (None: the sample "
-                                     "is held over the whole gap, no hold noise)")
-    hold_accel_rw: float = Field(0.7, ge=0, description="m/s^3/sqrt(Hz): random walk of the true specific "
-                                 "force away from a held sample (the vehicle's manoeuvres)")
-    hold_rate_rw: float = Field(1.0, ge=0, description="rad/s^2/sqrt(Hz): the same for the angular rate")
-    hold_max_attitude_sd: float = Field(0.5, gt=0, description="rad: the hold noise's attitude sd at most (per "
-                                        "axis): what a linearised (EKF) quaternion block can carry; a vehicle "
-                                        "that turns further during a gap needs a re-alignment (recovery)")
+                                     "is integrated over hold_after only (counted from the sample's time), "
+                                     "then the state coasts (attitude and velocity kept) with the hold noise "
+                                     "below over the rest of the gap (None: the sample is held over the whole "
+                                     "gap, no hold noise)")
+    # The hold noise is the vehicle's own motion while no IMU sample says what it does: its acceleration and
+    # rotation rates as first-order Gauss-Markov processes (sd, correlation time), in the navigation frame;
+    # the coast's errors are their integrals (ins_batch.add_hold_noise).
+    hold_accel_sd: float = Field(1.0, ge=0, description="m/s^2: the vehicle's acceleration during a hold (NED, "
+                                 "per axis; default: a ground vehicle's braking and turning)")
+    hold_yaw_rate_sd: float = Field(0.3, ge=0, description="rad/s: its rate about down during a hold (a "
+                                    "vehicle turns freely)")
+    hold_tilt_rate_sd: float = Field(0.02, ge=0, description="rad/s: its rates about north and east during a "
+                                     "hold (a ground vehicle stays near level; raise it for an aircraft)")
+    hold_motion_tau: float = Field(2.0, gt=0, description="s: correlation time of those motions (a missed "
+                                   "sample costs ~nothing, a gap much longer than tau grows as a random walk)")
+    hold_max_attitude_sd: float = Field(0.5, gt=0, description="rad: the hold noise's attitude sd of one "
+                                        "prediction at most (per axis): what a linearised (EKF) quaternion "
+                                        "block can carry; a vehicle that turns further during a gap needs a "
+                                        "re-alignment (recovery)")
     align_gyro_bias: bool = Field(True, description="initial alignment also takes the mean static gyro "
                                   "rate as the gyro bias")
     states: Literal[10, 16, 22] = Field(16, description="state set (paper 002): 10 [p v q], 16 + biases "
@@ -89,6 +99,19 @@ class InsParams(Params):
     gauss_markov: list[GaussMarkovBlock] = Field(
         default_factory=list, description="first-order Gauss-Markov blocks appended to the state (a slowly "
         "varying measurement error, e.g. a fix's height error; ins_gauss_markov.py); none: the state as above")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _replaced_hold_parameters(cls, data: object) -> object:
+        if isinstance(data, dict):
+            for old, new in (("hold_accel_rw", "hold_accel_sd (m/s^2)"),
+                             ("hold_rate_rw", "hold_yaw_rate_sd and hold_tilt_rate_sd (rad/s)")):
+                if old in data:
+                    raise ValueError(f"{old} was replaced by {new} and hold_motion_tau (s): the hold noise is "
+                                     "now the vehicle's own motion (Gauss-Markov acceleration and rates), "
+                                     "accrued over the whole gap however it is cut into steps; see "
+                                     "docs/results/imu_dropout.md")
+        return data
 
     @model_validator(mode="after")
     def _earth_rate_needs_latitude(self) -> "InsParams":

@@ -20,6 +20,7 @@ s = 1 (an error of ~2 |s - 1| in the variance, far inside the uncertainty of dat
 """
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -63,10 +64,21 @@ class InsStates(InsProcess):
         self._fast = (p.integration == "euler" and p.eta == 0.0 and c.w_ie is None
                       and c._qc_diag is not None)
         self._hold = p.hold_after if p.hold_after is not None else math.inf   # a longer step: general path
+        self.hold_after = p.hold_after        # fusion.api.HoldsInput
         self._cache_key: tuple | None = None
         self._cache: tuple = ()
         self._Qc: dict[float, np.ndarray] = {}
         self._base_coef: tuple | None = None
+
+    def held(self, age: float) -> "InsStates":
+        """fusion.api.HoldsInput: this model for a prediction that starts ``age`` s after the sample it
+        holds (the 16-state core's :meth:`Ins.held`; the fast path only within what is left of hold_after)."""
+        if self.hold_after is None or age <= 0.0:
+            return self
+        c = copy.copy(self)
+        c.core = self.core.held(age)
+        c._hold = max(0.0, self._hold - age)
+        return c
 
     # ------------------------------------------------------------------ mapping to the 16-state model
     def _core(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.integrate import quad
 
 from fusion import testing
 from fusion.api import BuildContext, ConfigError, MalformedMessage, Message, StateLayout
@@ -33,22 +34,30 @@ def test_fix_with_age_is_predicted_through_the_velocity():
         pv.observe(Message(3.0, "abps", pack_fix(np.zeros(3), cov) + (0.1,)))
 
 
+def _gm(sd, tau, e):
+    """Variance of the integral of a Gauss-Markov process over e (closed form, independent of the code)."""
+    x = e / tau
+    return 2 * sd * sd * tau * tau * (x - 1 + np.exp(-x))
+
+
 def test_ins_hold_noise_grows_only_past_hold_after():
     base = testing.build("process", "ins", {})
-    held = testing.build("process", "ins", {"hold_after": 0.015, "hold_accel_rw": 0.7, "hold_rate_rw": 1.0})
+    held = testing.build("process", "ins", {"hold_after": 0.015, "hold_accel_sd": 0.5, "hold_yaw_rate_sd": 0.5,
+                                            "hold_tilt_rate_sd": 0.02, "hold_motion_tau": 2.0})
     x = INS.vector({"q": [1, 0, 0, 0]})
     u = np.r_[0, 0, -9.8, 0, 0, 0]
     np.testing.assert_array_equal(held.Q(x, u, 0.01), base.Q(x, u, 0.01))
     d = held.Q(x, u, 0.02) - base.Q(x, u, 0.02)                  # one dropped sample: negligible
-    assert 0 < d[3, 3] < 1e-7
-    d = held.Q(x, u, 1.015) - base.Q(x, u, 1.015)                # a 1 s gap: v sd 0.4 m/s, attitude 0.6 rad
-    assert d[3, 3] == pytest.approx(0.49 / 3) and d[0, 0] == pytest.approx(0.49 / 20)
+    assert 0 < d[3, 3] < 1e-5 and d[3, 3] == pytest.approx(_gm(0.5, 2.0, 0.005))
+    d = held.Q(x, u, 1.015) - base.Q(x, u, 1.015)                # a 1 s gap: v sd 0.46 m/s
+    pp = quad(lambda t: 2 * 0.25 * 2.0 * (1 - np.exp(-t / 2.0)) * (1.0 - t) ** 2, 0.0, 1.0)[0]   # p sd 0.19 m
+    assert d[3, 3] == pytest.approx(_gm(0.5, 2.0, 1.0)) and d[0, 0] == pytest.approx(pp, rel=1e-6)
     assert np.linalg.eigvalsh(held.Q(x, u, 1.015)).min() > -1e-15
     dts = np.r_[np.full(5, 0.01), 1.015, np.full(5, 0.01)]
     us = np.tile(u, (11, 1))
     x1 = held.normalize(held.f_inputs(x, us, dts))
     dQ = held.Q_inputs(x, x1, us, dts) - base.Q_inputs(x, x1, us, dts)
-    assert dQ[3, 3] == pytest.approx(0.49 / 3)
+    assert dQ[3, 3] == pytest.approx(_gm(0.5, 2.0, 1.0))
 
 
 @pytest.mark.parametrize("rank", [16, 15, 9, 1])
