@@ -146,7 +146,10 @@ class NisTracker:
             side.add(float(nis), int(dim))
             if accepted and ok is not None:
                 by = self.accepted_by_dof.setdefault(sensor, {})
-                (by.get(int(dim)) or by.setdefault(int(dim), ChiSquareStat(self.prob))).add(float(nis), int(dim))
+                one = by.get(int(dim))
+                if one is None:
+                    one = by[int(dim)] = ChiSquareStat(self.prob)
+                one.add(float(nis), int(dim))
         if self.keep_series and t is not None and ok is not None:
             self._t[sensor].append(float(t))
             self._v[sensor].append(float(nis))
