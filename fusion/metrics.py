@@ -257,13 +257,16 @@ class ErrorTracker:
             r += 3
         return nees(err, T @ P @ T.T)
 
-    def add_nis(self, sensor: str, nis: float, dim: int, t: float | None = None) -> None:
+    def add_nis(self, sensor: str, nis: float, dim: int, t: float | None = None,
+                accepted: bool | None = None) -> None:
         """Record the NIS of one update of ``sensor`` (measurement dimension ``dim``). Call it for every
-        update tried, accepted or rejected by its gate (a gate truncates the distribution otherwise).
-        With ``t`` it respects ``settle_s`` and keeps a series for plots (``nis_series``)."""
+        update tried, accepted or rejected by its gate (a gate truncates the distribution otherwise), with
+        ``accepted`` when known: the summary then gives the accepted and rejected ones apart as well
+        (fusion.consistency.NisTracker.summary). With ``t`` it respects ``settle_s`` and keeps a series
+        for plots (``nis_series``)."""
         if t is not None and not self._settled(float(t)):
             return
-        self.nis.add(sensor if sensor is not None else "?", nis, dim, t)
+        self.nis.add(sensor if sensor is not None else "?", nis, dim, t, accepted)
 
     def nis_series(self) -> dict[str, tuple[np.ndarray, np.ndarray, int]]:
         """``{sensor: (times, values, dim)}`` of the NIS recorded with a time (for fusion.sinks.plot)."""
@@ -281,7 +284,9 @@ class ErrorTracker:
 
         consistency: ``nees_mean``, ``nees_in_95_fraction``, ``nees_dof`` (+ ``nees_samples``,
         ``nees_skipped``) when truth covers some element; ``nis_mean``, ``nis_in_95_fraction``,
-        ``nis_dof``, ``nis_samples`` as {sensor: value} (empty dicts when no NIS was recorded).
+        ``nis_dof``, ``nis_samples`` as {sensor: value} (empty dicts when no NIS was recorded), over every
+        update tried; with ``accepted`` given to ``add_nis``, the ``nis_accepted_*`` and ``nis_rejected_*``
+        keys of fusion.consistency.NisTracker.summary too.
         """
         errors: dict = {}
         if self.truth is not None and self.compared:

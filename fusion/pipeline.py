@@ -225,7 +225,7 @@ class Run:
                                  "values are read in that order, by position"))
 
     def _on_nis(self, sensor: str, t: float, nis: float, dim: int, accepted: bool = True) -> None:
-        self.stats.add_nis(sensor, t, nis, dim)
+        self.stats.add_nis(sensor, t, nis, dim, accepted)
         self.stats.add_update(sensor, t, accepted)
         if self.plot is not None:
             self.plot.on_nis(sensor, t, nis, dim)

@@ -165,9 +165,34 @@ def _consistency_table(c: dict) -> Table:
         t.add_row("NEES", _num(c.get("nees_dof")), _num(c.get("nees_mean"), ".3g"),
                   _pct(c.get("nees_in_95_fraction")), _num(c.get("nees_samples")))
     frac, dof, n = (c.get(k) or {} for k in ("nis_in_95_fraction", "nis_dof", "nis_samples"))
+    rej_mean, rej_n = (c.get(k) or {} for k in ("nis_rejected_mean", "nis_rejected_samples"))
     for sensor, mean in (c.get("nis_mean") or {}).items():
-        t.add_row(_text(f"NIS {sensor}"), _num(dof.get(sensor)), _num(mean, ".3g"), _pct(frac.get(sensor)),
-                  _num(n.get(sensor)))
+        if sensor not in rej_n:   # a summary without the accepted/rejected split (every update tried)
+            t.add_row(_text(f"NIS {sensor}"), _num(dof.get(sensor)), _num(mean, ".3g"), _pct(frac.get(sensor)),
+                      _num(n.get(sensor)))
+            continue
+        # the accepted updates (tester5 #9: rejected echoes and mixed dofs made a 1-dof NIS of 0.76 read
+        # "15.4 on 4 dof"); per dof when the dofs differ, then their sum over the sum of dofs (expected 1)
+        by_dof = (c.get("nis_accepted_by_dof") or {}).get(sensor)
+        if by_dof:
+            for d, b in by_dof.items():
+                t.add_row(_text(f"NIS {sensor}, dof {d}"), _text(d), _num(b.get("mean"), ".3g"),
+                          _pct(b.get("in_95_fraction")), _num(b.get("samples")))
+            lo_hi = (c.get("nis_accepted_mean_per_dof_95") or {}).get(sensor) or []
+            band = f" ({lo_hi[0]:.3g}-{lo_hi[1]:.3g})" if len(lo_hi) == 2 else ""
+            t.add_row(_text(f"NIS {sensor}, all / dof{band}"), "1", _num(
+                (c.get("nis_accepted_mean_per_dof") or {}).get(sensor), ".3g"),
+                _pct((c.get("nis_accepted_in_95_fraction") or {}).get(sensor)),
+                _num((c.get("nis_accepted_samples") or {}).get(sensor)))
+        elif sensor in (c.get("nis_accepted_samples") or {}):
+            dofs = (c.get("nis_accepted_dofs") or {}).get(sensor) or []
+            t.add_row(_text(f"NIS {sensor}"), _num(dofs[0] if dofs else None),
+                      _num((c.get("nis_accepted_mean") or {}).get(sensor), ".3g"),
+                      _pct((c.get("nis_accepted_in_95_fraction") or {}).get(sensor)),
+                      _num((c.get("nis_accepted_samples") or {}).get(sensor)))
+        if rej_n.get(sensor):
+            t.add_row(_text(f"NIS {sensor}, rejected by the gate"), "-", _num(rej_mean.get(sensor), ".3g"), "-",
+                      _num(rej_n.get(sensor)))
     return t
 
 
@@ -195,6 +220,11 @@ def print_summary(summary: dict, console: Console | None = None) -> None:
     if "nees_mean" in c or c.get("nis_mean"):
         console.print()
         console.print(_consistency_table(c))
+    for sensor, run in ((summary.get("health") or {}).get("locked_out") or {}).items():
+        console.print(f"\n[bold yellow]{escape(str(sensor))}: {run['rejected']} updates in a row rejected over "
+                      f"{run['for_s']:.2f} s from t {run['from_s']:.2f} s: a stretch of bad measurements or a "
+                      f"filter locked out of them ({(summary.get('health') or {}).get('resets', 0)} recovery "
+                      "resets in the run; sensors.NAME.recovery)[/]")
     extra = {k: v for k, v in summary.items() if k not in _KNOWN}
     if extra:
         console.print()

@@ -54,12 +54,13 @@ class RunStats:
         self.t_last = -math.inf
         self.nonfinite = 0        # estimates with a non-finite mean or sd
         self.largest_sd = 0.0     # over the run, any element
-        self._nis_wait: list[tuple[str, float, float, int]] | None = []
+        self._nis_wait: list[tuple[str, float, float, int, bool | None]] | None = []
         self.diverged_s = 0.0     # sensor time from a non-finite estimate to the next estimate
         self._last_nonfinite = False
         self._last_t = math.nan
         self.last_finite = True   # the last estimate of the run is finite
         self._updates: dict[str, list[float]] = {}  # sensor -> [first update t, last accepted t, longest gap]
+        self._rejected_runs: dict[str, list] = {}   # sensor -> see add_update
         self.on_result: Callable | None = None  # (estimate, errors, truth_row) for a plot
 
     # ------------------------------------------------------------------ feeding
@@ -115,36 +116,62 @@ class RunStats:
         if self.reference is not None:
             self.reference.add_estimate(est)
 
-    def add_nis(self, sensor: str, t: float, nis: float, dim: int) -> None:
+    def add_nis(self, sensor: str, t: float, nis: float, dim: int, accepted: bool | None = None) -> None:
         wait = self._nis_wait
         if wait is not None:
-            wait.append((sensor, t, nis, dim))
+            wait.append((sensor, t, nis, dim, accepted))
             if len(wait) > _NIS_WAIT_MAX:  # no estimate is coming (outputs off): start the clock here
                 self.tracker.start(wait[0][1])
                 self._release_nis()
             return
-        self.tracker.add_nis(sensor, nis, dim, t=t)
+        self.tracker.add_nis(sensor, nis, dim, t=t, accepted=accepted)
 
     def _release_nis(self) -> None:
         wait, self._nis_wait = self._nis_wait, None
-        for sensor, t, nis, dim in wait or ():
-            self.tracker.add_nis(sensor, nis, dim, t=t)
+        for sensor, t, nis, dim, accepted in wait or ():
+            self.tracker.add_nis(sensor, nis, dim, t=t, accepted=accepted)
 
     def add_update(self, sensor: str, t: float, accepted: bool) -> None:
-        """One update of ``sensor`` at ``t``: tracks the longest time without an accepted one."""
+        """One update of ``sensor`` at ``t``: tracks the longest time without an accepted one and the longest
+        run of updates rejected in a row (a lock-out, tester5 #1)."""
         u = self._updates.get(sensor)
         if u is None:
             u = self._updates[sensor] = [t, math.nan, 0.0, t]
+            self._rejected_runs[sensor] = [math.nan, 0, math.nan, 0, 0.0]
         u[3] = t
+        r = self._rejected_runs[sensor]   # [run start t, run count, longest run's start, its count, its span s]
         if accepted:
             since = u[1] if u[1] == u[1] else u[0]
             u[2] = max(u[2], t - since)
             u[1] = t
+            r[0], r[1] = math.nan, 0
+            return
+        if r[1] == 0:
+            r[0] = t
+        r[1] += 1
+        if r[1] > r[3] or (r[1] == r[3] and t - r[0] > r[4]):
+            r[2], r[3], r[4] = r[0], r[1], t - r[0]
+
+    def lockouts(self) -> dict[str, dict[str, float]]:
+        """The sensors whose updates were all rejected for at least their recovery's ``after_s`` and
+        ``min_rejected`` (the recovery's defaults, 2 s and 3, for a sensor without one), reset or not:
+        ``{sensor: {"rejected": n, "from_s": t, "for_s": s}}`` of the longest run (in updates)."""
+        from fusion.recovery import RecoverySpec
+
+        out = {}
+        for sensor, (_, _, start, n, span) in sorted(self._rejected_runs.items()):
+            spec = getattr(self.scheduler.sensors.get(sensor), "recovery", None) or RecoverySpec()
+            if n >= spec.min_rejected and span >= spec.after_s:
+                out[sensor] = {"rejected": n, "from_s": start, "for_s": span}
+        return out
 
     def health(self) -> dict[str, Any]:
         """The summary's ``health``: non-finite estimates, the largest sd, time diverged, the longest time
         without an accepted measurement per sensor (from its first update, up to its last), resets and
-        clock events."""
+        clock events. ``rejected_in_a_row`` ({sensor: the longest run of its updates rejected in a row}) and
+        ``locked_out`` (:meth:`lockouts`: such runs as long as a lock-out, whether the recovery fired or
+        not: a stretch of bad measurements, a disturbed magnetic field, or a filter locked out of good
+        ones) say when a sensor was shut out for long."""
         longest = {}
         for sensor, (first, last_ok, gap, last) in sorted(self._updates.items()):
             tail = last - (last_ok if last_ok == last_ok else first)
@@ -152,7 +179,9 @@ class RunStats:
         return {"nonfinite_estimates": self.nonfinite, "final_estimate_finite": self.last_finite,
                 "largest_sd": self.largest_sd, "diverged_s": self.diverged_s,
                 "longest_without_accepted_s": longest, "resets": self.scheduler.resets,
-                "clock_events": self.events.get("clock", 0)}
+                "clock_events": self.events.get("clock", 0),
+                "rejected_in_a_row": {k: r[3] for k, r in sorted(self._rejected_runs.items())},
+                "locked_out": self.lockouts()}
 
     def add_event(self, event: Event) -> None:
         self.events[event.kind] = self.events.get(event.kind, 0) + 1

@@ -536,7 +536,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         if watch is not None and not self._replaying:
             threshold = self._thresholds.get(sensor.name)
             th = threshold(len(obs.z)) if threshold is not None else None
-            if watch.update(obs.t, result.accepted, result.nis, th):
+            if watch.update(obs.t, result.accepted, result.nis, th, result.innovation, result.S, obs.model):
                 watch.clear()
                 self.resets += 1
                 self.belief, event = recover(sensor.recovery, self.belief, self.system.layout, obs, R,  # type: ignore[arg-type]

@@ -52,7 +52,7 @@ def _reference_errors(system, path):
     class Nis:
         def on_estimate(self, est):
             if est.update is not None:
-                nis.append((est.sensor, est.t, est.update.nis, est.update.innovation.size))
+                nis.append((est.sensor, est.t, est.update.nis, est.update.innovation.size, est.update.accepted))
 
         def close(self):
             pass
@@ -63,8 +63,8 @@ def _reference_errors(system, path):
     tr = ErrorTracker(system.layout, truth, settle_s=ev.settle_s, position=ev.position)
     for est in kept.estimates:
         tr.add(est)
-    for sensor, t, v, dim in nis:
-        tr.add_nis(sensor, v, dim, t=t)
+    for sensor, t, v, dim, accepted in nis:
+        tr.add_nis(sensor, v, dim, t=t, accepted=accepted)
     return result.summary, tr.summary()
 
 

@@ -290,3 +290,39 @@ def test_nis_per_sensor():
     assert c["nis_dof"] == {"gps": 3, "uwb": 1}
     series = tr.nis_series()
     assert set(series) == {"uwb"} and series["uwb"][0].shape == (4000,) and series["uwb"][2] == 1
+
+
+def test_nis_of_accepted_updates_apart_from_rejected_and_per_dof():
+    """tester5 #9: 1-dof arrivals (accepted mean ~1), one 4-dof fix and rejected echoes (NIS ~230) read
+    'mean 15.4 on 4 dof' in one running mean; the accepted ones, per dof, are given apart now."""
+    rng = np.random.default_rng(5)
+    tr = ErrorTracker(StateLayout.parse("p:2"), None)
+    ones = rng.chisquare(1, 3000)
+    for v in ones:
+        tr.add_nis("us", float(v), 1, accepted=True)
+    tr.add_nis("us", 2.0, 4, accepted=True)
+    for v in 200.0 + 60.0 * rng.random(200):
+        tr.add_nis("us", float(v), 1, accepted=False)
+    tr.add_nis("fix", 3.0, 2, accepted=True)
+    c = tr.summary()["consistency"]
+    # the keys of before keep their meaning: every update tried, the largest dof
+    assert c["nis_samples"]["us"] == 3201 and c["nis_dof"]["us"] == 4 and c["nis_mean"]["us"] > 10.0
+    assert c["nis_accepted_samples"] == {"fix": 1, "us": 3001}
+    assert c["nis_accepted_dofs"] == {"fix": [2], "us": [1, 4]}
+    assert c["nis_accepted_mean"]["us"] == pytest.approx((ones.sum() + 2.0) / 3001)
+    assert c["nis_accepted_mean_per_dof"]["us"] == pytest.approx((ones.sum() + 2.0) / 3004)
+    assert c["nis_accepted_mean_per_dof"]["us"] == pytest.approx(1.0, abs=0.06)
+    lo, hi = c["nis_accepted_mean_per_dof_95"]["us"]
+    assert (lo, hi) == pytest.approx((chi2.ppf(0.025, 3004) / 3004, chi2.ppf(0.975, 3004) / 3004))
+    by = c["nis_accepted_by_dof"]
+    assert set(by) == {"us"} and by["us"]["1"]["samples"] == 3000 and by["us"]["4"]["mean"] == 2.0
+    assert by["us"]["1"]["mean"] == pytest.approx(ones.mean())
+    assert c["nis_accepted_in_95_fraction"]["us"] == pytest.approx(0.95, abs=0.015)
+    assert c["nis_rejected_samples"] == {"fix": 0, "us": 200} and c["nis_rejected_mean"]["fix"] is None
+    assert 200.0 < c["nis_rejected_mean"]["us"] < 260.0
+
+
+def test_nis_without_accepted_flags_has_the_keys_of_before_only():
+    tr = ErrorTracker(StateLayout.parse("p:2"), None)
+    tr.add_nis("uwb", 1.0, 1)
+    assert set(tr.summary()["consistency"]) == {"nis_mean", "nis_in_95_fraction", "nis_dof", "nis_samples"}

@@ -56,3 +56,30 @@ def test_progress_hidden_by_default_delay_and_shown_when_forced():
     with progress(None, enabled=False, console=Console(file=buf2), delay_s=0.0) as tick:
         tick(1.0)
     assert not tick.shown and buf2.getvalue() == "" and tick.t == 1.0
+
+
+def test_nis_rows_are_the_accepted_updates_per_dof_and_the_rejected_apart():
+    """tester5 #9: 'NIS us | 4 | 15.4' for 1-dof arrivals whose accepted mean is 0.76."""
+    c = {"nis_mean": {"us": 15.4}, "nis_in_95_fraction": {"us": 0.926}, "nis_dof": {"us": 4},
+         "nis_samples": {"us": 1322}, "nis_accepted_mean": {"us": 0.761}, "nis_accepted_samples": {"us": 1238},
+         "nis_accepted_in_95_fraction": {"us": 0.968}, "nis_accepted_dofs": {"us": [1, 4]},
+         "nis_accepted_mean_per_dof": {"us": 0.758}, "nis_accepted_mean_per_dof_95": {"us": [0.923, 1.08]},
+         "nis_accepted_by_dof": {"us": {"1": {"mean": 0.7612, "in_95_fraction": 0.968, "samples": 1237},
+                                        "4": {"mean": 0.00114, "in_95_fraction": 0.0, "samples": 1}}},
+         "nis_rejected_mean": {"us": 230.5}, "nis_rejected_samples": {"us": 84}}
+    out = render({**SUMMARY, "consistency": c})
+    assert "15.4" not in out
+    for text in ("NIS us, dof 1", "0.761", "1,237", "NIS us, dof 4", "NIS us, all / dof (0.923-1.08)", "0.758",
+                 "1,238", "NIS us, rejected by the gate", "230", "84"):
+        assert text in out, text
+    one = {**c, "nis_accepted_by_dof": {}, "nis_accepted_dofs": {"us": [1]}}
+    out = render({**SUMMARY, "consistency": one})
+    assert "NIS us " in out and "0.761" in out and "dof 1" not in out
+
+
+def test_a_long_rejection_run_is_said_even_without_a_reset():
+    """tester5 #1: 14 fixes in a row refused, 'resets: 0', and nothing else said."""
+    health = {"resets": 0, "locked_out": {"abps": {"rejected": 14, "from_s": 13.14, "for_s": 6.38}}}
+    out = render({**SUMMARY, "health": health})
+    assert "abps: 14 updates in a row rejected over 6.38 s from t 13.14 s" in out
+    assert "0 recovery resets" in out
