@@ -556,8 +556,10 @@ def read_only(estimate: Estimate) -> Estimate:
     return Estimate(estimate.t, belief, estimate.reason, estimate.sensor, u)
 
 
-def _lines_of(source: Any) -> tuple[Iterable[str], str, Callable[[], Any] | None]:
-    """(lines, label, close) of a path, a Source or an iterable of text lines."""
+def _lines_of(source: Any, given: str | None = None) -> tuple[Iterable[str], str, Callable[[], Any] | None]:
+    """(lines, label, close) of a path, a Source or an iterable of text lines. A source without a ``label`` of
+    its own is named by ``given`` (the text the user typed, ``gen://5``) rather than by the default label, its
+    first parameter's value (tester6 #14: "5.0"). A plugin's source's lines are checked to be text."""
     if isinstance(source, (str, Path)):
         from fusion.sources.select import open_source
 
@@ -565,8 +567,12 @@ def _lines_of(source: Any) -> tuple[Iterable[str], str, Callable[[], Any] | None
     if isinstance(source, Source):
         if has(source, Opens):
             source.open()
-        label = source.label or str(getattr(source.params, "path", "") or source.name)
-        return source.lines(), str(label), source.close if has(source, Closes) else None
+        if given and type(source).label is Source.label:
+            label = given
+        else:
+            label = source.label or str(getattr(source.params, "path", "") or source.name)
+        label = str(label)
+        return source_text(source.lines(), source, label), label, source.close if has(source, Closes) else None
     return source, "<lines>", None
 
 
@@ -629,11 +635,7 @@ def run(system: System, source: Any, sinks: Sequence[Any] = (), *, on_event: Cal
     failure in one update only loses that message (fusion.scheduler). A bug in a component ends the
     run with a RuntimeError that says how far it got; a component's ``FusionError`` (bad input the run
     cannot go on with) is raised as is, after the sinks are closed."""
-    lines, name, close = _lines_of(source)
-    if label:       # the source as the user named it (the URL typed), not its first parameter's value
-        name = label
-    if isinstance(source, Source):
-        lines = source_text(lines, source, name)
+    lines, name, close = _lines_of(source, label)
     session = Run(system, sinks, on_event=on_event, progress=progress, plot=plot, hooks=hooks,
                   label=label if label is not None else name, on_truth=on_truth)
     interrupted = False
