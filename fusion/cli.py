@@ -1,7 +1,9 @@
 """The ``fusion`` command: one subcommand a module in fusion.commands (each has ``register(subparsers)``).
 
 Exit codes: 0 success; 2 bad usage, bad config or bad input (one line naming file, line/field and what
-is wrong; no traceback unless ``--debug``); 1 internal error; 141 (128 + SIGPIPE, what a shell reports for
+is wrong; no traceback unless ``--debug``), or an installed plugin's observer (a hook, a plugin's sink)
+that raised during a run whose outputs were written complete without it (one line naming the plugin:
+docs/writing-plugins.md section 5); 1 internal error; 141 (128 + SIGPIPE, what a shell reports for
 a tool that a closed pipe ended) when the reader of standard output went away (``fusion run -o - | head``):
 no message, no traceback, stdout pointed at the null device so that the exit's flush cannot fail again;
 143 / 129 (128 + SIGTERM / SIGHUP) when ``fusion run``, ``simulate``, ``sweep`` or ``import`` was stopped by
