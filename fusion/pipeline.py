@@ -293,7 +293,8 @@ class Run:
         paths = _discard_outputs(inner)
         registry = self.system.registry
         who = f"plugin sink {getattr(inner, 'name', None) or type(inner).__name__!r}"
-        provider = registry.provider_of(type(inner)) if hasattr(registry, "provider_of") else ""
+        providers = getattr(registry, "providers", None) or {}
+        provider = providers.get(type(inner).__module__.split(".")[0])   # its installed package, if one
         if provider:
             who += f" ({provider})"
         at = f" at t = {t:.3f} s" if math.isfinite(t) else ""

@@ -266,7 +266,7 @@ def test_a_failing_plugin_sink_is_dropped_its_file_discarded_and_the_run_goes_on
         assert len(kept.estimates) == result.stats.estimates > 2000
         assert not path.exists() and os.listdir(tmp_path) == [], os.listdir(tmp_path)   # no cut file, no .tmp
         method = "on_estimate" if when == "estimate" else "close"
-        assert result.plugin_errors[0].startswith(f"plugin sink 'failing' (")
+        assert result.plugin_errors[0].startswith("plugin sink 'failing': its ")  # no package: a test's class
         assert f"its {method}() raised" in result.plugin_errors[0] and f"its output {path} was discarded" in \
             result.plugin_errors[0], result.plugin_errors
 
