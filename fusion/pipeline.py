@@ -251,7 +251,7 @@ class Run:
                 if foreign:
                     try:
                         sink.on_estimate(seen)
-                    except FusionError:
+                    except _PASSED_ON:
                         raise
                     except Exception as exc:   # a plugin's sink: named, dropped, the run goes on
                         self._sink_failed(sink, "on_estimate", exc, out.t)
@@ -269,7 +269,7 @@ class Run:
                 if foreign:
                     try:
                         on_event(out)
-                    except FusionError:
+                    except _PASSED_ON:
                         raise
                     except Exception as exc:
                         self._sink_failed(sink, "on_event", exc, out.t)
@@ -365,7 +365,7 @@ class Run:
             except FusionError as exc:
                 errors.append(exc)
             except Exception as exc:
-                if not views.get(id(sink), not _is_own(sink)):
+                if isinstance(exc, BrokenPipeError) or not views.get(id(sink), not _is_own(sink)):
                     raise
                 self._sink_failed(sink, "close", exc)
         if errors:
@@ -454,6 +454,11 @@ def header_beacon_warnings(declared: dict[str, tuple[float, ...]], configured: d
     return events
 
 
+#: What an observer's failure is not: a FusionError (the user's to fix: a failed write, raised as before) and
+#: a BrokenPipeError (a plugin printing to a stdout whose reader went away: the CLI ends quietly, exit 141).
+_PASSED_ON = (FusionError, BrokenPipeError)
+
+
 class _Observers:
     """The implementations of one observation hook, called one by one in pluggy's order (the last
     registered first): one that raises is named in the run's ``plugin_errors`` and not called again, the
@@ -487,6 +492,8 @@ class _Observers:
                     fn(**kwargs)
                 else:
                     fn(*[kwargs[a] for a in names])
+            except _PASSED_ON:
+                raise
             except Exception as exc:
                 self._failed(impl, exc, kwargs)
 
