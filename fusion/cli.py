@@ -1,7 +1,9 @@
 """The ``fusion`` command: one subcommand a module in fusion.commands (each has ``register(subparsers)``).
 
 Exit codes: 0 success; 2 bad usage, bad config or bad input (one line naming file, line/field and what
-is wrong; no traceback unless ``--debug``); 1 internal error; 141 (128 + SIGPIPE, what a shell reports for
+is wrong; no traceback unless ``--debug``), or an installed plugin's observer (a hook, a plugin's sink)
+that raised during a run whose outputs were written complete without it (one line naming the plugin:
+docs/writing-plugins.md section 5); 1 internal error; 141 (128 + SIGPIPE, what a shell reports for
 a tool that a closed pipe ended) when the reader of standard output went away (``fusion run -o - | head``):
 no message, no traceback, stdout pointed at the null device so that the exit's flush cannot fail again;
 143 / 129 (128 + SIGTERM / SIGHUP) when ``fusion run``, ``simulate``, ``sweep`` or ``import`` was stopped by
@@ -19,6 +21,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import importlib  # noqa: E402
+import re  # noqa: E402
 import signal  # noqa: E402
 import sys  # noqa: E402
 import threading  # noqa: E402
@@ -35,6 +38,7 @@ NUMERIC_COMMANDS = ("run", "validate", "tui", "simulate", "import", "sweep")
 # Commands that write outputs: SIGTERM and SIGHUP stop them as Ctrl-C does (stop_signals). The live view
 # (tui) handles them itself (fusion.commands.tui: the app exits as by 'q', the terminal restored).
 STOPPABLE_COMMANDS = ("run", "simulate", "sweep", "import")
+NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE)
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
@@ -102,6 +106,9 @@ def build_parser() -> argparse.ArgumentParser:
             raise
         mod.register(sub)
     for subparser in sub.choices.values():
+        # a negative number in scientific notation (``--start -1e308``, ``-inf``) is a value, not an option:
+        # argparse's own test knows only -1 and -1.5 (tester6 #18)
+        subparser._negative_number_matcher = NEGATIVE_NUMBER
         # also after the subcommand (``fusion run C --debug``); SUPPRESS keeps a --debug given before it
         subparser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                                help="show tracebacks for errors (as 'fusion --debug COMMAND')")

@@ -34,9 +34,11 @@ def fusion_register_components(registry: "Registry") -> None:
 
 # --------------------------------------------------------------------------- observation hooks
 # Called by fusion.pipeline during a run, through the kept PluginManager (``registry.pm.hook``), for every
-# registered plugin that implements them. They observe: the return value is ignored, and an exception
-# raised by an implementation ends the run as an internal error naming the hook. Each is called only
-# when some plugin implements it, so a run without observers pays nothing.
+# registered plugin that implements them. They observe: the return value is ignored, and an implementation
+# that raises cannot end the run: it is not called again, the run goes on complete, and the failure, naming
+# the plugin, is in ``RunResult.plugin_errors`` and the summary's ``plugin_errors`` (``fusion run`` writes
+# its outputs, prints one line per failure and exits 2). Each is called only when some plugin implements
+# it, so a run without observers pays nothing.
 # Which runs call them: ``fusion run``, ``fusion tui`` and ``fusion.pipeline.run`` / ``Run`` (unless given
 # ``hooks=False``). The trials of ``fusion sweep`` do not (serial, pooled and batched alike: they run with
 # ``hooks=False``, fusion/sweep/trial.py and batched.py): a sweep is thousands of runs, and its results file
@@ -68,9 +70,11 @@ def fusion_on_event(event: "Event", system: "System") -> None:
 
 @hookspec
 def fusion_on_run_end(summary: dict, system: "System") -> None:
-    """Called once when a run ends (end of input, a lost source, or Ctrl-C), with its summary.
+    """Called once when a run ends (end of input, a lost source, Ctrl-C, or ``q`` in ``fusion tui``), with its
+    summary.
     Not called by the trials of ``fusion sweep`` (``hooks=False``), nor by a ``pipeline.run(..., hooks=False)``.
 
-    :param summary: the summary dict, the same that ``--summary-json`` writes (DESIGN.md "Outputs").
+    :param summary: a copy of the summary dict ``--summary-json`` writes (DESIGN.md "Outputs"): editing it
+        changes neither the printed table nor the file.
     :param system: the wired system that was run.
     """

@@ -12,6 +12,8 @@
   permission bits (a read-only 0444 file stays 0444). Standard output closed by its reader (``| head``) is
   ``StdoutClosed``: the command ends quietly (``stdout_closed``: exit 141, as a tool ended by SIGPIPE).
 - ``write_text``: a whole text at once through an ``OutputFile``.
+- ``stdout_carries_data``: while a command's output is ``-``, ``sys.stdout`` is stderr (a plugin's
+  ``print``, a stray debug line cannot go into the CSV), and ``OutputFile("-")`` keeps the real stdout.
 
 Plugins write their files through ``OutputFile`` too (exported as ``fusion.api.OutputFile``;
 docs/writing-plugins.md, "A sink").
@@ -23,12 +25,41 @@ import os
 import stat
 import sys
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
-from typing import IO, Iterable, Mapping
+from typing import IO, Iterable, Iterator, Mapping
 
 from fusion.errors import ConfigError, FusionError
 
-__all__ = ["check_outputs", "OutputFile", "is_stream", "write_text", "StdoutClosed", "stdout_closed"]
+__all__ = ["check_outputs", "OutputFile", "is_stream", "write_text", "StdoutClosed", "stdout_closed",
+           "stdout_carries_data", "data_stdout"]
+
+_data_stdout: IO | None = None   # the real stdout while stdout_carries_data() has sys.stdout on stderr
+
+
+def data_stdout() -> IO:
+    """The standard output data is written to (``-``): the real one, also within ``stdout_carries_data``."""
+    return _data_stdout if _data_stdout is not None else sys.stdout
+
+
+@contextmanager
+def stdout_carries_data(carries: bool = True) -> Iterator[None]:
+    """Within the block (when ``carries``: an output is ``-``), ``sys.stdout`` is ``sys.stderr``: a plugin's
+    ``print()`` (a hook's debug line, a model's) goes to the terminal instead of into the CSV or JSON on
+    stdout (tester6 #15: 600 junk rows among 601); ``OutputFile("-")`` writes to the real stdout. Restored
+    after the block."""
+    global _data_stdout
+    if not carries or _data_stdout is not None:
+        yield
+        return
+    real = sys.stdout
+    _data_stdout = real
+    sys.stdout = sys.stderr
+    try:
+        yield
+    finally:
+        sys.stdout = real
+        _data_stdout = None
 
 #: Exit status of a command whose standard output was closed by its reader: 128 + SIGPIPE, what a shell
 #: reports for a tool that SIGPIPE ended (``seq 1000000 | head -1``), so ``set -o pipefail`` sees it.
@@ -75,8 +106,15 @@ def check_outputs(outputs: Mapping[str, str | os.PathLike | None], inputs: Itera
     given = {opt: p for opt, p in outputs.items() if p is not None}
     read = {_key(p): str(p) for p in inputs if p is not None and str(p) != "-"}
     seen: dict[str, str] = {}
+    stdout: str | None = None
     for opt, path in given.items():
-        if str(path) == "-" or _key(path) == os.devnull:  # stdout and the null device take any number
+        if str(path) == "-":   # standard output carries one output: two would be mixed (CSV then JSON)
+            if stdout is not None:
+                raise ConfigError(f"{opt} -: standard output already carries {stdout}; it can hold one output "
+                                  f"(give {opt} a file)")
+            stdout = opt
+            continue
+        if _key(path) == os.devnull:  # the null device takes any number
             continue
         key = _key(path)
         if key in read:
@@ -113,7 +151,8 @@ class OutputFile:
         self._target = self.path
         try:
             if self.path == "-":
-                self.file: IO = sys.stdout.buffer if binary else sys.stdout
+                out = data_stdout()
+                self.file: IO = out.buffer if binary else out
                 self._owns = False
             elif is_stream(self.path):
                 self.file = open(self.path, "ab" if binary else "a", **({} if binary else {"encoding": "utf-8"}))

@@ -22,9 +22,10 @@ Modules: this one is the loop (``Run``, ``run``, ``RunResult``, the ``Collect`` 
 """
 from __future__ import annotations
 
+import copy
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Sequence
 
@@ -75,7 +76,9 @@ class RunResult:
     ``interrupted`` (Ctrl-C), the wall time, and ``source_error``: why the source stopped early (it raised
     an OSError or a FusionError, e.g. a lost link), None when it ended normally; ``component_error``: why the
     run stopped before the end of its input because a component cannot go on (the process model failed on
-    every prediction: fusion.scheduler.ProcessModelFailed), None otherwise."""
+    every prediction: fusion.scheduler.ProcessModelFailed), None otherwise; ``plugin_errors``: one line per
+    observer of a plugin that raised (an observation hook, a plugin's sink), each naming the plugin: the
+    run went on without it (``Run``), so the estimates and the summary are complete."""
 
     summary: dict[str, Any]
     stats: RunStats
@@ -85,6 +88,8 @@ class RunResult:
     wall_s: float
     source_error: str | None = None
     component_error: str | None = None
+    plugin_errors: tuple[str, ...] = ()
+    plugin_exceptions: tuple[BaseException, ...] = field(default=(), repr=False)
 
 
 class Run:
@@ -98,6 +103,12 @@ class Run:
     :param plot: a ``fusion.sinks.plot.PlotRecorder`` that keeps a decimated trajectory for ``--plot``.
     :param on_truth: called with every truth message (the live view draws the true track).
     :param hooks: call the plugins' observation hooks (``fusion_on_estimate``, ...).
+
+    Observers cannot end the run: a plugin's hook implementation or a plugin's sink (a sink whose class is not
+    fusion's own) that raises is named in ``plugin_errors`` (and the summary's ``plugin_errors``) and not
+    called again; a failed sink's output files (the ``OutputFile`` objects it holds) are discarded, never
+    left cut under their names. The run, fusion's own sinks and the summary go on complete. A sink's
+    ``FusionError`` (a write that failed: disk full) is raised as before.
     """
 
     def __init__(self, system: System, sinks: Sequence[Any] = (), *, on_event: Callable[[Event], Any] | None = None,
@@ -115,7 +126,9 @@ class Run:
         # A plugin's sink (not one of fusion's own) sees read-only copies, as the hooks do (read_only)
         self._sink_views = [(s, not _is_own(s)) for s in self.sinks]
         self._copies = any(foreign for _, foreign in self._sink_views)
-        self._event_sinks = [s.on_event for s in self.sinks if has(s, ReceivesEvents)]
+        self._event_sinks = [(s, s.on_event, not _is_own(s)) for s in self.sinks if has(s, ReceivesEvents)]
+        self.plugin_errors: list[str] = []
+        self.plugin_exceptions: list[BaseException] = []   # the same failures, for a traceback (--debug)
         self.on_event = on_event
         self.progress = progress
         self.plot = plot
@@ -125,10 +138,9 @@ class Run:
         pm = getattr(system.registry, "pm", None) if hooks else None
         self._hook_estimate = self._hook_event = self._hook_end = None
         if pm is not None:
-            h = pm.hook
-            self._hook_estimate = h.fusion_on_estimate if h.fusion_on_estimate.get_hookimpls() else None
-            self._hook_event = h.fusion_on_event if h.fusion_on_event.get_hookimpls() else None
-            self._hook_end = h.fusion_on_run_end if h.fusion_on_run_end.get_hookimpls() else None
+            self._hook_estimate = _Observers.of(pm, system.registry, "fusion_on_estimate", self)
+            self._hook_event = _Observers.of(pm, system.registry, "fusion_on_event", self)
+            self._hook_end = _Observers.of(pm, system.registry, "fusion_on_run_end", self)
         self.last: Estimate | None = None
         self.wall0 = time.perf_counter()
         self.finished: RunResult | None = None
@@ -236,19 +248,59 @@ class Run:
             self.stats.add_estimate(out)
             seen = read_only(out) if self._copies or self._hook_estimate is not None else out
             for sink, foreign in self._sink_views:
-                sink.on_estimate(seen if foreign else out)
+                if foreign:
+                    try:
+                        sink.on_estimate(seen)
+                    except _PASSED_ON:
+                        raise
+                    except Exception as exc:   # a plugin's sink: named, dropped, the run goes on
+                        self._sink_failed(sink, "on_estimate", exc, out.t)
+                else:
+                    sink.on_estimate(out)
             if self._hook_estimate is not None:
-                _call(self._hook_estimate, "fusion_on_estimate", estimate=seen, system=self.system)
+                self._hook_estimate(estimate=seen, system=self.system)
             if self.progress is not None:
                 self.progress(out.t)
         else:
             self.stats.add_event(out)
             if self.on_event is not None:
                 self.on_event(out)
-            for on_event in self._event_sinks:
-                on_event(out)
+            for sink, on_event, foreign in self._event_sinks:
+                if foreign:
+                    try:
+                        on_event(out)
+                    except _PASSED_ON:
+                        raise
+                    except Exception as exc:
+                        self._sink_failed(sink, "on_event", exc, out.t)
+                else:
+                    on_event(out)
             if self._hook_event is not None:
-                _call(self._hook_event, "fusion_on_event", event=out, system=self.system)
+                self._hook_event(event=out, system=self.system)
+
+    def _plugin_failed(self, text: str, exc: BaseException) -> None:
+        self.plugin_errors.append(text)
+        self.plugin_exceptions.append(exc)
+
+    def _sink_failed(self, sink: Any, method: str, exc: BaseException, t: float = math.nan) -> None:
+        """A plugin's sink raised: it gets nothing more, its output files are discarded (a cut file left
+        under the name a later script reads would pass for a result), the failure is named."""
+        self.sinks = [s for s in self.sinks if s is not sink]
+        self._sink_views = [(s, f) for s, f in self._sink_views if s is not sink]
+        self._copies = any(f for _, f in self._sink_views)
+        self._event_sinks = [e for e in self._event_sinks if e[0] is not sink]
+        inner = getattr(sink, "sink", sink)
+        paths = _discard_outputs(inner)
+        registry = self.system.registry
+        who = f"plugin sink {getattr(inner, 'name', None) or type(inner).__name__!r}"
+        providers = getattr(registry, "providers", None) or {}
+        provider = providers.get(type(inner).__module__.split(".")[0])   # its installed package, if one
+        if provider:
+            who += f" ({provider})"
+        at = f" at t = {t:.3f} s" if math.isfinite(t) else ""
+        lost = f"; its output {', '.join(paths)} was discarded (incomplete)" if paths else ""
+        more = "" if method == "close" else "; it got nothing more"
+        self._plugin_failed(f"{who}: its {method}() raised {type(exc).__name__}: {exc}{at}{more}{lost}", exc)
 
     def scheduler_finish(self) -> list[Estimate | Event]:
         """End of input: release what the scheduler still buffers (dispatched, and returned); ``finish()``
@@ -292,19 +344,30 @@ class Run:
         if component_error is not None:
             summary["component_error"] = component_error
         if self._hook_end is not None:
-            _call(self._hook_end, "fusion_on_run_end", summary=summary, system=self.system)
+            # a copy: an observer that edits the dict it is given (pops a key to upload the rest) must not
+            # change the table printed and the --summary-json written after it (tester6 #2)
+            self._hook_end(summary=copy.deepcopy(summary), system=self.system)
+        if self.plugin_errors:
+            summary["plugin_errors"] = list(self.plugin_errors)
         self.finished = RunResult(summary, self.stats, self.last, self.parsed, interrupted, wall, source_error,
-                                  component_error)
+                                  component_error, tuple(self.plugin_errors), tuple(self.plugin_exceptions))
         return self.finished
 
     def close_sinks(self) -> None:
-        sinks, self.sinks, self._sink_views = self.sinks, [], []
+        """Close every sink: a sink's FusionError (a failed write) is raised after all are closed; a plugin's
+        sink that raises anything else is a plugin error (``_sink_failed``: its outputs discarded)."""
+        sinks, views = self.sinks, dict((id(s), f) for s, f in self._sink_views)
+        self.sinks, self._sink_views, self._event_sinks = [], [], []
         errors = []
         for sink in sinks:
             try:
                 sink.close()
             except FusionError as exc:
                 errors.append(exc)
+            except Exception as exc:
+                if isinstance(exc, BrokenPipeError) or not views.get(id(sink), not _is_own(sink)):
+                    raise
+                self._sink_failed(sink, "close", exc)
         if errors:
             raise errors[0]
 
@@ -391,12 +454,84 @@ def header_beacon_warnings(declared: dict[str, tuple[float, ...]], configured: d
     return events
 
 
-def _call(hook, name: str, **kwargs) -> None:
-    """Call an observation hook; a plugin's exception becomes an internal error that names the hook."""
-    try:
-        hook(**kwargs)
-    except Exception as exc:
-        raise RuntimeError(f"a plugin's {name} hook raised {type(exc).__name__}: {exc}") from exc
+#: What an observer's failure is not: a FusionError (the user's to fix: a failed write, raised as before) and
+#: a BrokenPipeError (a plugin printing to a stdout whose reader went away: the CLI ends quietly, exit 141).
+_PASSED_ON = (FusionError, BrokenPipeError)
+
+
+class _Observers:
+    """The implementations of one observation hook, called one by one in pluggy's order (the last
+    registered first): one that raises is named in the run's ``plugin_errors`` and not called again, the
+    others and the run go on (an observer cannot end the run, nor lose its outputs: tester6 #10)."""
+
+    def __init__(self, name: str, impls: list[tuple[Callable, tuple[str, ...] | None, str]], run: "Run"):
+        self.name = name
+        self.impls = impls
+        self.run = run
+
+    @classmethod
+    def of(cls, pm: Any, registry: Any, name: str, run: "Run") -> "_Observers | None":
+        """The hook's implementations, None when there is none."""
+        found = getattr(pm.hook, name).get_hookimpls()
+        if not found:
+            return None
+        if any(hi.hookwrapper or getattr(hi, "wrapper", False) for hi in found):
+            hook = getattr(pm.hook, name)   # a wrapper needs pluggy's own call; one failure is still named
+            return cls(name, [(hook, None, f"a plugin's {name} hook")], run)
+        providers = getattr(registry, "providers", {}) or {}
+        impls = []
+        for hi in reversed(found):
+            impls.append((hi.function, tuple(hi.argnames), _plugin_label(pm, hi.plugin, providers)))
+        return cls(name, impls, run)
+
+    def __call__(self, **kwargs: Any) -> None:
+        for impl in self.impls:
+            fn, names, who = impl
+            try:
+                if names is None:
+                    fn(**kwargs)
+                else:
+                    fn(*[kwargs[a] for a in names])
+            except _PASSED_ON:
+                raise
+            except Exception as exc:
+                self._failed(impl, exc, kwargs)
+
+    def _failed(self, impl: tuple, exc: BaseException, kwargs: dict[str, Any]) -> None:
+        self.impls = [i for i in self.impls if i is not impl]
+        item = kwargs.get("estimate", kwargs.get("event"))
+        t = getattr(item, "t", math.nan)
+        at = f" at t = {t:.3f} s" if isinstance(t, float) and math.isfinite(t) else (
+            " at the end of the run" if self.name == "fusion_on_run_end" else "")
+        again = "" if self.name == "fusion_on_run_end" else "; it was not called again"
+        self.run._plugin_failed(f"{impl[2]}: its {self.name} hook raised {type(exc).__name__}: {exc}{at}{again}", exc)
+        if not self.impls:    # none left: the run stops copying estimates for it
+            for attr in ("_hook_estimate", "_hook_event", "_hook_end"):
+                if getattr(self.run, attr) is self:
+                    setattr(self.run, attr, None)
+
+
+def _plugin_label(pm: Any, plugin: Any, providers: dict[str, str]) -> str:
+    """``plugin t6 (fusion-t6 0.1.0)``: the entry point's name and the distribution that installed it."""
+    name = pm.get_name(plugin) or ""
+    if not name or name.isdigit():   # registered without a name (pluggy names it by id): its module or class
+        name = getattr(plugin, "__name__", None) or type(plugin).__qualname__
+    top = (getattr(plugin, "__name__", None) or type(plugin).__module__).split(".")[0]
+    package = providers.get(top)
+    return f"plugin {name}" + (f" ({package})" if package else "")
+
+
+def _discard_outputs(sink: Any) -> list[str]:
+    """Discard the ``fusion.api.OutputFile`` objects a (failed) sink holds as attributes; their paths."""
+    from fusion.outputs import OutputFile
+
+    paths = []
+    for value in list(getattr(sink, "__dict__", {}).values()):
+        if isinstance(value, OutputFile):
+            if value.temporary is not None or value.file is not None:
+                paths.append(value.path)
+            value.discard()
+    return paths
 
 
 def _is_own(sink: Any) -> bool:
@@ -429,8 +564,10 @@ def read_only(estimate: Estimate) -> Estimate:
     return Estimate(estimate.t, belief, estimate.reason, estimate.sensor, u)
 
 
-def _lines_of(source: Any) -> tuple[Iterable[str], str, Callable[[], Any] | None]:
-    """(lines, label, close) of a path, a Source or an iterable of text lines."""
+def _lines_of(source: Any, given: str | None = None) -> tuple[Iterable[str], str, Callable[[], Any] | None]:
+    """(lines, label, close) of a path, a Source or an iterable of text lines. A source without a ``label`` of
+    its own is named by ``given`` (the text the user typed, ``gen://5``) rather than by the default label, its
+    first parameter's value (tester6 #14: "5.0"). A plugin's source's lines are checked to be text."""
     if isinstance(source, (str, Path)):
         from fusion.sources.select import open_source
 
@@ -438,9 +575,37 @@ def _lines_of(source: Any) -> tuple[Iterable[str], str, Callable[[], Any] | None
     if isinstance(source, Source):
         if has(source, Opens):
             source.open()
-        label = source.label or str(getattr(source.params, "path", "") or source.name)
-        return source.lines(), str(label), source.close if has(source, Closes) else None
+        if given and type(source).label is Source.label:
+            label = given
+        else:
+            label = source.label or str(getattr(source.params, "path", "") or source.name)
+        label = str(label)
+        return source_text(source.lines(), source, label), label, source.close if has(source, Closes) else None
     return source, "<lines>", None
+
+
+def source_text(lines: Iterable[Any], source: Source, label: str) -> Iterable[str]:
+    """A plugin's source's ``lines()`` checked to be text: one that yields bytes or anything else (a socket's
+    datagrams undecoded) ends the input with an InputError naming the source and what it yielded, where the
+    parser would fail on it as an internal error (tester6 #14). fusion's own sources are not re-checked."""
+    if _is_own(source):
+        return lines
+    return _text_only(lines, source, label)
+
+
+def _text_only(lines: Iterable[Any], source: Source, label: str) -> Iterator[str]:
+    for n, line in enumerate(lines, 1):
+        if not isinstance(line, str):
+            what = type(line).__name__
+            hint = " (decode it: line.decode('utf-8'))" if isinstance(line, (bytes, bytearray)) else ""
+            raise InputError(f"source {source.name!r} ({label}) yielded {what} {_short(line)} as line {n}: a "
+                             f"source's lines() yields text (str){hint}")
+        yield line
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 class _SourceLost(Exception):
@@ -478,7 +643,7 @@ def run(system: System, source: Any, sinks: Sequence[Any] = (), *, on_event: Cal
     failure in one update only loses that message (fusion.scheduler). A bug in a component ends the
     run with a RuntimeError that says how far it got; a component's ``FusionError`` (bad input the run
     cannot go on with) is raised as is, after the sinks are closed."""
-    lines, name, close = _lines_of(source)
+    lines, name, close = _lines_of(source, label)
     session = Run(system, sinks, on_event=on_event, progress=progress, plot=plot, hooks=hooks,
                   label=label if label is not None else name, on_truth=on_truth)
     interrupted = False

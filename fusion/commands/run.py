@@ -19,16 +19,16 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "config composes; print a summary with errors against truth when the recording "
                                    "has truth lines.")
     p.add_argument("config", help="system YAML (e.g. configs/abps_ins.yaml)")
-    p.add_argument("--input", "-i", metavar="SOURCE",
+    p.add_argument("--input", "-i", metavar="SOURCE", action=Once,
                    help="recording to replay instead of the config's own ('-' for stdin), or any registered source: "
                         "a serial port (/dev/ttyUSB0, socket://host:port, loop://) or a plugin's scheme")
-    p.add_argument("--filter", metavar="NAME", help="use this filter instead of the config's (kf, ekf, iekf, ukf, srukf)")
+    p.add_argument("--filter", metavar="NAME", action=Once, help="use this filter instead of the config's (kf, ekf, iekf, ukf, srukf)")
     p.add_argument("--filter-param", metavar="KEY=VALUE", action="append", default=[],
                    help="set a filter parameter (repeatable; VALUE is YAML, e.g. alpha=0.5)")
-    p.add_argument("--output", "-o", metavar="PATH",
+    p.add_argument("--output", "-o", metavar="PATH", action=Once,
                    help="write estimates: the sink is chosen by suffix (.csv, .jsonl, or a plugin's; '-' CSV on stdout)")
-    p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON")
-    p.add_argument("--plot", metavar="PATH.png", help="plot trajectory, errors with 3-sigma bounds and NIS")
+    p.add_argument("--summary-json", metavar="PATH", action=Once, help="write the summary as JSON")
+    p.add_argument("--plot", metavar="PATH.png", action=Once, help="plot trajectory, errors with 3-sigma bounds and NIS")
     p.add_argument("--smooth", action="store_true",
                    help="Rauch-Tung-Striebel smoothing after the forward filter: --output and the summary give the "
                         "smoothed estimates, the summary the filtered and smoothed errors side by side")
@@ -39,6 +39,20 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="no table on stdout (on stderr when an output is '-', so stdout holds only that output)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
+
+
+class Once(argparse.Action):
+    """An option that takes one value and may be given once: a second ``-o b.csv`` (``--plot``, ``--filter``,
+    ``--input``) is refused (exit 2) where argparse would keep the last and drop the first request without a
+    word (tester6 #16). One run writes one output of each kind; run it again for another."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        before = getattr(namespace, self.dest, None)
+        if before is not None and getattr(namespace, f"_{self.dest}_given", False):
+            raise argparse.ArgumentError(self, f"given twice ({before} and {values}): a run takes one; give it "
+                                               "once (run again for another)")
+        setattr(namespace, f"_{self.dest}_given", True)
+        setattr(namespace, self.dest, values)
 
 
 def filter_override(config: str | Path, name: str | None, params: list[str]) -> Any:
@@ -75,6 +89,14 @@ class EventNotes:
 
 
 def run(args: argparse.Namespace) -> int:
+    from fusion.outputs import stdout_carries_data
+
+    # an output on stdout ('-'): a plugin's print() goes to stderr for the whole command, never into the data
+    with stdout_carries_data("-" in (args.output, args.summary_json, args.plot)):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     from fusion import pipeline, report
     from fusion.config import load_system
     from fusion.sinks.summary import write_summary_json
@@ -107,7 +129,9 @@ def run(args: argparse.Namespace) -> int:
         from fusion.sinks.plot_recorder import PlotRecorder
 
         plot = PlotRecorder()
-    show_progress = not args.no_progress and not args.quiet and sys.stdout.isatty()
+    from fusion.outputs import data_stdout
+
+    show_progress = not args.no_progress and not args.quiet and data_stdout().isatty()
     with report.progress(_duration_hint(source), enabled=show_progress) as tick:
         notes = EventNotes(sys.stderr, enabled=not args.quiet)
         smoothing = _smoothing(args, system)
@@ -135,6 +159,7 @@ def run(args: argparse.Namespace) -> int:
     for sink in guarded:
         if sink.error is not None:  # the output failed (disk full): after the summary, one line, exit 2
             raise sink.error
+    report_plugin_errors("run", result, debug=getattr(args, "debug", False))
     if result.interrupted:
         print("fusion run: interrupted; the summary covers what was read", file=sys.stderr)
         return 130
@@ -149,11 +174,31 @@ def run(args: argparse.Namespace) -> int:
     if not result.stats.estimates:   # a log this config cannot use (or nothing in it): a user error
         print(f"fusion run: error: {summary['not_started']}; the summary covers what was read", file=sys.stderr)
         return 2
+    if result.plugin_errors:   # an observer failed: the run's outputs are complete, the plugin is not
+        return 2
     if not result.stats.last_finite:
         print("fusion run: the estimate ended non-finite (the filter diverged); see the summary's health",
               file=sys.stderr)
         return 3
     return 0
+
+
+def report_plugin_errors(command: str, result: Any, debug: bool = False) -> None:
+    """One line on stderr per plugin observer that raised during the run (``RunResult.plugin_errors``: a hook,
+    a plugin's sink), naming the plugin, after the outputs are written (they are complete: the run went on
+    without it); with ``--debug`` each failure's traceback too. The command then exits 2."""
+    errors = getattr(result, "plugin_errors", ())
+    if not errors:
+        return
+    if debug:
+        import traceback
+
+        for exc in getattr(result, "plugin_exceptions", ()):
+            traceback.print_exception(exc, file=sys.stderr)
+    for text in errors:
+        print(f"fusion {command}: error: {text}", file=sys.stderr)
+    print(f"fusion {command}: the run went on without it: the summary and the other outputs are complete (exit 2)",
+          file=sys.stderr)
 
 
 def summary_console(stderr: bool = False):

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from fusion.commands.run import Once
 from fusion.errors import ConfigError
 
 HELP = "run many seeded trials (simulate + run) over filters and parameters; one row a trial"
@@ -39,14 +40,14 @@ def register(sub) -> None:
     p.add_argument("--scenario", metavar="S", help="scenario YAML to simulate (default: the one that made the "
                                                     "config's own recording)")
     p.add_argument("--seeds", metavar="N", required=True, help="N seeds 0..N-1, or A:B for seeds A..B-1")
-    p.add_argument("--filter", metavar="NAMES", help="comma-separated filters (default: the config's)")
+    p.add_argument("--filter", metavar="NAMES", action=Once, help="comma-separated filters (default: the config's)")
     p.add_argument("--param", metavar="KEY=V1,V2", action="append", default=[],
                    help="a config (or scenario.*) value to vary; repeatable: the grid is every combination")
     p.add_argument("--smooth", action="store_true", help="also run the RTS smoother; smoothed columns in the rows")
     p.add_argument("--initial", default="config", choices=("config", "drawn"),
                    help="initial mean: the config's (default), or drawn per seed from N(true start, P0), the "
                         "Monte-Carlo protocol of a NEES test (needs truth in the recording)")
-    p.add_argument("-o", "--output", metavar="RESULTS", required=True, help="results file (.csv or .parquet)")
+    p.add_argument("-o", "--output", metavar="RESULTS", required=True, action=Once, help="results file (.csv or .parquet)")
     p.add_argument("--engine", default="auto", choices=("auto", "batch", "serial", "pool", "dask"),
                    help="where trials run (default auto)")
     p.add_argument("--jobs", "-j", type=int, default=2, metavar="J", help="pool or LocalCluster workers (default 2)")
@@ -118,6 +119,9 @@ def run(args: argparse.Namespace) -> int:
     filters = [f.strip() for f in args.filter.split(",")] if args.filter else [None]
     if args.filter and any(not f for f in filters):
         raise ConfigError(f"--filter {args.filter!r}: an empty name (e.g. --filter ukf,ekf)")
+    twice = sorted({f for f in filters if filters.count(f) > 1})
+    if args.filter and twice:   # each trial would run twice and be written once ("2 trials ... 4 run")
+        raise ConfigError(f"--filter {args.filter!r}: {', '.join(twice)} given twice; name each filter once")
     params = parse_params(args.param)
     trials = trials_of(args.config, scenario, seeds_of(args.seeds), filters, params, args.smooth, args.initial)
     where = args.scheduler or args.dask

@@ -14,6 +14,7 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
+from fusion.commands.run import Once
 from fusion.errors import ConfigError, FusionError, InputError
 
 DEFAULT_CONFIG = Path("configs") / "abps_ins.yaml"
@@ -28,20 +29,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("config", nargs="?", metavar="CONFIG",
                    help=f"system YAML (default: {DEFAULT_CONFIG} when it exists)")
     src = p.add_mutually_exclusive_group()
-    src.add_argument("--port", metavar="PORT",
+    src.add_argument("--port", metavar="PORT", action=Once,
                      help="serial device (/dev/ttyUSB0, COM3) or pyserial URL (socket://host:port, loop://)")
-    src.add_argument("--input", "-i", metavar="LOG", help="replay this recording instead of the config's own")
+    src.add_argument("--input", "-i", metavar="LOG", action=Once, help="replay this recording instead of the config's own")
     p.add_argument("--baud", type=int, default=115200, help="with --port: bit/s, 8N1 (default 115200)")
-    p.add_argument("--record", metavar="PATH",
+    p.add_argument("--record", metavar="PATH", action=Once,
                    help="with --port: write every raw byte received to PATH (a recording; must not exist)")
     p.add_argument("--speed", type=float, default=None,
                    help="replays: x real time by sensor time (default 1; 0 = as fast as possible)")
-    p.add_argument("--filter", metavar="NAME", help="use this filter instead of the config's (kf, ekf, iekf, ukf, srukf)")
+    p.add_argument("--filter", metavar="NAME", action=Once, help="use this filter instead of the config's (kf, ekf, iekf, ukf, srukf)")
     p.add_argument("--filter-param", metavar="KEY=VALUE", action="append", default=[],
                    help="set a filter parameter (repeatable; VALUE is YAML, e.g. alpha=0.5)")
     p.add_argument("--refresh", type=float, default=15.0, metavar="HZ",
                    help="view refreshes per second (default 15; estimates in between are coalesced)")
-    p.add_argument("--udp", metavar="HOST:PORT",
+    p.add_argument("--udp", metavar="HOST:PORT", action=Once,
                    help="also send every estimate and innovation as one JSON datagram (PlotJuggler's UDP server, "
                         "JSON protocol, timestamp field 'timestamp'; its default port is 9870)")
     p.add_argument("--expect-rate", metavar="SENSOR=HZ", action="append", default=[],
@@ -188,6 +189,9 @@ def run(args: argparse.Namespace) -> int:
     app = build_app(args)
     with _exit_on_stop_signals(app) as received:
         app.run()
+    feed = getattr(app, "feed", None)
+    if feed is not None:   # the worker finishes the run (sinks closed, fusion_on_run_end called) after 'q'
+        feed.done.wait(10.0)
     snap = app.latest
     if received:        # SIGTERM / SIGHUP: the view closed as by 'q' (terminal restored, record complete)
         print(f"fusion tui: stopped by {received[0].name}" + (f"; raw input recorded to {args.record}"
@@ -202,6 +206,11 @@ def run(args: argparse.Namespace) -> int:
     if snap.state == "error":
         print(f"fusion tui: {snap.message}", file=sys.stderr)
         return 1
+    result = getattr(feed, "result", None)
+    if result is not None and result.plugin_errors:
+        from fusion.commands.run import report_plugin_errors
+
+        report_plugin_errors("tui", result, debug=getattr(args, "debug", False))
     if snap.state == "lost":
         raise FusionError(snap.message)
-    return 0
+    return 2 if result is not None and result.plugin_errors else 0

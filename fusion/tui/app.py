@@ -20,6 +20,7 @@ from textual.widgets import ContentSwitcher, Footer, Header, TabbedContent, TabP
 
 from fusion.api import Closes, ConfigError, Opens, ReportsIdle, ReportsStatus, Source, has
 from fusion.config import System, load_system
+from fusion.pipeline import source_text
 from fusion.sources.select import open_source
 from fusion.tui.counters import SensorCounters
 from fusion.tui.event_log import EventLog
@@ -282,12 +283,18 @@ class FusionApp(App):
         self.exit()
 
 
-def _primed(lines: Iterator[str]) -> Iterator[str]:
-    """Open a recording now (its InputError is raised here, before the UI starts), then stream it."""
+def _primed(lines: Iterator[str], label: str = "") -> Iterator[str]:
+    """Open a recording now (its InputError is raised here, before the UI starts), then stream it. A source
+    whose first read fails (an OSError: a link down) is an InputError naming it, as in ``fusion run``."""
+    from fusion.errors import InputError
+    from fusion.pipeline import _source_message
+
     try:
         first = next(lines)
     except StopIteration:
         return iter(())
+    except OSError as exc:
+        raise InputError(_source_message(label, exc)) from None
     return itertools.chain([first], lines)
 
 
@@ -333,8 +340,10 @@ def make_app(config_path_or_system: str | Path | System, source: Any = None, *, 
     if has(source, Opens):
         source.open()
     live = bool(source.live)
-    lines = source.lines() if live else _primed(iter(source.lines()))
-    options: dict[str, Any] = dict(lines=lines, source=label or source.label, live=live,
+    label = label or source.label
+    lines = source_text(source.lines(), source, label)   # a plugin's source yielding bytes: named, exit 2
+    lines = lines if live else _primed(iter(lines), label)
+    options: dict[str, Any] = dict(lines=lines, source=label, live=live,
                                    close=source.close if has(source, Closes) else None)
     options.update(speed=speed, refresh_hz=refresh_hz, expected_rates=expected_rates, limits=limits,
                    pause_at=pause_at, smooth_lag=smooth_lag)

@@ -26,7 +26,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 from fusion.api import Estimate, Event, InputError, Message
 from fusion.config import System
 from fusion.logformat import iter_messages
-from fusion.pipeline import COUNTERS, Run
+from fusion.pipeline import COUNTERS, Run, _guarded, _SourceLost, _source_message
 from fusion.tui.health import Health, HealthMonitor
 from fusion.tui.series import InnovationHistory
 from fusion.tui.smoothed_trace import SmoothedTrace
@@ -82,6 +82,7 @@ class LiveFeed:
         self.refresh_dt = 1.0 / refresh_hz if refresh_hz > 0 else 0.0
         self._close = close
         self._stop = threading.Event()
+        self.done = threading.Event()   # set when run() has returned (the run finished, its hooks called)
         self._running = threading.Event()
         self._running.set()
         self.events: deque[LoggedEvent] = deque(maxlen=max_events)
@@ -165,13 +166,23 @@ class LiveFeed:
 
     # ------------------------------------------------------------------ the worker
     def run(self) -> FeedSnapshot:
-        """Read until the end of the input, a lost port, or stop(); returns the final snapshot."""
+        """Read until the end of the input, a lost port, or stop(); returns the final snapshot. The run is
+        finished (``result``; its sinks closed, ``fusion_on_run_end`` called) however reading ended: at the
+        end of the input, a lost source (``source_error``), or ``stop()`` (``q``: ``interrupted``, as Ctrl-C
+        in ``fusion run``; a live session can end no other way: tester6 #11); not after an internal error."""
+        try:
+            return self._run()
+        finally:
+            self.done.set()
+
+    def _run(self) -> FeedSnapshot:
         run = self.run_
         self._emit(time.monotonic())
         ended = False
+        source_error = None
         try:
             self.state = "running"
-            for item in iter_messages(self._paced(self._lines), self.parsed):
+            for item in iter_messages(self._paced(_guarded(self._lines)), self.parsed):
                 if isinstance(item, Message) and item.t - item.t == 0.0:
                     if self.sensor_t != self.sensor_t:
                         self._t_start = item.t
@@ -187,27 +198,29 @@ class LiveFeed:
                     self._emit(now)
             ended = not self._stop.is_set()
             self.state = "finished" if ended else "stopped"
-        except InputError as exc:  # a port that vanished: keep the last state, say so
+        except (InputError, _SourceLost) as exc:  # a port that vanished, a source's lost link: keep the last state
             ended = True
             self.state = "lost"
-            self.message = str(exc)
-            self._log(Event(self.sensor_t, "source", None, str(exc)))
+            cause = exc.__cause__ if isinstance(exc, _SourceLost) and exc.__cause__ is not None else exc
+            self.message = source_error = _source_message(self.source, cause) if self.source else str(cause)
+            self._log(Event(self.sensor_t, "source", None, self.message))
         except Exception as exc:  # a bug: report it in the view rather than killing the app
             self.state = "error"
             self.message = f"internal error: {type(exc).__name__}: {exc}"
             self._log(Event(self.sensor_t, "error", None, self.message))
-        if ended:
+        if self.state != "error":
             try:
-                for out in run.scheduler_finish():
-                    self._take(out)
-                self.result = run.finish()
+                if ended:
+                    for out in run.scheduler_finish():
+                        self._take(out)
+                self.result = run.finish(interrupted=not ended, source_error=source_error)
             except Exception as exc:
                 self.state = "error"
                 self.message = f"internal error: {type(exc).__name__}: {exc}"
                 self._log(Event(self.sensor_t, "error", None, self.message))
         else:
             try:
-                run.close_sinks()  # stopped: the --udp socket is released too
+                run.close_sinks()  # the --udp socket is released too
             except Exception:  # a sink that fails to close must not hide how the run ended
                 pass
         return self._emit(time.monotonic())
