@@ -18,11 +18,10 @@ Over n firings the transition is Phi^n (t advances by n T) and the noise the sum
 What the random walk covers: ``position_sd`` is the sd of an independent zero-mean step per firing, so
 the model expects the robot to wander, not to go somewhere. The paper (sec. 4.2) chooses it "of the same
 order as the maximum movement anticipated in each axis in one time step", but it is not a bound: a robot
-moving steadily at v m/s moves v T every firing in the same direction, and the filter, weighing the old
-arrivals against the new, lags by about v T / (the fraction of the new step it takes in), which stays small
-only while v T is well under position_sd (a bias of several sd at 2 cm/s with 5 mm: measured by tester5,
-finding 4: 316 mm RMSE, NEES 56 on 3 dof, and the echo gate then rejects genuine arrivals of the lagging
-filter, ~1/3 of them). Raising position_sd covers steady motion at a price when the robot stands still
+moving steadily at v m/s moves v T every firing in the same direction, and a random-walk filter follows a
+ramp with a steady lag of v T over its gain per firing, many steps' worth at the small gains of a noisy
+arrival time (tester5, finding 4: 2 cm/s with 5 mm, 316 mm RMSE, NEES 56 on 3 dof, and the echo gate then
+rejects ~1/3 of the genuine arrivals of the lagging filter as echoes). Raising position_sd covers steady motion at a price when the robot stands still
 (measured 27 -> 91 mm at 0.05 m): one per-step sd cannot serve both. The attitude walk
 (``attitude_sd_deg``) is the same: it covers an attitude that jitters, not one that turns steadily.
 
@@ -69,7 +68,7 @@ config's white model, which does not use it.
 from __future__ import annotations
 
 import numpy as np
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 
 from typing import Literal
 
@@ -157,6 +156,13 @@ class FiringClock(ProcessModel):
             if s.size not in (1, 3) or np.any(s < 0) or not np.all(np.isfinite(s)):
                 raise ValueError(f"{info.field_name} needs 1 or 3 finite values >= 0, got {v}")
             return v
+
+        @model_validator(mode="after")
+        def _psd_needs_velocity(self):
+            if "acceleration_psd" in self.model_fields_set and self.motion != "constant_velocity":
+                raise ValueError("acceleration_psd is the noise of motion: constant_velocity (the random walk's "
+                                 "is position_sd); set motion: constant_velocity or drop it")
+            return self
 
     def __init__(self, params=None, context=None):
         super().__init__(params, context)

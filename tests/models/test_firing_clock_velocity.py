@@ -87,3 +87,9 @@ def test_bad_acceleration_psd_is_refused():
     from fusion.api import ConfigError
     with pytest.raises((ValueError, ConfigError), match="acceleration_psd"):
         _clock(motion="constant_velocity", acceleration_psd=[1e-4, -1.0, 0.0])
+
+
+def test_acceleration_psd_without_constant_velocity_is_refused():
+    """A density that the random walk would silently ignore: refused, naming both keys."""
+    with pytest.raises(ValueError, match="acceleration_psd.*constant_velocity"):
+        _clock(acceleration_psd=1e-4)
