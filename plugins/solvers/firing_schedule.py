@@ -191,13 +191,11 @@ class FiringSchedule:
     def _learn(self) -> bool:
         """Period (if not given) and cut from the held ranges; False when they do not tell yet (or the learnt
         period is refused: ``_refused`` says why)."""
-        by_beacon: dict[str, list[float]] = {}
-        for _, b, _, te in self._held:
-            by_beacon.setdefault(b, []).append(te)
+        by_beacon = self._pulses()
         learnt = self.period is None
         if learnt:
-            gaps = np.concatenate([np.diff(sorted(v)) for v in by_beacon.values() if len(v) > 1] or [np.zeros(0)])
-            gaps = gaps[gaps > max(1e-6, self._pulse_gap())]     # two reports of one pulse: no period
+            gaps = np.concatenate([np.diff(v) for v in by_beacon.values() if len(v) > 1] or [np.zeros(0)])
+            gaps = gaps[gaps > 1e-6]
             if len(gaps) < 2:
                 return False
             m = gaps.min()
@@ -236,13 +234,20 @@ class FiringSchedule:
         self.cut -= math.ceil((self.cut - t0) / T) * T
         return True
 
-    def _pulse_gap(self) -> float:
-        """Half the median gap (s) between consecutive emissions of two different beacons in the held ranges:
-        two emissions of one beacon closer than that are one pulse reported twice (0 with one beacon)."""
+    def _pulses(self) -> dict[str, list[float]]:
+        """The emission times (s, sorted) of each beacon's pulses in the held ranges. Two emissions of one
+        beacon closer than half the median gap between consecutive emissions of two different beacons are one
+        pulse reported twice: the shorter range's (the direct path) stands for it."""
         held = sorted(self._held, key=lambda h: h[3])
-        d = [b[3] - a[3] for a, b in zip(held, held[1:]) if a[1] != b[1]]
-        if not d:
-            return 0.0
-        d.sort()
+        d = sorted(b[3] - a[3] for a, b in zip(held, held[1:]) if a[1] != b[1])
         h = len(d) // 2
-        return 0.5 * (d[h] if len(d) % 2 else 0.5 * (d[h - 1] + d[h]))
+        tol = 0.5 * (d[h] if len(d) % 2 else 0.5 * (d[h - 1] + d[h])) if d else 0.0
+        by_beacon: dict[str, list[tuple[float, float]]] = {}
+        for _, b, r, te in held:
+            v = by_beacon.setdefault(b, [])
+            if v and te - v[-1][0] < tol:
+                if r < v[-1][1]:
+                    v[-1] = (te, r)
+            else:
+                v.append((te, r))
+        return {b: [te for te, _ in v] for b, v in by_beacon.items()}

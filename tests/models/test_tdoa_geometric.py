@@ -130,7 +130,7 @@ def test_solver_counts_missing_beacons_and_initialise_mode():
     s = _solver(output="initialise")
     msgs = _messages(r, 5)
     out = [m for msg in msgs for m in s.feed(msg)]
-    assert out[0].value.shape == (4,) and out[0].cov.shape == (4, 4) and out[0].attitude is None
+    assert out[0].value.shape == (5,) and out[0].cov.shape == (5, 5) and out[0].attitude is None   # [p t T]
     assert out[1:] == msgs[12:]      # one fix (three cycles agree), then the arrivals
 
 
@@ -162,9 +162,10 @@ def test_solver_bad_input():
 
 
 def test_initial_state_fix_carries_the_firing_time():
-    """The initial fix: position, and t = the last firing's time (exact on exact arrivals), observed by
-    arrival_time as a linear fix of p and t whose covariance holds the p-t correlation of t = a - d / c."""
-    from fusion_plugins.solvers.initial_fix import observe_initial
+    """The initial fix: position, t = the last firing's time and the period T (exact on exact arrivals),
+    observed by arrival_time as a linear fix of p, t and T whose covariance is the fit's: cov(t, T) =
+    n_last var(T) + cov(t0, T) of t = t0 + n_last T."""
+    from fusion_plugins.solvers.initial_fix import observe_initial, state_fix
     r = np.array([1.2, 1.1, 1.3])
     msgs = _messages(r, 3, t0=0.137)
     s = _solver(output="initialise")
@@ -172,19 +173,26 @@ def test_initial_state_fix_carries_the_firing_time():
     v = out[0].value
     assert np.abs(v[:3] - r).max() < 1e-8
     assert v[3] == pytest.approx(0.137 + 11 * T, abs=1e-10)           # the 12th firing (B4 of cycle 3)
+    assert v[4] == pytest.approx(T, abs=1e-12)
     proc = testing.build("process", "firing_clock", {})
     ctx = BuildContext(layout=proc.layout, beacons={f"B{i + 1}": b for i, b in enumerate(LAB)})
     obs = observe_initial(out[0], ctx)
-    x = np.r_[r, T, v[3]]
-    assert obs.z.shape == (4,) and np.allclose(obs.model.h(x), obs.z, atol=1e-8)
-    u = (r - LAB[3]) / np.linalg.norm(r - LAB[3])
-    assert np.allclose(obs.R[:3, 3], -obs.R[:3, :3] @ u / C)          # cov(p, t) = -C u / c
+    lay = proc.layout
+    x = np.zeros(lay.n)
+    x[lay["p"]], x[lay["T"]], x[lay["t"]] = r, T, v[3]
+    assert obs.z.shape == (5,) and np.allclose(obs.model.h(x), obs.z, atol=1e-8)
+    H = obs.model.jacobian(x)
+    assert np.array_equal(H @ x, obs.model.h(x))
     assert np.all(np.linalg.eigvalsh(obs.R) > 0)
+    assert 1e-6 < np.sqrt(obs.R[4, 4]) < 1e-4                          # 3 cycles of 0.2 ms arrivals: ~20 us
+    # the 4-value fix (no period) is still read
+    old = state_fix(1.0, r, np.eye(3) * 1e-4, v[3], np.zeros(3), 1e-8)
+    assert observe_initial(old, ctx).z.shape == (4,)
     with pytest.raises(MalformedMessage):                              # a message is no typed fix
         observe_initial(Message(1.0, "us", tuple(v.tolist())), ctx)
-    with pytest.raises(MalformedMessage, match="4 finite"):
+    with pytest.raises(MalformedMessage, match="4 or 5 finite"):
         observe_initial(Fix(1.0, np.r_[v[:3], np.nan], out[0].cov), ctx)
-    with pytest.raises(MalformedMessage, match="4 x 4"):
+    with pytest.raises(MalformedMessage, match="5 x 5"):
         observe_initial(Fix(1.0, v, None), ctx)
 
 
@@ -289,7 +297,7 @@ def test_stationary_initialiser_keeps_the_wait():
     batch = _solver(output="initialise", initialise_stationary=True)
     f0 = [m for msg in msgs for m in plain.feed(msg)][0]
     f1 = [m for msg in msgs for m in batch.feed(msg)][0]
-    assert f0.t == f1.t and f0.value.shape == f1.value.shape == (4,) and f1.cov.shape == (4, 4)
+    assert f0.t == f1.t and f0.value.shape == f1.value.shape == (5,) and f1.cov.shape == (5, 5)
     p0, c0 = f0.value[:3], f0.cov[:3, :3]
     p1, c1 = f1.value[:3], f1.cov[:3, :3]
     assert np.abs(p1 - FAR).max() < 1e-6
