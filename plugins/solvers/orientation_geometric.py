@@ -207,7 +207,8 @@ class OrientationGeometric(Solver):
             r, cov = agreed
             self._initialised = True
             period = None if p.position is not None else agreed_period(
-                self._agree.agreeing(), self.beacon_positions, p.period_s, p.speed_of_sound, p.arrival_sd, r)
+                self._agree.agreeing(), self.beacon_positions, p.period_s, p.speed_of_sound, p.arrival_sd,
+                np.mean(list(self.beacon_positions.values()), axis=0))
             if period is not None:     # the period estimated from the agreeing cycles (tdoa_geometric)
                 return [period_initial_fix(period, float(a[-1]), q, sd, **where)]
             return [initial_fix(r, cov, B[-1], float(a[-1]), p.speed_of_sound, p.arrival_sd, q, sd, **where)]

@@ -347,7 +347,7 @@ class TdoaGeometric(Solver):
             pos, cov = agreed
             where = {"sensor": last.sensor, "line": last.line, "used": tuple(names)}
             period = agreed_period(self._agree.agreeing(), self.beacon_positions, p.period_s, p.speed_of_sound,
-                                   p.arrival_sd, pos)
+                                   p.arrival_sd, self.start)
             if p.initialise_stationary:
                 try:
                     return [self._stationary(pos, cov, float(a[-1]), where, period)]
@@ -386,24 +386,52 @@ class TdoaGeometric(Solver):
 def agreed_period(cycles: list, beacons: dict, period: float, c: float, sigma: float, start: np.ndarray
                   ) -> tuple[np.ndarray, float, float, np.ndarray, float, np.ndarray] | None:
     """The fix of ``[p, t0, T]`` from the arrivals of the agreeing cycles (``cycles``: (names, arrival times
-    (s)) each, in time order), :func:`fusion_plugins.solvers.stationary_fix.period_fix` from ``start`` (m)
-    and the nominal ``period`` (s): ``(p, t0, T, cov (5, 5), latest firing count, last beacon (3,))``, or None
-    when they cannot determine the period (fewer than two cycles)."""
+    (s)) each, in time order), or None when they cannot determine the period (fewer than two cycles).
+
+    1. T by least squares of the arrival times against the firing numbers (counted with the nominal
+       ``period``, s), one intercept per beacon (its time of flight): the position does not enter, so the
+       cycles' fixes, which a period 0.5 % off throws 1-2 m out, do not either.
+    2. Each cycle's fix (:func:`tdoa_fix`) again with that T, from ``start`` (m: the solver's cold start,
+       not the fixes made with the nominal period, which can lie outside the basin); their mean starts
+    3. :func:`fusion_plugins.solvers.stationary_fix.period_fix` on every arrival: ``[p, t0, T]`` and their
+       covariance.
+
+    :returns: ``(p, t0, T, cov (5, 5), latest firing count, last beacon (3,))``.
+    """
     from .stationary_fix import period_fix
 
+    if len(cycles) < 2:
+        return None
     names = [n for ns, _ in cycles for n in ns]
     a = np.concatenate([np.asarray(t, float) for _, t in cycles])
-    if len(cycles) < 2 or a.size < 6:
+    n = np.rint((a - a[0]) / period)
+    num = den = 0.0
+    for b in set(names):
+        m = np.array([x == b for x in names])
+        if m.sum() > 1:
+            dn, da = n[m] - n[m].mean(), a[m] - a[m].mean()
+            num, den = num + float(dn @ da), den + float(dn @ dn)
+    if den == 0.0:
         return None
-    B = np.array([beacons[n] for n in names])
+    T0 = num / den
+    if not (np.isfinite(T0) and abs(T0 - period) < 0.05 * period):    # 5 % off: not this schedule
+        return None
+    fixes = []
+    for ns, t in cycles:
+        t = np.asarray(t, float)
+        try:
+            fixes.append(tdoa_fix(np.array([beacons[x] for x in ns]), t, np.rint((t - t[0]) / T0), T0, c,
+                                  start, sigma)[0])
+        except NoFix:
+            pass
+    B = np.array([beacons[x] for x in names])
     try:
-        pos, t0, T, cov = period_fix(B, a, period, c, sigma, start)
+        pos, t0, T, cov = period_fix(B, a, T0, c, sigma, np.mean(fixes, axis=0) if fixes else start)
     except np.linalg.LinAlgError:
         return None
-    if not (np.all(np.isfinite(pos)) and abs(T - period) < 0.05 * period):   # a period 5 % off: not this one
+    if not (np.all(np.isfinite(pos)) and abs(T - period) < 0.05 * period):
         return None
-    n_last = float(np.rint((a[-1] - a[0]) / period))
-    return pos, t0, T, cov, n_last, B[-1]
+    return pos, t0, T, cov, float(np.rint((a[-1] - a[0]) / T0)), B[-1]
 
 
 def period_initial_fix(period: tuple, t: float, q: np.ndarray | None = None, q_sd: float | None = None,

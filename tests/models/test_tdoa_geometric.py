@@ -303,3 +303,57 @@ def test_stationary_initialiser_keeps_the_wait():
     assert np.abs(p1 - FAR).max() < 1e-6
     assert np.trace(c1) < 0.6 * np.trace(c0)       # 28 genuine arrivals against 12
     assert abs(f1.value[3] - f0.value[3]) < 1e-6  # the same latest firing time (noise-free)
+
+
+# --------------------------------------------------------------------------- a period off its nominal value
+@pytest.mark.parametrize("true_T", [0.2251, 0.2255, 0.226, 0.2239])
+@pytest.mark.parametrize("stationary", [False, True])
+def test_initial_fix_with_the_period_off_its_nominal_value(true_T, stationary):
+    """tester5 #6: beacons whose period is up to 0.5 % off period_s (a ceramic resonator's tolerance). Fixed
+    at period_s the three agreeing cycles all put the robot ~0.5 m off (0.2 %) with an sd of ~45 mm; the
+    period estimated from them starts it right, T in the fix within 3 sd of the truth, the position error
+    within 3 sd of its covariance (0.2 ms noise; 10 seeds)."""
+    rng = np.random.default_rng(7)
+    r = np.array([1.5, 1.5, 1.5])
+    for _ in range(10):
+        msgs, k = [], 0
+        for _ in range(8 if stationary else 3):
+            for i, b in enumerate(LAB):
+                a = 0.137 + k * true_T + np.linalg.norm(r - b) / C + rng.normal(0.0, 2e-4)
+                msgs.append(Message(a, "us", (f"B{i + 1}", a, 11.0)))
+                k += 1
+        s = _solver(output="initialise", initialise_stationary=stationary)
+        fix = [m for msg in msgs for m in s.feed(msg)][0]
+        v, P = fix.value, fix.cov
+        assert v.shape == (5,)
+        e = v[:3] - r
+        assert float(e @ np.linalg.solve(P[:3, :3], e)) < 16.3                 # chi2(3) 0.999
+        assert abs(v[4] - true_T) < 3.5 * np.sqrt(P[4, 4])
+        j = next(i for i, m in enumerate(msgs) if m.t == fix.t)                   # the latest firing
+        assert abs(v[3] - (0.137 + j * true_T)) < 3.5 * np.sqrt(P[3, 3])
+        assert np.linalg.norm(e) < 0.2                                        # not 0.5-1 m
+
+
+def test_period_fix_is_least_squares_of_arrivals_against_firing_numbers():
+    """period_fix against scipy least_squares on [p, t0, T] (an independent solver), and its covariance against
+    stationary_bound (the same information)."""
+    from scipy.optimize import least_squares
+
+    from fusion_plugins.solvers.stationary_fix import period_fix
+    from fusion_plugins.solvers.tdoa_geometric import stationary_bound
+
+    rng = np.random.default_rng(2)
+    k = np.arange(12)
+    Bk = LAB[k % 4]
+    true_T = 0.2257
+    a = 1000.137 + k * true_T + np.linalg.norm(FAR - Bk, axis=1) / C + rng.normal(0.0, 2e-4, k.size)
+    pos, t0, Tf, cov = period_fix(Bk, a, T, C, 2e-4, FAR + 0.3)
+    fun = lambda x: x[4] + k * x[3] + np.linalg.norm(x[:3] - Bk, axis=1) / C - (a - 1000.0)  # noqa: E731
+    ref = least_squares(fun, np.r_[FAR, T, 0.137], x_scale=[1, 1, 1, 1e-5, 1e-4], xtol=1e-15, ftol=1e-15,
+                        gtol=1e-15).x
+    assert np.abs(pos - ref[:3]).max() < 1e-6 and abs(Tf - ref[3]) < 1e-9 and abs(t0 - 1000.0 - ref[4]) < 1e-8
+    bound = stationary_bound(Bk, pos, k, C, 2e-4)           # order [x y z T t0]
+    assert np.allclose(cov[:3, :3], bound[:3, :3], rtol=1e-6)
+    assert cov[4, 4] == pytest.approx(bound[3, 3], rel=1e-6) and cov[3, 3] == pytest.approx(bound[4, 4], rel=1e-6)
+    with pytest.raises(np.linalg.LinAlgError):
+        period_fix(LAB, a[:4], T, C, 2e-4, FAR)                # one cycle: T not determined
