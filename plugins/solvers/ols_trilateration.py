@@ -91,8 +91,11 @@ class OlsTrilateration(Solver):
     every ``firing_period`` (given, or learnt from the first ``learn_s`` of the stream); the emission time of
     a range (arrival time minus r / ``speed_of_sound``) puts it in its firing cycle. A repeat of a beacon
     never merges two cycles; a cycle that would span more than its period, or hold a beacon twice, is
-    split. A cycle closes when a range of a later cycle arrives, when every expected beacon has reported,
-    or at the end of the input (flush).
+    split. A second report of one pulse (emissions of one beacon closer than half a slot spacing: a repeated
+    or retransmitted line, an echo stamped with the direct pulse's time) is no period while learning and
+    in a cycle the shorter range is kept: counted ``duplicate_pulses``, an Event ``rejected``. A period that
+    cannot be learnt gives an Event ``warning`` saying so. A cycle closes when a range of a later cycle
+    arrives, when every expected beacon has reported, or at the end of the input (flush).
 
     **Motion compensation** (``motion_compensation``): the fix is of the receiver at the mean time t_m of
     the cycle's ranges; the filter's belief predicted to t_m (fusion.api.ReadsBelief) gives the velocity v

@@ -252,9 +252,11 @@ class TdoaGeometric(Solver):
     (m^2), stamped at the last arrival, for the ``position`` model (its covariance as R). No fix: ``counters`` counts the reason
     (``too_few_beacons``, ``degenerate``, ``no_convergence``) and ``events`` gets a ``no_fix`` Event.
     With four beacons there is no redundancy: an echo shifts the fix and cannot be detected here (paper).
-    ``output: initialise`` emits one initial state fix (position, the time of the last firing, their
-    covariance: :mod:`fusion_plugins.solvers.initial_fix`), from the mean of the first ``initialise_agree``
-    consecutive fixes that agree with each other (:class:`AgreeingFixes`), then passes every arrival through.
+    ``output: initialise`` emits one initial state fix (position, the time of the last firing and the firing
+    period, their covariance: :mod:`fusion_plugins.solvers.initial_fix`) once the first ``initialise_agree``
+    consecutive fixes agree with each other (:class:`AgreeingFixes`): with two or more, [p, t0, T] from their
+    arrivals (:func:`agreed_period`; ``period_s`` is the nominal period, which counts the firings), with one
+    their mean at ``period_s``; then it passes every arrival through.
     """
 
     name: ClassVar[str] = "tdoa_geometric"
