@@ -88,7 +88,8 @@ class FiringSchedule:
                 return []
             held = sorted(self._held, key=lambda h: h[3])
             if not self._learn():
-                if span < LEARN_MAX * self.learn_s:
+                # too few gaps yet: hold on (as ever); a period refused: over LEARN_MAX learn_s at most
+                if self._refused is None or span < LEARN_MAX * self.learn_s:
                     return []
                 self._give_up(t, span)
                 self._held = []
