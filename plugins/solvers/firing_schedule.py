@@ -18,6 +18,19 @@ stream (``learn_s``): the cut goes half a slot spacing after the last seen slot 
 the seen phases (the idle time after the last beacon), so it lies between two slots of the grid even for
 beacons that come into range later. Ranges are held (not lost) while learning.
 
+**Two reports of one pulse** (two receiver channels, a logger stamping an echo with the direct pulse's
+time, a retransmitted line): two firings of one beacon are a period apart, and a period holds the slot of
+every other beacon heard, so two reports of one beacon whose emissions are closer than half the gap between
+the slots of two different beacons are one pulse. While learning, such a gap is no period (a min gap of
+microseconds would make every range its own cycle); in a cycle the shorter range is kept as the direct
+path (an echo is always longer) and the other is returned by :meth:`FiringSchedule.take_duplicates`.
+
+**A learnt period is checked**: every beacon's emissions must sit on its slot of the learnt grid, its
+circular spread under a quarter of the smallest slot spacing (the slots must hold the beacons heard
+apart). A period that fails is refused and learning goes on over more of the stream (up to
+``LEARN_MAX`` x ``learn_s``); when it still fails the cycles are runs of distinct beacons (a repeat closes
+one) and :meth:`FiringSchedule.take_warnings` says why, so that ``firing_period`` can be given.
+
 A cycle never spans more than its period and never holds a beacon twice: either would start a new
 cycle (a split), e.g. after a jump of the receiver clock.
 """
@@ -28,6 +41,8 @@ import math
 import numpy as np
 
 Range = tuple[float, str, float, float]   # (arrival time s, beacon, range m, emission time s)
+LEARN_MAX = 3.0          # learning may go on over this many learn_s when the learnt period is refused
+MAX_SPREAD = 0.25        # largest circular sd of a beacon's emissions, in smallest slot spacings
 
 
 class FiringSchedule:
@@ -51,11 +66,18 @@ class FiringSchedule:
         self._held: list[Range] = []            # ranges held while learning
         self._open: list[Range] = []
         self._open_k: int | None = None
+        self.slot: float | None = None          # smallest spacing of two beacons' slots (s), once learnt
+        self.unscheduled = False                # no period could be learnt: cycles are runs of distinct beacons
+        self._duplicates: list[tuple[Range, Range]] = []   # (dropped, kept) reports of one pulse
+        self._warnings: list[tuple[float, str]] = []       # (time s, why) for the user
+        self._refused: str | None = None        # why the last learnt period was refused
 
     # ------------------------------------------------------------------ public
     def add(self, t: float, beacon: str, rng: float) -> list[list[Range]]:
         te = t - rng / self.c if self.c else t
         item = (t, beacon, rng, te)
+        if self.unscheduled:
+            return self._assign_unscheduled(item)
         if self.cut is None:
             self._held.append(item)
             span = te - min(h[3] for h in self._held)
@@ -64,34 +86,50 @@ class FiringSchedule:
                 span >= self.period or len({h[1] for h in self._held}) == self.expected))
             if not done:
                 return []
+            held = sorted(self._held, key=lambda h: h[3])
             if not self._learn():
-                return []
-            held, self._held = self._held, []
-            out: list[list[Range]] = []
-            for h in sorted(held, key=lambda h: h[3]):
+                # too few gaps yet: hold on (as ever); a period refused: over LEARN_MAX learn_s at most
+                if self._refused is None or span < LEARN_MAX * self.learn_s:
+                    return []
+                self._give_up(t, span)
+                self._held = []
+                out = []
+                for h in held:
+                    out += self._assign_unscheduled(h)
+                return out
+            self._held = []
+            out = []
+            for h in held:
                 out += self._assign(h)
             return out
         return self._assign(item)
+
+    def take_duplicates(self) -> list[tuple[Range, Range]]:
+        """The reports dropped as a second report of one pulse since the last call, each with the one kept."""
+        d, self._duplicates = self._duplicates, []
+        return d
+
+    def take_warnings(self) -> list[tuple[float, str]]:
+        """What the user should know about the schedule since the last call: (time s, message)."""
+        w, self._warnings = self._warnings, []
+        return w
 
     def flush(self) -> list[list[Range]]:
         """The cycle still open (end of input); while still learning, the held ranges with what was learnt
         (or each run of distinct beacons as a cycle when nothing could be learnt)."""
         out: list[list[Range]] = []
-        if self.cut is None and self._held:
+        if self.cut is None and self._held and not self.unscheduled:
             learnt = self._learn()
             held, self._held = sorted(self._held, key=lambda h: h[3]), []
             if learnt:
                 for h in held:
                     out += self._assign(h)
             else:
-                cyc: list[Range] = []
+                if self._refused is not None:
+                    self._give_up(held[-1][0], held[-1][3] - held[0][3])
+                self.unscheduled = True
                 for h in held:
-                    if any(c[1] == h[1] for c in cyc):
-                        out.append(cyc)
-                        cyc = []
-                    cyc.append(h)
-                out.append(cyc)
-                return out
+                    out += self._assign_unscheduled(h)
         if self._open:
             out.append(self._open)
             self._open, self._open_k = [], None
@@ -111,6 +149,8 @@ class FiringSchedule:
         T = self.period
         k = math.floor((item[3] - self.cut) / T)  # type: ignore[operator]
         out: list[list[Range]] = []
+        if self._open and self._same_pulse(item):
+            return out
         if self._open and (k > self._open_k or any(o[1] == item[1] for o in self._open)  # type: ignore[operator]
                            or item[3] - self._open[0][3] >= T):
             if k <= self._open_k:                 # type: ignore[operator]
@@ -122,13 +162,40 @@ class FiringSchedule:
         self._open.append(item)
         return out
 
+    def _same_pulse(self, item: Range) -> bool:
+        """Whether ``item`` is a second report of the pulse of a range of its beacon in the open cycle (emissions
+        closer than half the smallest slot spacing); if so the shorter range stays in the cycle (the direct
+        path) and the other is recorded as a duplicate."""
+        for j, o in enumerate(self._open):
+            if o[1] == item[1] and abs(item[3] - o[3]) < 0.5 * self.slot:   # type: ignore[operator]
+                keep, drop = (item, o) if item[2] < o[2] else (o, item)
+                self._open[j] = keep
+                self._duplicates.append((drop, keep))
+                return True
+        return False
+
+    def _assign_unscheduled(self, item: Range) -> list[list[Range]]:
+        """Without a schedule: a cycle is a run of distinct beacons, closed by a repeat of one."""
+        out: list[list[Range]] = []
+        if any(o[1] == item[1] for o in self._open):
+            out.append(self._open)
+            self._open = []
+        self._open.append(item)
+        return out
+
+    def _give_up(self, t: float, span: float) -> None:
+        self.unscheduled = True
+        self._warnings.append((t, f"the firing period could not be learnt from the first {span:.3g} s of ranges "
+                                  f"({self._refused}); each run of distinct beacons is taken as a cycle. Give "
+                                  f"the beacons' period as firing_period"))
+
     def _learn(self) -> bool:
-        """Period (if not given) and cut from the held ranges; False when they do not tell yet."""
-        by_beacon: dict[str, list[float]] = {}
-        for _, b, _, te in self._held:
-            by_beacon.setdefault(b, []).append(te)
-        if self.period is None:
-            gaps = np.concatenate([np.diff(sorted(v)) for v in by_beacon.values() if len(v) > 1] or [np.zeros(0)])
+        """Period (if not given) and cut from the held ranges; False when they do not tell yet (or the learnt
+        period is refused: ``_refused`` says why)."""
+        by_beacon = self._pulses()
+        learnt = self.period is None
+        if learnt:
+            gaps = np.concatenate([np.diff(v) for v in by_beacon.values() if len(v) > 1] or [np.zeros(0)])
             gaps = gaps[gaps > 1e-6]
             if len(gaps) < 2:
                 return False
@@ -137,23 +204,51 @@ class FiringSchedule:
             # mean of the middle two, of the sorted periods
             per = np.sort(gaps / np.maximum(np.round(gaps / m), 1.0))
             h = len(per) // 2
-            self.period = float(per[h]) if len(per) % 2 else float((per[h - 1] + per[h]) / 2.0)
-        T = self.period
+            T = float(per[h]) if len(per) % 2 else float((per[h - 1] + per[h]) / 2.0)
+        else:
+            T = self.period
         t0 = min(h[3] for h in self._held)
-        # slot phase of each beacon (circular mean of its emissions modulo T)
-        phases = []
+        # slot phase of each beacon (circular mean of its emissions modulo T) and its spread (circular sd, s)
+        phases, spread = [], 0.0
         for v in by_beacon.values():
             a = 2.0 * np.pi * (np.asarray(v) - t0) / T
-            phases.append((math.atan2(np.sin(a).mean(), np.cos(a).mean()) / (2.0 * np.pi) * T) % T)
+            s, c = np.sin(a).mean(), np.cos(a).mean()
+            phases.append((math.atan2(s, c) / (2.0 * np.pi) * T) % T)
+            if learnt and len(v) > 1:
+                spread = max(spread, math.sqrt(-2.0 * math.log(min(1.0, max(math.hypot(s, c), 1e-300)))) * T / (2.0 * np.pi))
         ph = np.sort(np.asarray(phases))
+        gaps = np.diff(np.r_[ph, ph[0] + T])
+        distinct = gaps[gaps > 1e-3 * T]
+        spacing = float(distinct.min()) if len(distinct) and len(ph) > 1 else T
+        if learnt and spread > MAX_SPREAD * spacing:
+            # the emissions do not sit on the learnt grid's slots: the period is refused
+            self._refused = (f"a learnt period of {T:.6g} s leaves the emissions of a beacon spread over "
+                             f"{spread:.3g} s (circular sd) against slots {spacing:.3g} s apart")
+            return False
+        self.period, self.slot = T, spacing
         if len(ph) == 1:
             self.cut = t0 + ph[0] + 0.5 * T
             return True
-        gaps = np.diff(np.r_[ph, ph[0] + T])
-        distinct = gaps[gaps > 1e-3 * T]
-        spacing = float(distinct.min()) if len(distinct) else T
         i = int(np.argmax(gaps))
         self.cut = t0 + ph[i] + 0.5 * min(spacing, gaps[i])
         # the first cut at or before the first emission
         self.cut -= math.ceil((self.cut - t0) / T) * T
         return True
+
+    def _pulses(self) -> dict[str, list[float]]:
+        """The emission times (s, sorted) of each beacon's pulses in the held ranges. Two emissions of one
+        beacon closer than half the median gap between consecutive emissions of two different beacons are one
+        pulse reported twice: the shorter range's (the direct path) stands for it."""
+        held = sorted(self._held, key=lambda h: h[3])
+        d = sorted(b[3] - a[3] for a, b in zip(held, held[1:]) if a[1] != b[1])
+        h = len(d) // 2
+        tol = 0.5 * (d[h] if len(d) % 2 else 0.5 * (d[h - 1] + d[h])) if d else 0.0
+        by_beacon: dict[str, list[tuple[float, float]]] = {}
+        for _, b, r, te in held:
+            v = by_beacon.setdefault(b, [])
+            if v and te - v[-1][0] < tol:
+                if r < v[-1][1]:
+                    v[-1] = (te, r)
+            else:
+                v.append((te, r))
+        return {b: [te for te, _ in v] for b, v in by_beacon.items()}

@@ -91,8 +91,11 @@ class OlsTrilateration(Solver):
     every ``firing_period`` (given, or learnt from the first ``learn_s`` of the stream); the emission time of
     a range (arrival time minus r / ``speed_of_sound``) puts it in its firing cycle. A repeat of a beacon
     never merges two cycles; a cycle that would span more than its period, or hold a beacon twice, is
-    split. A cycle closes when a range of a later cycle arrives, when every expected beacon has reported,
-    or at the end of the input (flush).
+    split. A second report of one pulse (emissions of one beacon closer than half a slot spacing: a repeated
+    or retransmitted line, an echo stamped with the direct pulse's time) is no period while learning and
+    in a cycle the shorter range is kept: counted ``duplicate_pulses``, an Event ``rejected``. A period that
+    cannot be learnt gives an Event ``warning`` saying so. A cycle closes when a range of a later cycle
+    arrives, when every expected beacon has reported, or at the end of the input (flush).
 
     **Motion compensation** (``motion_compensation``): the fix is of the receiver at the mean time t_m of
     the cycle's ranges; the filter's belief predicted to t_m (fusion.api.ReadsBelief) gives the velocity v
@@ -201,6 +204,7 @@ class OlsTrilateration(Solver):
         for label, rng in pairs:
             for cycle in self.schedule.add(message.t, label, rng):
                 out += self._solve(cycle)
+        self._schedule_events()
         if self.schedule.open_beacons() == len(self.beacon_positions):   # every expected beacon heard
             out += self._solve(self.schedule.close_open())
         return out
@@ -210,7 +214,21 @@ class OlsTrilateration(Solver):
         out: list[Message] = []
         for cycle in self.schedule.flush():
             out += self._solve(cycle)
+        self._schedule_events()
         return out
+
+    def _schedule_events(self) -> None:
+        """The firing schedule's news as events: a second report of one pulse dropped (``rejected``, counted
+        ``duplicate_pulses``), a period that could not be learnt (``warning``)."""
+        for drop, keep in self.schedule.take_duplicates():
+            self.counters["duplicate_pulses"] = self.counters.get("duplicate_pulses", 0) + 1
+            self.events.append(Event(drop[0], "rejected", self._sensor,
+                                     f"range to {drop[1]} ({drop[2]:.3f} m, t={drop[0]:.6f} s) is a second report "
+                                     f"of the pulse of {keep[2]:.3f} m (t={keep[0]:.6f} s), emitted "
+                                     f"{1e3 * abs(drop[3] - keep[3]):.3g} ms apart; the shorter (the direct "
+                                     f"path) is kept"))
+        for t, why in self.schedule.take_warnings():
+            self.events.append(Event(t, "warning", self._sensor, f"ols_trilateration: {why}"))
 
     def _solve(self, cycle: list) -> list[Message]:
         """Fix of one closed cycle of (t, beacon, range, t_emit)."""

@@ -24,7 +24,7 @@ from pydantic import Field
 from fusion import quaternion as quat
 from fusion.api import BuildContext, ConfigError, Event, Fix, MalformedMessage, Message, Params, Solver
 
-from .tdoa_geometric import AgreeingFixes, NoFix, parse_arrival, tdoa_fix
+from .tdoa_geometric import AgreeingFixes, NoFix, agreed_period, parse_arrival, period_initial_fix, tdoa_fix
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -201,11 +201,16 @@ class OrientationGeometric(Solver):
         where = {"sensor": last.sensor, "line": last.line, "used": tuple(names)}
         if p.output == "initialise":
             from .initial_fix import initial_fix
-            agreed = self._agree.add(r, cov)
+            agreed = self._agree.add(r, cov, (names, a))
             if agreed is None:
                 return []
             r, cov = agreed
             self._initialised = True
+            period = None if p.position is not None else agreed_period(
+                self._agree.agreeing(), self.beacon_positions, p.period_s, p.speed_of_sound, p.arrival_sd,
+                np.mean(list(self.beacon_positions.values()), axis=0))
+            if period is not None:     # the period estimated from the agreeing cycles (tdoa_geometric)
+                return [period_initial_fix(period, float(a[-1]), q, sd, **where)]
             return [initial_fix(r, cov, B[-1], float(a[-1]), p.speed_of_sound, p.arrival_sd, q, sd, **where)]
         return [Fix(float(a[-1]), np.array(r, dtype=float), cov, attitude=q, attitude_cov=sd ** 2 * np.eye(3),
                     **where)]

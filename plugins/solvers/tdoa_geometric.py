@@ -179,6 +179,7 @@ class AgreeingFixes:
         self.n = n
         self.threshold = float(chi2.ppf(probability, 3))
         self.run: list[tuple[np.ndarray, np.ndarray]] = []
+        self.data: list = []        # what the caller gave with each fix of the run (add's ``data``)
 
     def agree(self, pos_a: np.ndarray, cov_a: np.ndarray, pos_b: np.ndarray, cov_b: np.ndarray) -> bool:
         """The agreement test of two fixes (m, m^2)."""
@@ -189,17 +190,25 @@ class AgreeingFixes:
         except np.linalg.LinAlgError:
             return False
 
-    def add(self, pos: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    def add(self, pos: np.ndarray, cov: np.ndarray, data=None) -> tuple[np.ndarray, np.ndarray] | None:
+        """Add a fix (and anything the caller keeps with it, ``data``); the mean once ``n`` agree in a row
+        (then :meth:`agreeing` gives their ``data``)."""
         if self.run and not self.agree(pos, cov, *self.run[-1]):
-            self.run = []
+            self.reset()
         self.run.append((pos, cov))
+        self.data.append(data)
         if len(self.run) < self.n:
             return None
         run = self.run[-self.n:]
         return (np.mean([p for p, _ in run], axis=0), np.mean([c for _, c in run], axis=0) / self.n)
 
+    def agreeing(self) -> list:
+        """The ``data`` of the last ``n`` fixes (those of the mean ``add`` returned)."""
+        return self.data[-self.n:]
+
     def reset(self) -> None:
         self.run = []
+        self.data = []
 
 
 class TdoaParams(Params):
@@ -243,9 +252,11 @@ class TdoaGeometric(Solver):
     (m^2), stamped at the last arrival, for the ``position`` model (its covariance as R). No fix: ``counters`` counts the reason
     (``too_few_beacons``, ``degenerate``, ``no_convergence``) and ``events`` gets a ``no_fix`` Event.
     With four beacons there is no redundancy: an echo shifts the fix and cannot be detected here (paper).
-    ``output: initialise`` emits one initial state fix (position, the time of the last firing, their
-    covariance: :mod:`fusion_plugins.solvers.initial_fix`), from the mean of the first ``initialise_agree``
-    consecutive fixes that agree with each other (:class:`AgreeingFixes`), then passes every arrival through.
+    ``output: initialise`` emits one initial state fix (position, the time of the last firing and the firing
+    period, their covariance: :mod:`fusion_plugins.solvers.initial_fix`) once the first ``initialise_agree``
+    consecutive fixes agree with each other (:class:`AgreeingFixes`): with two or more, [p, t0, T] from their
+    arrivals (:func:`agreed_period`; ``period_s`` is the nominal period, which counts the firings), with one
+    their mean at ``period_s``; then it passes every arrival through.
     """
 
     name: ClassVar[str] = "tdoa_geometric"
@@ -330,35 +341,109 @@ class TdoaGeometric(Solver):
         self.counters["iterations"] += it
         self._previous = pos
         if p.output == "initialise":
-            agreed = self._agree.add(pos, cov)
+            agreed = self._agree.add(pos, cov, (names, a))
             if agreed is None:
                 return []
             from .initial_fix import initial_fix
             self._initialised = True
             pos, cov = agreed
             where = {"sensor": last.sensor, "line": last.line, "used": tuple(names)}
+            period = agreed_period(self._agree.agreeing(), self.beacon_positions, p.period_s, p.speed_of_sound,
+                                   p.arrival_sd, self.start)
             if p.initialise_stationary:
                 try:
-                    return [self._stationary(pos, cov, float(a[-1]), where)]
+                    return [self._stationary(pos, cov, float(a[-1]), where, period)]
                 except np.linalg.LinAlgError:     # cannot happen with the agreeing cycles kept; be safe
                     self._history = []
+            if period is not None:
+                return [period_initial_fix(period, float(a[-1]), **where)]
             return [initial_fix(pos, cov, self.beacon_positions[names[-1]], float(a[-1]), p.speed_of_sound,
                                 p.arrival_sd, **where)]
         return [Fix(float(a[-1]), pos, cov, used=tuple(names), sensor=last.sensor, line=last.line)]
 
-    def _stationary(self, start: np.ndarray, start_cov: np.ndarray, t: float, where: dict) -> Fix:
+    def _stationary(self, start: np.ndarray, start_cov: np.ndarray, t: float, where: dict,
+                    period: tuple | None = None) -> Fix:
         """The initial fix (fusion_plugins.solvers.initial_fix), stamped at ``t``, of every arrival so far, from
-        the agreeing position."""
-        from .initial_fix import state_fix
-        from .stationary_fix import stationary_fix
+        the agreeing position; with ``period`` (:func:`agreed_period`) the arrivals are counted with its
+        estimated T and fix [p, t0, T] together (stationary_period_fix)."""
+        from .initial_fix import period_state_fix, state_fix
+        from .stationary_fix import stationary_fix, stationary_period_fix
 
         p: TdoaParams = self.params  # type: ignore[assignment]
         B = np.array([self.beacon_positions[b] for b, _ in self._history])
         a = np.array([t for _, t in self._history])
-        pos, t0, C, _ = stationary_fix(B, a, p.period_s, p.speed_of_sound, p.arrival_sd, start, start_cov)
         self._history = []
-        n_last = float(np.rint((a[-1] - a[0]) / p.period_s))        # t: the latest firing, t0 + n T
+        if period is not None:
+            # the standing robot's consistent arrivals fix the period too: [p, t0, T], counted with the
+            # agreeing cycles' estimate of T
+            pos, t0, T, X, _ = stationary_period_fix(B, a, period[2], p.speed_of_sound, p.arrival_sd, start,
+                                                     start_cov)
+            n_last = float(np.rint((a[-1] - a[0]) / period[2]))        # t: the latest firing, t0 + n T
+            return period_state_fix(t, pos, t0, T, n_last, X, **where)
+        pos, t0, C, _ = stationary_fix(B, a, p.period_s, p.speed_of_sound, p.arrival_sd, start, start_cov)
+        n_last = float(np.rint((a[-1] - a[0]) / p.period_s))
         return state_fix(t, pos, C[:3, :3], t0 + n_last * p.period_s, C[:3, 3], float(C[3, 3]), **where)
+
+
+def agreed_period(cycles: list, beacons: dict, period: float, c: float, sigma: float, start: np.ndarray
+                  ) -> tuple[np.ndarray, float, float, np.ndarray, float, np.ndarray] | None:
+    """The fix of ``[p, t0, T]`` from the arrivals of the agreeing cycles (``cycles``: (names, arrival times
+    (s)) each, in time order), or None when they cannot determine the period (fewer than two cycles).
+
+    1. T by least squares of the arrival times against the firing numbers (counted with the nominal
+       ``period``, s), one intercept per beacon (its time of flight): the position does not enter, so the
+       cycles' fixes, which a period 0.5 % off throws 1-2 m out, do not either.
+    2. Each cycle's fix (:func:`tdoa_fix`) again with that T, from ``start`` (m: the solver's cold start,
+       not the fixes made with the nominal period, which can lie outside the basin); their mean starts
+    3. :func:`fusion_plugins.solvers.stationary_fix.period_fix` on every arrival: ``[p, t0, T]`` and their
+       covariance.
+
+    :returns: ``(p, t0, T, cov (5, 5), latest firing count, last beacon (3,))``.
+    """
+    from .stationary_fix import period_fix
+
+    if len(cycles) < 2:
+        return None
+    names = [n for ns, _ in cycles for n in ns]
+    a = np.concatenate([np.asarray(t, float) for _, t in cycles])
+    n = np.rint((a - a[0]) / period)
+    num = den = 0.0
+    for b in set(names):
+        m = np.array([x == b for x in names])
+        if m.sum() > 1:
+            dn, da = n[m] - n[m].mean(), a[m] - a[m].mean()
+            num, den = num + float(dn @ da), den + float(dn @ dn)
+    if den == 0.0:
+        return None
+    T0 = num / den
+    if not (np.isfinite(T0) and abs(T0 - period) < 0.05 * period):    # 5 % off: not this schedule
+        return None
+    fixes = []
+    for ns, t in cycles:
+        t = np.asarray(t, float)
+        try:
+            fixes.append(tdoa_fix(np.array([beacons[x] for x in ns]), t, np.rint((t - t[0]) / T0), T0, c,
+                                  start, sigma)[0])
+        except NoFix:
+            pass
+    B = np.array([beacons[x] for x in names])
+    try:
+        pos, t0, T, cov = period_fix(B, a, T0, c, sigma, np.mean(fixes, axis=0) if fixes else start)
+    except np.linalg.LinAlgError:
+        return None
+    if not (np.all(np.isfinite(pos)) and abs(T - period) < 0.05 * period):
+        return None
+    return pos, t0, T, cov, float(np.rint((a[-1] - a[0]) / T0)), B[-1]
+
+
+def period_initial_fix(period: tuple, t: float, q: np.ndarray | None = None, q_sd: float | None = None,
+                       **where) -> Fix:
+    """The initial state fix ``[p, t, T]`` stamped at ``t`` (s, the last arrival) from :func:`agreed_period`'s
+    result: the latest firing ``t0 + n_last T`` (s)."""
+    from .initial_fix import period_state_fix
+
+    pos, t0, T, cov, n_last, _ = period
+    return period_state_fix(t, pos, t0, T, n_last, cov, q, q_sd, **where)
 
 
 def parse_arrival(message: Message, known: Sequence[str]) -> tuple[str, float]:

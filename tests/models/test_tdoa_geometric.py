@@ -130,7 +130,7 @@ def test_solver_counts_missing_beacons_and_initialise_mode():
     s = _solver(output="initialise")
     msgs = _messages(r, 5)
     out = [m for msg in msgs for m in s.feed(msg)]
-    assert out[0].value.shape == (4,) and out[0].cov.shape == (4, 4) and out[0].attitude is None
+    assert out[0].value.shape == (5,) and out[0].cov.shape == (5, 5) and out[0].attitude is None   # [p t T]
     assert out[1:] == msgs[12:]      # one fix (three cycles agree), then the arrivals
 
 
@@ -162,9 +162,10 @@ def test_solver_bad_input():
 
 
 def test_initial_state_fix_carries_the_firing_time():
-    """The initial fix: position, and t = the last firing's time (exact on exact arrivals), observed by
-    arrival_time as a linear fix of p and t whose covariance holds the p-t correlation of t = a - d / c."""
-    from fusion_plugins.solvers.initial_fix import observe_initial
+    """The initial fix: position, t = the last firing's time and the period T (exact on exact arrivals),
+    observed by arrival_time as a linear fix of p, t and T whose covariance is the fit's: cov(t, T) =
+    n_last var(T) + cov(t0, T) of t = t0 + n_last T."""
+    from fusion_plugins.solvers.initial_fix import observe_initial, state_fix
     r = np.array([1.2, 1.1, 1.3])
     msgs = _messages(r, 3, t0=0.137)
     s = _solver(output="initialise")
@@ -172,19 +173,26 @@ def test_initial_state_fix_carries_the_firing_time():
     v = out[0].value
     assert np.abs(v[:3] - r).max() < 1e-8
     assert v[3] == pytest.approx(0.137 + 11 * T, abs=1e-10)           # the 12th firing (B4 of cycle 3)
+    assert v[4] == pytest.approx(T, abs=1e-12)
     proc = testing.build("process", "firing_clock", {})
     ctx = BuildContext(layout=proc.layout, beacons={f"B{i + 1}": b for i, b in enumerate(LAB)})
     obs = observe_initial(out[0], ctx)
-    x = np.r_[r, T, v[3]]
-    assert obs.z.shape == (4,) and np.allclose(obs.model.h(x), obs.z, atol=1e-8)
-    u = (r - LAB[3]) / np.linalg.norm(r - LAB[3])
-    assert np.allclose(obs.R[:3, 3], -obs.R[:3, :3] @ u / C)          # cov(p, t) = -C u / c
+    lay = proc.layout
+    x = np.zeros(lay.n)
+    x[lay["p"]], x[lay["T"]], x[lay["t"]] = r, T, v[3]
+    assert obs.z.shape == (5,) and np.allclose(obs.model.h(x), obs.z, atol=1e-8)
+    H = obs.model.jacobian(x)
+    assert np.array_equal(H @ x, obs.model.h(x))
     assert np.all(np.linalg.eigvalsh(obs.R) > 0)
+    assert 1e-6 < np.sqrt(obs.R[4, 4]) < 1e-4                          # 3 cycles of 0.2 ms arrivals: ~20 us
+    # the 4-value fix (no period) is still read
+    old = state_fix(1.0, r, np.eye(3) * 1e-4, v[3], np.zeros(3), 1e-8)
+    assert observe_initial(old, ctx).z.shape == (4,)
     with pytest.raises(MalformedMessage):                              # a message is no typed fix
         observe_initial(Message(1.0, "us", tuple(v.tolist())), ctx)
-    with pytest.raises(MalformedMessage, match="4 finite"):
+    with pytest.raises(MalformedMessage, match="4 or 5 finite"):
         observe_initial(Fix(1.0, np.r_[v[:3], np.nan], out[0].cov), ctx)
-    with pytest.raises(MalformedMessage, match="4 x 4"):
+    with pytest.raises(MalformedMessage, match="5 x 5"):
         observe_initial(Fix(1.0, v, None), ctx)
 
 
@@ -289,9 +297,63 @@ def test_stationary_initialiser_keeps_the_wait():
     batch = _solver(output="initialise", initialise_stationary=True)
     f0 = [m for msg in msgs for m in plain.feed(msg)][0]
     f1 = [m for msg in msgs for m in batch.feed(msg)][0]
-    assert f0.t == f1.t and f0.value.shape == f1.value.shape == (4,) and f1.cov.shape == (4, 4)
+    assert f0.t == f1.t and f0.value.shape == f1.value.shape == (5,) and f1.cov.shape == (5, 5)
     p0, c0 = f0.value[:3], f0.cov[:3, :3]
     p1, c1 = f1.value[:3], f1.cov[:3, :3]
     assert np.abs(p1 - FAR).max() < 1e-6
     assert np.trace(c1) < 0.6 * np.trace(c0)       # 28 genuine arrivals against 12
     assert abs(f1.value[3] - f0.value[3]) < 1e-6  # the same latest firing time (noise-free)
+
+
+# --------------------------------------------------------------------------- a period off its nominal value
+@pytest.mark.parametrize("true_T", [0.2251, 0.2255, 0.226, 0.2239])
+@pytest.mark.parametrize("stationary", [False, True])
+def test_initial_fix_with_the_period_off_its_nominal_value(true_T, stationary):
+    """tester5 #6: beacons whose period is up to 0.5 % off period_s (a ceramic resonator's tolerance). Fixed
+    at period_s the three agreeing cycles all put the robot ~0.5 m off (0.2 %) with an sd of ~45 mm; the
+    period estimated from them starts it right, T in the fix within 3 sd of the truth, the position error
+    within 3 sd of its covariance (0.2 ms noise; 10 seeds)."""
+    rng = np.random.default_rng(7)
+    r = np.array([1.5, 1.5, 1.5])
+    for _ in range(10):
+        msgs, k = [], 0
+        for _ in range(8 if stationary else 3):
+            for i, b in enumerate(LAB):
+                a = 0.137 + k * true_T + np.linalg.norm(r - b) / C + rng.normal(0.0, 2e-4)
+                msgs.append(Message(a, "us", (f"B{i + 1}", a, 11.0)))
+                k += 1
+        s = _solver(output="initialise", initialise_stationary=stationary)
+        fix = [m for msg in msgs for m in s.feed(msg)][0]
+        v, P = fix.value, fix.cov
+        assert v.shape == (5,)
+        e = v[:3] - r
+        assert float(e @ np.linalg.solve(P[:3, :3], e)) < 16.3                 # chi2(3) 0.999
+        assert abs(v[4] - true_T) < 3.5 * np.sqrt(P[4, 4])
+        j = next(i for i, m in enumerate(msgs) if m.t == fix.t)                   # the latest firing
+        assert abs(v[3] - (0.137 + j * true_T)) < 3.5 * np.sqrt(P[3, 3])
+        assert np.linalg.norm(e) < 0.2                                        # not 0.5-1 m
+
+
+def test_period_fix_is_least_squares_of_arrivals_against_firing_numbers():
+    """period_fix against scipy least_squares on [p, t0, T] (an independent solver), and its covariance against
+    stationary_bound (the same information)."""
+    from scipy.optimize import least_squares
+
+    from fusion_plugins.solvers.stationary_fix import period_fix
+    from fusion_plugins.solvers.tdoa_geometric import stationary_bound
+
+    rng = np.random.default_rng(2)
+    k = np.arange(12)
+    Bk = LAB[k % 4]
+    true_T = 0.2257
+    a = 1000.137 + k * true_T + np.linalg.norm(FAR - Bk, axis=1) / C + rng.normal(0.0, 2e-4, k.size)
+    pos, t0, Tf, cov = period_fix(Bk, a, T, C, 2e-4, FAR + 0.3)
+    fun = lambda x: x[4] + k * x[3] + np.linalg.norm(x[:3] - Bk, axis=1) / C - (a - 1000.0)  # noqa: E731
+    ref = least_squares(fun, np.r_[FAR, T, 0.137], x_scale=[1, 1, 1, 1e-5, 1e-4], xtol=1e-15, ftol=1e-15,
+                        gtol=1e-15).x
+    assert np.abs(pos - ref[:3]).max() < 1e-6 and abs(Tf - ref[3]) < 1e-9 and abs(t0 - 1000.0 - ref[4]) < 1e-8
+    bound = stationary_bound(Bk, pos, k, C, 2e-4)           # order [x y z T t0]
+    assert np.allclose(cov[:3, :3], bound[:3, :3], rtol=1e-6)
+    assert cov[4, 4] == pytest.approx(bound[3, 3], rel=1e-6) and cov[3, 3] == pytest.approx(bound[4, 4], rel=1e-6)
+    with pytest.raises(np.linalg.LinAlgError):
+        period_fix(LAB, a[:4], T, C, 2e-4, FAR)                # one cycle: T not determined
