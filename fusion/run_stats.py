@@ -144,15 +144,19 @@ class RunStats:
     def health(self) -> dict[str, Any]:
         """The summary's ``health``: non-finite estimates, the largest sd, time diverged, the longest time
         without an accepted measurement per sensor (from its first update, up to its last), resets and
-        clock events."""
+        clock events; ``alignment_not_static`` (the numbers) when the static start was judged moving."""
         longest = {}
         for sensor, (first, last_ok, gap, last) in sorted(self._updates.items()):
             tail = last - (last_ok if last_ok == last_ok else first)
             longest[sensor] = max(gap, tail)
-        return {"nonfinite_estimates": self.nonfinite, "final_estimate_finite": self.last_finite,
-                "largest_sd": self.largest_sd, "diverged_s": self.diverged_s,
-                "longest_without_accepted_s": longest, "resets": self.scheduler.resets,
-                "clock_events": self.events.get("clock", 0)}
+        out = {"nonfinite_estimates": self.nonfinite, "final_estimate_finite": self.last_finite,
+               "largest_sd": self.largest_sd, "diverged_s": self.diverged_s,
+               "longest_without_accepted_s": longest, "resets": self.scheduler.resets,
+               "clock_events": self.events.get("clock", 0)}
+        why = getattr(self.scheduler, "alignment_not_static", None)
+        if why:   # only then: a static start's summary is unchanged
+            out["alignment_not_static"] = why
+        return out
 
     def add_event(self, event: Event) -> None:
         self.events[event.kind] = self.events.get(event.kind, 0) + 1

@@ -18,7 +18,7 @@ from __future__ import annotations
 from fusion.errors import ConfigError, FusionError, InputError, MalformedMessage, RejectedMessage
 from fusion.kinds import KINDS
 
-from .capabilities import (CAPABILITIES, Aligns, AlignsState, CapabilityWarning, ChecksGeometry, Closes,
+from .capabilities import (CAPABILITIES, Aligns, AlignsState, ChecksStillness, CapabilityWarning, ChecksGeometry, Closes,
                            HasThreshold, InputRunNoise, IntegratesInputRuns, KeepsGateState, LinearisesInputRuns,
                            NonAdditiveMeasurementNoise, NonAdditiveProcessNoise, Opens, PositionFromFix,
                            PredictsInputRuns, PseudoMeasurement, ReadsBelief, ReceivesEvents, ReportsIdle,
@@ -59,7 +59,7 @@ __all__ = [
     "ConfigError", "InputError", "MalformedMessage", "RejectedMessage", "KINDS", "MAX_MAGNITUDE",
     "Importer", "ImportRequest", "Stream", "ImportedLog",
     # optional capabilities (fusion.api.capabilities)
-    "Aligns", "IntegratesInputRuns", "InputRunNoise", "LinearisesInputRuns", "NonAdditiveProcessNoise",
+    "Aligns", "ChecksStillness", "IntegratesInputRuns", "InputRunNoise", "LinearisesInputRuns", "NonAdditiveProcessNoise",
     "ReportsStepEvents", "ChecksGeometry", "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState",
     "UsesInput", "PseudoMeasurement", "PredictsInputRuns", "HasThreshold", "KeepsGateState", "ReadsBelief",
     "ReportsInfo", "Opens", "Closes", "ReportsIdle", "ReportsStatus", "ReceivesEvents", "CAPABILITIES",
