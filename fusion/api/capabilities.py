@@ -55,8 +55,8 @@ class Aligns(Protocol):
 class ChecksStillness(Protocol):
     """An :class:`Aligns` process model that can tell from the inputs of the alignment window whether the
     vehicle was static, as ``initial.align_s`` assumes (the ``ins``: the spread of the IMU samples against
-    its noise densities, the mean rate against the gyro-bias prior). The scheduler calls it once, at the
-    end of the window, before ``align``, which it then calls with ``still=`` the verdict (a model with this
+    its noise densities). The scheduler calls it once, at the
+    end of the window, before ``align``, which it then calls with ``still=`` the verdict and ``window=(us, ts)`` (a model with this
     capability accepts that keyword: with ``still=False`` it takes nothing from the window that only a
     static vehicle would give, e.g. the gyro bias). A window judged static also lets the scheduler combine
     the fixes of ``initial.from_sensor`` taken in it into the initial position (fusion.scheduling.initialisation)."""

@@ -131,6 +131,7 @@ class Initialisation:
         """Remember a fix of ``initial.from_sensor`` for the initial position (module doc: combined when the
         window was static, else the latest)."""
         self._fixes.append(obs)
+        self._fix = obs          # the latest
         self._have_fix = True
 
     def _fix_for_start(self) -> tuple[object | None, np.ndarray | None, np.ndarray | None]:
@@ -159,7 +160,7 @@ class Initialisation:
             R[:, :k] = 0.0
             R[:k, :k] = Pc
         out = [f"{f.t:.3f} s" for f, kept in zip(same, keep) if not kept]
-        self._filter_events.append(Event(obs.t, "initial", obs.sensor if hasattr(obs, "sensor") else None, (
+        self._filter_events.append(Event(obs.t, "initial", self._from_sensor, (
             f"initial position from {int(keep.sum())} of the {len(same)} fixes of the static start"
             + (f" (covariance-weighted mean; refused against the others: {', '.join(out)})" if out else
                " (covariance-weighted mean)" if R is not None else " (per-axis median)"))))

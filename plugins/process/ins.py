@@ -353,13 +353,16 @@ class Ins(InsNoise, ProcessModel):
         """Whether the IMU samples ``us`` (k, 6) at times ``ts`` (k,) (s) of the alignment window are those of
         a static vehicle (fusion.api.ChecksStillness); ``(still, why)``, ``why`` naming the numbers.
 
-        Two tests, each at significance :data:`STILL_ALPHA`: (1) the spread: per axis, the sample variance
-        against what a static unit reads at that rate, ``N^2 / dt`` for the white noise of density N plus
-        ``N_b^2 T / 6`` for the bias walk over the window's T s, times :data:`STILL_SD_FACTOR` squared
-        (chi-square on k - 1 dof; six axes, Bonferroni); (2) the mean rate minus the bias prior (``bw`` of
-        x0, P0) against that prior plus the mean's own noise (chi-square, 3 dof): a steady turn has no
-        spread, only a mean rate no bias prior explains. None (no static assumption to test) with
-        ``align_gyro_bias: false`` (a window in flight: docs/import.md) or fewer than 10 samples."""
+        The test: per axis, the sample variance against what a static unit reads at that rate, ``N^2 / dt``
+        for the white noise of density N plus ``N_b^2 T / 6`` for the bias walk over the window's T s, times
+        :data:`STILL_SD_FACTOR` squared (chi-square on k - 1 dof at significance :data:`STILL_ALPHA`, six
+        axes, Bonferroni). Motion that starts, stops or turns within the window spreads the samples far
+        beyond that. Not tested: the mean rate (a turn at one constant rate over the whole window reads like
+        a bias; the configured ``initial.sd.bw`` is the bias sd after this alignment, not a turn-on bias
+        spread the mean could be tested against: the shipped car's 0.02 rad/s turn-on bias is 10 of it).
+        None (no static assumption to test) with ``align_gyro_bias: false`` (a window in flight:
+        docs/import.md) or fewer than 10 samples.
+        """
         us, ts = np.asarray(us, dtype=float), np.asarray(ts, dtype=float)
         if not self.params.align_gyro_bias or len(us) < 10:  # type: ignore[attr-defined]
             return None
@@ -381,22 +384,10 @@ class Ins(InsNoise, ProcessModel):
         for i in np.flatnonzero(ratio > limit):
             why.append(f"{names[i]} sd {np.sqrt(spread[i]):.3g} against {np.sqrt(var[i]):.3g} for a static unit "
                        f"({np.sqrt(ratio[i]):.1f}x, limit {np.sqrt(limit):.1f}x)")
-        w_ie_b = (quat.to_matrix(quat.from_gravity(us[:, :3].mean(axis=0) - x0[10:13])).T @ self.w_ie
-                  if self.w_ie is not None else 0.0)
-        d = us[:, 3:].mean(axis=0) - w_ie_b - x0[13:16]
-        S = np.asarray(P0, dtype=float)[13:16, 13:16] + np.diag(var[3:]) / k
-        try:
-            m2 = float(d @ np.linalg.solve(S, d))
-        except np.linalg.LinAlgError:
-            m2 = 0.0
-        m2_limit = float(chi2.ppf(1.0 - STILL_ALPHA, 3))
-        if m2 > m2_limit:
-            why.append(f"mean rate {np.round(d + x0[13:16], 4).tolist()} rad/s is {np.sqrt(m2):.1f} sd from the gyro-bias "
-                       f"prior (limit {np.sqrt(m2_limit):.1f})")
         head = f"{k} IMU samples over {span:.2f} s"
         if why:
             return False, f"{head}: " + "; ".join(why)
-        return True, f"{head}: spread within {np.sqrt(ratio.max()):.1f}x a static unit's, mean rate {np.sqrt(m2):.1f} sd from the bias prior"
+        return True, f"{head}: spread within {np.sqrt(ratio.max()):.1f}x a static unit's"
 
     def align(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray, still: bool = True,
               window: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -286,14 +286,10 @@ class InsStates(InsProcess):
 
     # ------------------------------------------------------------------ initial alignment
     def stillness(self, x0: np.ndarray, P0: np.ndarray, us: np.ndarray, ts: np.ndarray) -> tuple[bool, str] | None:
-        """``Ins.stillness`` on the INS part (the first 16 elements share its layout); with 10 states there
-        is no gyro-bias state, so the mean rate is tested against a prior of 1e3 rad/s (any rate passes)."""
-        x16, P16 = np.zeros(16), np.eye(16) * 1e6
-        x16[:10] = np.asarray(x0, dtype=float)[:10]
-        if self.states == 22:
-            x16[10:16] = np.asarray(x0, dtype=float)[10:16]
-            P16 = np.asarray(P0, dtype=float)[:16, :16]
-        return self.core.stillness(x16, P16, us, ts)
+        """``Ins.stillness`` of the window's raw IMU samples (the spread, which scale factors hardly change)."""
+        x16 = np.zeros(16)
+        x16[:min(16, len(x0))] = np.asarray(x0, dtype=float)[:16]
+        return self.core.stillness(x16, np.eye(16), us, ts)
 
     def align(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray, still: bool = True,
               window: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
