@@ -105,15 +105,10 @@ class Initialisation:
                 if has(self.process, ChecksStillness):
                     verdict = self.process.stillness(self._x0, self._P0, us, ts)
                     self._still = None if verdict is None else bool(verdict[0])
-                    if self._still is False:
-                        self.alignment_not_static = verdict[1]  # type: ignore[index]
-                        self._filter_events.append(Event(t, "warning", sensor.name, (
-                            f"alignment: the static start (initial.align_s {self._align_s:g} s) is not static: "
-                            f"{verdict[1]}; the gyro-bias prior is kept (the mean rate is motion), the yaw "  # type: ignore[index]
-                            "carried over the window by the gyros, the initial position is the latest fix and "
-                            "the velocity prior is widened to the speed the fixes show")))
-                    self._x0, self._P0 = self.process.align(self._x0, self._P0, u_mean, still=self._still is not False,
-                                                            window=(us, ts))
+                    if verdict is not None and not verdict[0]:
+                        self._not_static(t, sensor.name, verdict[1])
+                    self._x0, self._P0 = self.process.align(self._x0, self._P0, u_mean,
+                                                            still=self._still is not False, window=(us, ts))
                 elif has(self.process, Aligns):   # wiring refuses align_s for a process without it
                     self._x0, self._P0 = self.process.align(self._x0, self._P0, u_mean)
                 for name, observations in self._aligners.items():
@@ -126,6 +121,15 @@ class Initialisation:
             sensor.counters["used"] += 1
             return good[i + 1:]
         return []
+
+    def _not_static(self, t: float, sensor: str, why: str) -> None:
+        """The alignment window judged moving (``why``: the process model's numbers and what it keeps): a
+        ``warning`` with the first prediction, and the summary's ``health``."""
+        self.alignment_not_static = why
+        fixes = (f"; the initial position is the latest fix of {self._from_sensor!r} and the velocity prior is "
+                 "widened to the speed its fixes show") if self._from_sensor else ""
+        self._filter_events.append(Event(t, "warning", sensor, f"alignment: the static start (initial.align_s "
+                                         f"{self._align_s:g} s) is not static: {why}{fixes}"))
 
     def _take_fix(self, obs) -> None:
         """Remember a fix of ``initial.from_sensor`` for the initial position (module doc: combined when the
@@ -210,7 +214,8 @@ class Initialisation:
         if not last.t > first.t:
             return P0
         k = min(len(first.z), len(last.z), layout["p"].stop - layout["p"].start)
-        speed = float(np.linalg.norm(np.asarray(last.z, float)[:k] - np.asarray(first.z, float)[:k]) / (last.t - first.t))
+        moved = np.asarray(last.z, dtype=float)[:k] - np.asarray(first.z, dtype=float)[:k]
+        speed = float(np.linalg.norm(moved) / (last.t - first.t))      # m/s
         if not math.isfinite(speed):
             return P0
         P0 = P0.copy()

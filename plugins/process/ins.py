@@ -374,7 +374,8 @@ class Ins(InsNoise, ProcessModel):
         if not steps.size:
             return None
         dt = float(np.median(steps))
-        var = np.concatenate([self._var_a / dt + self._var_ba * span / 6.0, self._var_w / dt + self._var_bw * span / 6.0])
+        var = np.concatenate([self._var_a / dt + self._var_ba * span / 6.0,
+                              self._var_w / dt + self._var_bw * span / 6.0])
         spread = us.var(axis=0, ddof=1)
         judged = var > 0.0                     # an axis with no noise given cannot be judged by its spread
         limit = chi2.ppf(1.0 - STILL_ALPHA / 6.0, k - 1) / (k - 1) * STILL_SD_FACTOR ** 2   # variance ratio
@@ -386,7 +387,8 @@ class Ins(InsNoise, ProcessModel):
                        f"({np.sqrt(ratio[i]):.1f}x, limit {np.sqrt(limit):.1f}x)")
         head = f"{k} IMU samples over {span:.2f} s"
         if why:
-            return False, f"{head}: " + "; ".join(why)
+            return False, (f"{head}: " + "; ".join(why) + "; the gyro-bias prior is kept (the mean rate is motion) "
+                           "and the yaw carried over the window by the gyros")
         return True, f"{head}: spread within {np.sqrt(ratio.max()):.1f}x a static unit's"
 
     def align(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray, still: bool = True,
