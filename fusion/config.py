@@ -114,7 +114,8 @@ class SensorSpec(_Strict):
 
 class InitialSpec(_Strict):
     """Initial belief by block name: ``mean`` values and ``sd`` (scalar or per element), or full ``P``.
-    ``from_sensor`` takes the position block from the first observation of that sensor."""
+    ``from_sensor`` takes the position block from that sensor's fixes before the start: the latest, or all of
+    an ``align_s`` window the process model judged static, combined (fusion.scheduling.initialisation)."""
 
     mean: dict[str, float | list[float]] = Field(default_factory=dict)
     sd: dict[str, float | list[float]] = Field(default_factory=dict)

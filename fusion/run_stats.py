@@ -171,17 +171,22 @@ class RunStats:
         clock events. ``rejected_in_a_row`` ({sensor: the longest run of its updates rejected in a row}) and
         ``locked_out`` (:meth:`lockouts`: such runs as long as a lock-out, whether the recovery fired or
         not: a stretch of bad measurements, a disturbed magnetic field, or a filter locked out of good
-        ones) say when a sensor was shut out for long."""
+        ones) say when a sensor was shut out for long; ``alignment_not_static`` (the numbers) when the
+        static start was judged moving."""
         longest = {}
         for sensor, (first, last_ok, gap, last) in sorted(self._updates.items()):
             tail = last - (last_ok if last_ok == last_ok else first)
             longest[sensor] = max(gap, tail)
-        return {"nonfinite_estimates": self.nonfinite, "final_estimate_finite": self.last_finite,
-                "largest_sd": self.largest_sd, "diverged_s": self.diverged_s,
-                "longest_without_accepted_s": longest, "resets": self.scheduler.resets,
-                "clock_events": self.events.get("clock", 0),
-                "rejected_in_a_row": {k: r[3] for k, r in sorted(self._rejected_runs.items())},
-                "locked_out": self.lockouts()}
+        out = {"nonfinite_estimates": self.nonfinite, "final_estimate_finite": self.last_finite,
+               "largest_sd": self.largest_sd, "diverged_s": self.diverged_s,
+               "longest_without_accepted_s": longest, "resets": self.scheduler.resets,
+               "clock_events": self.events.get("clock", 0),
+               "rejected_in_a_row": {k: r[3] for k, r in sorted(self._rejected_runs.items())},
+               "locked_out": self.lockouts()}
+        why = getattr(self.scheduler, "alignment_not_static", None)
+        if why:   # only then: a static start's summary is unchanged
+            out["alignment_not_static"] = why
+        return out
 
     def add_event(self, event: Event) -> None:
         self.events[event.kind] = self.events.get(event.kind, 0) + 1

@@ -38,7 +38,7 @@ from fusion.api import (AlignsState, Belief, Estimate, Event, FusionError, GateR
 from fusion.clock import ClockGuard
 from fusion.recovery import LockoutWatch, recover
 from fusion.config import SensorRuntime, System
-from fusion.scheduling.initialisation import Initialisation
+from fusion.scheduling.initialisation import FIXES_MAX, Initialisation
 from fusion.scheduling.reorder import Reordering
 from fusion.scheduling.replay import Replay, _Snapshot
 from fusion.scheduling.reporting import Reporting
@@ -135,7 +135,13 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         self._from_sensor = spec.initial.from_sensor
         self._have_fix = self._from_sensor is None
         self._align_u: list[np.ndarray] = []
+        self._align_t: list[float] = []
         self._align_t0: float | None = None
+        # The fixes of initial.from_sensor before the start, and the window's verdict (ChecksStillness: True
+        # static, False moving, None not judged): a static window's fixes are combined (initialisation.py).
+        self._fixes: deque = deque(maxlen=FIXES_MAX)
+        self._still: bool | None = None
+        self.alignment_not_static: str | None = None   # why the window was judged moving (summary health)
         self._last_input_t: float | None = None
         self._u_t: float | None = None   # the time of the sample in self.u (how long it has been held)
         # The input sensor whose silence is reported while the other sensors go on (its max_gap)

@@ -18,8 +18,9 @@ from __future__ import annotations
 from fusion.errors import ConfigError, FusionError, InputError, MalformedMessage, RejectedMessage
 from fusion.kinds import KINDS
 
-from .capabilities import (CAPABILITIES, Aligns, AlignsState, CapabilityWarning, ChecksGeometry, Closes,
-                           HasThreshold, HoldsInput, InputRunNoise, IntegratesInputRuns, KeepsGateState, LinearisesInputRuns,
+from .capabilities import (CAPABILITIES, Aligns, AlignsState, ChecksStillness, CapabilityWarning, ChecksGeometry,
+                           Closes, HasThreshold, HoldsInput, InputRunNoise, IntegratesInputRuns, KeepsGateState,
+                           LinearisesInputRuns,
                            NonAdditiveMeasurementNoise, NonAdditiveProcessNoise, Opens, PositionFromFix,
                            PredictsInputRuns, PseudoMeasurement, ReadsBelief, ReceivesEvents, ReportsIdle,
                            ReportsInfo, ReportsStatus, ReportsStepEvents, UsesInput, capabilities_of, has,
@@ -59,7 +60,7 @@ __all__ = [
     "ConfigError", "InputError", "MalformedMessage", "RejectedMessage", "KINDS", "MAX_MAGNITUDE",
     "Importer", "ImportRequest", "Stream", "ImportedLog",
     # optional capabilities (fusion.api.capabilities)
-    "Aligns", "IntegratesInputRuns", "InputRunNoise", "LinearisesInputRuns", "NonAdditiveProcessNoise",
+    "Aligns", "ChecksStillness", "IntegratesInputRuns", "InputRunNoise", "LinearisesInputRuns", "NonAdditiveProcessNoise",
     "ReportsStepEvents", "HoldsInput", "ChecksGeometry", "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState",
     "UsesInput", "PseudoMeasurement", "PredictsInputRuns", "HasThreshold", "KeepsGateState", "ReadsBelief",
     "ReportsInfo", "Opens", "Closes", "ReportsIdle", "ReportsStatus", "ReceivesEvents", "CAPABILITIES",

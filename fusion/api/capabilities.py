@@ -22,7 +22,7 @@ from .state import Belief
 
 __all__ = [
     # process models
-    "Aligns", "IntegratesInputRuns", "InputRunNoise", "LinearisesInputRuns", "NonAdditiveProcessNoise",
+    "Aligns", "ChecksStillness", "IntegratesInputRuns", "InputRunNoise", "LinearisesInputRuns", "NonAdditiveProcessNoise",
     "ReportsStepEvents", "HoldsInput",
     # measurement models
     "ChecksGeometry", "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState", "UsesInput",
@@ -48,6 +48,25 @@ class Aligns(Protocol):
 
     def align(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(x0 (n,), P0 (n, n)) refined; ``u_mean`` (input_dim,) the mean input over the static start."""
+        ...
+
+
+@runtime_checkable
+class ChecksStillness(Protocol):
+    """An :class:`Aligns` process model that can tell from the inputs of the alignment window whether the
+    vehicle was static, as ``initial.align_s`` assumes (the ``ins``: the spread of the IMU samples against
+    its noise densities). The scheduler calls it once, at the end of the window, before ``align``, which
+    it then calls with ``still=`` the verdict and ``window=(us, ts)`` (a model with this capability
+    accepts those keywords: with ``still=False`` it takes nothing from the window that only a
+    static vehicle would give, e.g. the gyro bias). A window judged static also lets the scheduler combine
+    the fixes of ``initial.from_sensor`` taken in it into the initial position
+    (fusion.scheduling.initialisation); one judged moving is a ``warning`` and in the summary's health."""
+
+    def stillness(self, x0: np.ndarray, P0: np.ndarray, us: np.ndarray,
+                  ts: np.ndarray) -> tuple[bool, str] | None:
+        """``(still, why)`` for the window's input samples ``us`` (k, input_dim) at times ``ts`` (k,) (s), given
+        the prior x0 (n,), P0 (n, n); ``why`` names the numbers. None: the model makes no static assumption
+        for this window (nothing to test), or too few samples to judge."""
         ...
 
 
@@ -301,8 +320,9 @@ class ReceivesEvents(Protocol):
 # --------------------------------------------------------------------------- detection
 #: Every capability protocol, by the member names it is detected by.
 CAPABILITIES: tuple[type, ...] = (
-    Aligns, IntegratesInputRuns, InputRunNoise, LinearisesInputRuns, NonAdditiveProcessNoise, ReportsStepEvents,
-    HoldsInput, ChecksGeometry, PositionFromFix, NonAdditiveMeasurementNoise, AlignsState, UsesInput, PseudoMeasurement,
+    Aligns, ChecksStillness, IntegratesInputRuns, InputRunNoise, LinearisesInputRuns, NonAdditiveProcessNoise,
+    ReportsStepEvents, HoldsInput, ChecksGeometry, PositionFromFix, NonAdditiveMeasurementNoise, AlignsState, UsesInput,
+    PseudoMeasurement,
     PredictsInputRuns, HasThreshold, KeepsGateState, ReportsInfo, ReadsBelief, Opens, Closes, ReportsIdle,
     ReportsStatus, ReceivesEvents,
 )

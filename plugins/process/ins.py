@@ -15,6 +15,15 @@ from .ins_noise import InsNoise
 from .ins_params import (ADIS16364_ACCEL_BIAS_RW, ADIS16364_ACCEL_ND, ADIS16364_GYRO_BIAS_RW, ADIS16364_GYRO_ND,  # noqa: F401
                          EARTH_RATE, STANDARD_GRAVITY, Density, InsParams, density_variance, somigliana_gravity)
 
+#: The alignment's stillness test (Ins.stillness): significance of each test, and the factor on the noise
+#: density's sd that a window's spread must exceed. Data-sheet densities are typical values: a static unit on
+#: a standing vehicle (fans, an idling engine) reads up to a few times them, a driven one tens of times
+#: (tester5 #5: 10x on the gyro z and the accelerometer x of a vehicle driving a bend), so 3x is "clearly
+#: not static", not "noisier than the sheet".
+STILL_ALPHA = 1e-6
+STILL_SD_FACTOR = 3.0
+
+
 def coast(x: np.ndarray, e: float) -> np.ndarray:
     """States x (..., n) (``p v`` first, m, m/s) after e s without an IMU sample: attitude, velocity and
     sensor states kept, ``p += v e`` (a new array). Past ``hold_after`` the held sample is no estimate of
@@ -357,20 +366,75 @@ class Ins(InsNoise, ProcessModel):
         return np.array((ax, ay, az, gx, gy, gz))
 
     # ------------------------------------------------------------------ initial alignment
-    def align(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def stillness(self, x0: np.ndarray, P0: np.ndarray, us: np.ndarray, ts: np.ndarray) -> tuple[bool, str] | None:
+        """Whether the IMU samples ``us`` (k, 6) at times ``ts`` (k,) (s) of the alignment window are those of
+        a static vehicle (fusion.api.ChecksStillness); ``(still, why)``, ``why`` naming the numbers.
+
+        The test: per axis, the sample variance against what a static unit reads at that rate, ``N^2 / dt``
+        for the white noise of density N plus ``N_b^2 T / 6`` for the bias walk over the window's T s, times
+        :data:`STILL_SD_FACTOR` squared (chi-square on k - 1 dof at significance :data:`STILL_ALPHA`, six
+        axes, Bonferroni). Motion that starts, stops or turns within the window spreads the samples far
+        beyond that. Not tested: the mean rate (a turn at one constant rate over the whole window reads like
+        a bias; the configured ``initial.sd.bw`` is the bias sd after this alignment, not a turn-on bias
+        spread the mean could be tested against: the shipped car's 0.02 rad/s turn-on bias is 10 of it).
+        None (no static assumption to test) with ``align_gyro_bias: false`` (a window in flight:
+        docs/import.md) or fewer than 10 samples.
+        """
+        us, ts = np.asarray(us, dtype=float), np.asarray(ts, dtype=float)
+        if not self.params.align_gyro_bias or len(us) < 10:  # type: ignore[attr-defined]
+            return None
+        from fusion.chisquare import chi2
+
+        k, span = len(us), float(ts[-1] - ts[0])
+        steps = np.diff(ts)
+        steps = steps[steps > 0]
+        if not steps.size:
+            return None
+        dt = float(np.median(steps))
+        var = np.concatenate([self._var_a / dt + self._var_ba * span / 6.0,
+                              self._var_w / dt + self._var_bw * span / 6.0])
+        spread = us.var(axis=0, ddof=1)
+        judged = var > 0.0                     # an axis with no noise given cannot be judged by its spread
+        limit = chi2.ppf(1.0 - STILL_ALPHA / 6.0, k - 1) / (k - 1) * STILL_SD_FACTOR ** 2   # variance ratio
+        ratio = np.where(judged, spread / np.where(judged, var, 1.0), 0.0)
+        why = []
+        names = ("ax", "ay", "az", "gx", "gy", "gz")
+        for i in np.flatnonzero(ratio > limit):
+            why.append(f"{names[i]} sd {np.sqrt(spread[i]):.3g} against {np.sqrt(var[i]):.3g} for a static unit "
+                       f"({np.sqrt(ratio[i]):.1f}x, limit {np.sqrt(limit):.1f}x)")
+        head = f"{k} IMU samples over {span:.2f} s"
+        if why:
+            return False, (f"{head}: " + "; ".join(why) + "; the gyro-bias prior is kept (the mean rate is motion) "
+                           "and the yaw carried over the window by the gyros")
+        return True, f"{head}: spread within {np.sqrt(ratio.max()):.1f}x a static unit's"
+
+    def align(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray, still: bool = True,
+              window: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Initial alignment from the mean IMU sample ``u_mean`` (6,) of a static start (``initial.align_s``).
 
         Roll and pitch from gravity (levelling: a static accelerometer reads ``C_n^b (-g_n) + b_a``, with
         b_a the initial mean ``ba``); yaw is kept from ``x0`` (the config's initial attitude: gravity
         cannot give it). With ``align_gyro_bias`` the gyro bias becomes the mean rate (minus the Earth rate
         when modelled): a static gyro reads its bias, to ARW / sqrt(T) over T seconds. Accelerometer
-        biases are left as given (not separable from tilt). P0 is returned unchanged."""
+        biases are left as given (not separable from tilt). P0 is returned unchanged.
+
+        ``still=False`` (the window failed :meth:`stillness`): the mean rate is motion, so the gyro bias
+        prior is kept; levelling stays (gravity still dominates the mean specific force: a mean acceleration
+        a tilts it by a / g, 0.6 deg for 1 m/s gained in 9 s) and, given the ``window``'s samples ``(us (k, 6),
+        ts (k,))``, the config's yaw, which is the window's first sample's, is carried to its end by the
+        rotation over the window (the rates minus the bias prior, each held to the next sample) about the
+        vertical: its NED-down component at the levelled tilt."""
         x0 = np.array(x0, dtype=float, copy=True)
         u_mean = np.asarray(u_mean, dtype=float)
         yaw = float(quat.to_euler(x0[6:10])[2]) if np.any(x0[6:10]) else 0.0
+        if not still and window is not None and len(window[0]) > 1:
+            us, ts = np.asarray(window[0], dtype=float), np.asarray(window[1], dtype=float)
+            rotation = (us[:-1, 3:] - x0[13:16]).T @ np.diff(ts)                   # rad, body frame
+            down = quat.to_matrix(quat.from_gravity(u_mean[:3] - x0[10:13]))[2]   # yaw-free: C_b^n's third row
+            yaw += float(down @ rotation)
         q = quat.from_gravity(u_mean[:3] - x0[10:13], yaw)
         x0[6:10] = q
-        if self.params.align_gyro_bias:  # type: ignore[attr-defined]
+        if self.params.align_gyro_bias and still:  # type: ignore[attr-defined]
             w_ie_b = quat.to_matrix(q).T @ self.w_ie if self.w_ie is not None else 0.0
             x0[13:16] = u_mean[3:] - w_ie_b
         return x0, np.array(P0, dtype=float, copy=True)

@@ -164,10 +164,17 @@ class InsGaussMarkov(InsProcess):
     def input_from(self, message: Message) -> np.ndarray:
         return self.core.input_from(message)
 
-    def align(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``ins``'s levelling (and gyro bias) on the INS part; the blocks and P0 unchanged."""
+    def stillness(self, x0: np.ndarray, P0: np.ndarray, us: np.ndarray, ts: np.ndarray) -> tuple[bool, str] | None:
+        """``ins``'s stillness test of the alignment window on the INS part."""
+        m = self.m
+        return self.core.stillness(np.asarray(x0, float)[:m], np.asarray(P0, float)[:m, :m], us, ts)
+
+    def align(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray, still: bool = True,
+              window: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``ins``'s levelling (and gyro bias) on the INS part; the blocks and P0 unchanged. ``still``,
+        ``window``: as ``Ins.align``."""
         x0 = np.array(x0, dtype=float, copy=True)
         m = self.m
-        y, _ = self.core.align(x0[:m], np.asarray(P0, float)[:m, :m], u_mean)
+        y, _ = self.core.align(x0[:m], np.asarray(P0, float)[:m, :m], u_mean, still=still, window=window)
         x0[:m] = y
         return x0, np.array(P0, dtype=float, copy=True)

@@ -297,10 +297,18 @@ class InsStates(InsProcess):
         return Qm
 
     # ------------------------------------------------------------------ initial alignment
-    def align(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def stillness(self, x0: np.ndarray, P0: np.ndarray, us: np.ndarray, ts: np.ndarray) -> tuple[bool, str] | None:
+        """``Ins.stillness`` of the window's raw IMU samples (the spread, which scale factors hardly change)."""
+        x16 = np.zeros(16)
+        x16[:min(16, len(x0))] = np.asarray(x0, dtype=float)[:16]
+        return self.core.stillness(x16, np.eye(16), us, ts)
+
+    def align(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray, still: bool = True,
+              window: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Levelling from the mean static IMU sample (``Ins.align``): roll and pitch from gravity corrected
         by the initial bias and scale factor, yaw kept; with 22 states and ``align_gyro_bias`` the gyro bias
-        becomes the mean static rate (a static gyro reads b, whatever its scale)."""
+        becomes the mean static rate (a static gyro reads b, whatever its scale). ``still``, ``window``: as
+        ``Ins.align`` (a moving window keeps the bias prior, its rotation carries the yaw)."""
         x0 = np.array(x0, dtype=float, copy=True)
         u = np.array(u_mean, dtype=float, copy=True)
         x16 = np.zeros(16)
@@ -309,7 +317,7 @@ class InsStates(InsProcess):
             ba, sa = x0[10:13], x0[16:19]
             x16[10:16] = x0[10:16]
             u[:3] = ba + (u[:3] - ba) / sa                       # so that u - ba = (u~ - ba) / sa
-        y, _ = self.core.align(x16, np.eye(16), u)
+        y, _ = self.core.align(x16, np.eye(16), u, still=still, window=window)
         x0[:10] = y[:10]
         if self.states == 22:
             x0[10:16] = y[10:16]

@@ -375,3 +375,24 @@ def test_input_from_out_of_range_is_a_rejection():
         m.input_from(Message(0.0, "imu", (0, 0, -9.8, 0, 6.0, 0)))
     with pytest.raises(RejectedMessage):
         m.input_from(Message(0.0, "imu", (0, 0, float("nan"), 0, 0, 0)))
+
+
+def test_stillness_tells_a_static_window_from_a_moving_one():
+    """tester5 #5: the alignment averaged a driving vehicle's IMU as a static one, without a check."""
+    m = make(gravity=G)
+    rng = np.random.default_rng(4)
+    k, dt = 900, 0.01
+    ts = np.arange(k) * dt
+    sd = np.r_[np.full(3, 2.0e-3), np.full(3, 5.8e-4)] / np.sqrt(dt)      # the default (ADIS16364) densities
+    static = np.r_[0.0, 0.0, -G, 1e-3, -2e-3, 5e-4] + rng.normal(size=(k, 6)) * sd
+    x0, P0 = state(), np.eye(16) * 1e-4
+    still, why = m.stillness(x0, P0, static, ts)
+    assert still, why
+    moving = static.copy()
+    moving[:, 5] += np.where((ts > 3) & (ts < 6), 0.5, 0.0)                # a bend: 0.5 rad/s for 3 s
+    still, why = m.stillness(x0, P0, moving, ts)
+    assert not still and "gz sd" in why
+    x1, _ = m.align(x0, P0, moving.mean(axis=0), still=False, window=(moving, ts))
+    np.testing.assert_array_equal(x1[13:16], 0.0)                          # the bias prior kept
+    assert float(quat.to_euler(x1[6:10])[2]) == pytest.approx(1.5, abs=0.02)   # yaw carried: 0.5 rad/s x 3 s
+    assert make(gravity=G, align_gyro_bias=False).stillness(x0, P0, moving, ts) is None   # a window in flight
