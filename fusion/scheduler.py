@@ -238,7 +238,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                 outs = [decoded]
             else:                                    # held for a fix, or combined into the fix(es) it emits
                 outs = sensor.preprocessor.feed(decoded)
-                if type(outs) is not list or not all(isinstance(o, (Message, Fix)) for o in outs):
+                if type(outs) not in (list, tuple) or not all(isinstance(o, (Message, Fix)) for o in outs):
                     raise MalformedMessage(f"{_who(sensor.preprocessor, self.system.registry)} feed returned "
                                            f"{shown(outs)}, expected a list of fusion.api.Message or Fix")
                 sensor.counters["absorbed"] += 1 - len(outs)
@@ -340,10 +340,11 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         self.belief = self.belief.with_(t=t)  # type: ignore[union-attr]
 
     def _update_failed(self, sensor: SensorRuntime, model, msg: Message, exc: Exception) -> Event | None:
-        """An update of ``sensor`` raised. When its model is at fault (its ``h`` or ``jacobian`` raises at the
-        belief, or ``h`` returns another shape than ``(dim,)``), the message is lost, counted malformed, the
-        belief kept; the first failure of each sensor is reported (naming the model and the exception), the
-        others counted, their number told at the end. Otherwise it is the filter's own bug: ``exc`` is raised
+        """An update of ``sensor`` raised. When its gate is at fault (GateFailed: its ``check`` raised or
+        returned no ``(GateDecision, state)``) or its model is (its ``h`` or ``jacobian`` raises at the belief, or
+        ``h`` returns another shape than ``(dim,)``), the message is lost (:meth:`_lost`: counted malformed, the
+        belief kept, the first failure of each sensor and component reported naming it and the exception, the
+        others counted, their number told at the end). Otherwise it is the filter's own bug: ``exc`` is raised
         again (an internal error)."""
         if isinstance(exc, GateFailed):
             who = _who(exc.gate, self.system.registry)

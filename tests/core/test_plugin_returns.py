@@ -217,3 +217,14 @@ def test_fusion_run_with_a_failing_gate_exits_0_and_writes_the_summary(registry,
     assert main(["run", str(cfg), "-q", "--summary-json", str(tmp_path / "s.json")]) == 0
     assert "internal error" not in capsys.readouterr().err
     assert (tmp_path / "s.json").exists()
+
+
+def test_a_run_whose_every_message_was_lost_says_so(registry, tmp_path):
+    """Not "no input reached the filter": the input came, a plugin failed on all of it (the events say how)."""
+    cfg = config(tmp_path, "{model: {type: test_height, fault: R_nan}, noise: {sd: 0.1}}")
+    cfg.write_text(cfg.read_text().replace("  uwb: {model: range, noise: {sd: 0.1}}\n", ""))
+    log = tmp_path / "r.log"
+    log.write_text("".join(line for line in log.read_text().splitlines(True) if ",uwb," not in line))
+    summary = pipeline.run(load_system(cfg), log).summary
+    assert summary["sensors"]["alt"]["malformed"] == 40
+    assert "every message of the config's sensors was malformed" in summary["not_started"]
