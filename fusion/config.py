@@ -309,12 +309,28 @@ def build_component(registry: Registry, kind: str, spec: ComponentSpec, ctx: Bui
         if doc is not None:
             raise pydantic_errors(doc, exc, loc) from None
         raise ConfigError(f"{where}: {pydantic_errors(None, exc, data=params)}") from None
+    except Exception as exc:  # a plugin's own validator raising another exception (pydantic passes it through)
+        raise _build_failed(registry, cls, kind, name, where, "failed to validate its parameters", exc) from exc
     try:
         return cls(p, ctx)
     except ConfigError as exc:
         raise ConfigError(f"{where}: {exc}") from None
     except ValueError as exc:
         raise ConfigError(f"{where}: {kind} {name!r}: {exc}") from None
+    except Exception as exc:  # a plugin's calibration file that is missing, a RuntimeError of its own, ...
+        raise _build_failed(registry, cls, kind, name, where, "failed to build", exc) from exc
+
+
+def _build_failed(registry: Registry, cls: type, kind: str, name: str, where: str, what: str,
+                  exc: Exception) -> Exception:
+    """The error for a component that raised while it was built: a ConfigError naming the config line, the
+    component, its kind and package and the exception (``--debug`` shows its traceback, chained), for a
+    third-party component, and for any that fails to open a file (an OSError: a path the user gave);
+    otherwise (a built-in's bug) ``exc`` itself, an internal error."""
+    provider = registry.provider_of(cls)
+    if provider.endswith("(built-in)") and not isinstance(exc, OSError):
+        return exc
+    return ConfigError(f"{where}: component {name!r} ({kind}, from {provider}) {what}: {type(exc).__name__}: {exc}")
 
 
 from fusion.config_values import initial_belief_values, noise_matrix  # noqa: E402 (the numbers of a config, split out)

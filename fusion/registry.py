@@ -22,6 +22,7 @@ import functools
 import importlib
 import importlib.metadata as md
 import os
+import re
 import sys
 import traceback
 import warnings
@@ -31,7 +32,7 @@ from typing import Iterable
 import pluggy
 
 from fusion import hookspecs
-from fusion.api import KINDS, ConfigError, Component
+from fusion.api import KINDS, ConfigError, Component, Params
 
 # Built-in plugin modules (pytest's default_plugins pattern), by the same names as their entry points in
 # pyproject.toml, so load_setuptools_entrypoints() sees them registered and does not load them twice.
@@ -143,11 +144,16 @@ class Registry:
                 self._refused[(kind, name)] = problem
 
     def _add(self, cls: type[Component], name: str | None = None) -> None:
+        if not (isinstance(cls, type) and issubclass(cls, Component)):
+            raise ValueError(f"{cls!r} is not a component class (a subclass of one of the fusion.api bases: "
+                             "ProcessModel, MeasurementModel, Gate, ...)")
         kind, nm = cls.kind, name or cls.name
         if kind not in self._entries:
             raise ValueError(f"{cls.__qualname__}: unknown kind {kind!r}; kinds are {list(KINDS)}")
         if not nm:
             raise ValueError(f"{cls.__qualname__}: component has no name")
+        self._check_name(kind, nm, cls.__qualname__)
+        _check_params(kind, nm, cls)
         if nm in self._lazy[kind]:
             self._resolve(kind, nm)
         prev = self._entries[kind].get(nm)
@@ -157,6 +163,19 @@ class Registry:
         if kind in ("source", "sink"):
             self._check_claims(kind, nm, cls, provider)
         self._entries[kind][nm] = Entry(kind, nm, cls, provider)
+
+    def _check_name(self, kind: str, name: object, who: str) -> None:
+        """A name a config can write and tell apart: an identifier (never a module path, never a space), and
+        not another registered name of its kind but for case (``ranGE`` next to the built-in ``range``)."""
+        if not isinstance(name, str) or not NAME.match(name):
+            raise ValueError(f"{who}: {kind} name {name!r} is not a registry name (an ASCII letter or _, then "
+                             "letters, digits or _, e.g. 'my_baro'; never a module path)")
+        folded = name.lower()
+        for other in (*self._entries[kind], *self._lazy[kind]):
+            if other != name and other.lower() == folded:
+                raise ValueError(f"{who}: {kind} {name!r} differs from the registered {kind} {other!r} only in case: "
+                                 "a config could not tell them apart, so it is not registered (give it a name of "
+                                 "its own)")
 
     def _check_claims(self, kind: str, name: str, cls: type, provider: str) -> None:
         """A URL scheme or file suffix already claimed by another source (sink) is refused, as a name
@@ -176,6 +195,7 @@ class Registry:
     def _add_lazy(self, kind: str, name: str, target: str) -> None:
         if kind not in self._lazy:
             raise ValueError(f"{target}: unknown kind {kind!r}; kinds are {list(KINDS)}")
+        self._check_name(kind, name, target)
         if name in self._entries[kind] or name in self._lazy[kind]:
             prev = self._entries[kind].get(name)
             by = prev.provider if prev is not None else self._lazy[kind][name][1]
@@ -195,6 +215,7 @@ class Registry:
             if getattr(cls, "kind", None) != kind or (cls.name and cls.name != name):
                 raise ValueError(f"registered lazily as {kind} {name!r} but declares {getattr(cls, 'kind', None)} "
                                  f"{getattr(cls, 'name', None)!r}")
+            _check_params(kind, name, cls)
         except Exception as exc:  # a broken plugin: whatever its module raises
             what = str(exc) if isinstance(exc, ValueError) else f"{_where(exc, modname)}{type(exc).__name__}: {exc}"
             package = None if provider.endswith("(built-in)") else provider
@@ -234,6 +255,55 @@ class Registry:
                            for p in broken)
             raise ConfigError(f"{at}unknown {kind} {name!r}{hint} (known {kind}s: {', '.join(known) or 'none'})"
                               f"{also}") from None
+
+
+#: A component's registry name: what a config writes (``model: my_baro``), never a module path.
+NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+_BUILTIN_TOPS = ("fusion", "fusion_plugins")
+
+
+def _check_params(kind: str, name: str, cls: type) -> None:
+    """ValueError unless ``cls.Params`` is a class deriving from fusion.api.Params that forbids unknown keys
+    (a plain pydantic model would silently ignore a misspelt key), and, for a third-party class, every plain
+    default of it is a valid value of its field (``limit: float = "nine"`` would pass ``fusion validate``
+    and fail the run). Built-in classes are held to the same by the test suite, not at every start."""
+    P = getattr(cls, "Params", None)
+    who = f"{kind} {name!r}"
+    if not isinstance(P, type):
+        raise ValueError(f"{who}: Params must be a class deriving from fusion.api.Params, got {P!r}")
+    if not issubclass(P, Params):
+        raise ValueError(f"{who}: its Params ({P.__qualname__}) does not derive from fusion.api.Params: unknown "
+                         "(misspelt) keys would be accepted silently")
+    if P.model_config.get("extra") != "forbid":
+        raise ValueError(f"{who}: its Params ({P.__qualname__}) does not forbid unknown keys (model_config extra="
+                         f"{P.model_config.get('extra')!r}; fusion.api.Params sets 'forbid'): a misspelt key would be "
+                         "accepted silently")
+    if cls.__module__.split(".")[0] not in _BUILTIN_TOPS:
+        bad = params_default_errors(P)
+        if bad:
+            raise ValueError(f"{who}: a default of its Params ({P.__qualname__}) is not a valid value: {bad}")
+
+
+def params_default_errors(P: type[Params]) -> str:
+    """Why the plain defaults of the Params model ``P`` are not valid values of their fields ("" when they
+    are): ``field = default: error`` for each, joined by ``; ``. A None default (the usual "not given") and
+    default factories are not checked; a model validator's cross-field rules are not either."""
+    from pydantic import ValidationError
+
+    defaults = {}
+    for n, f in P.model_fields.items():
+        if not f.is_required() and f.default_factory is None and f.default is not None:
+            defaults[f.alias or n] = f.default
+    if not defaults:
+        return ""
+    try:
+        P.model_validate(defaults)
+    except ValidationError as exc:
+        errors = [e for e in exc.errors() if e["loc"] and e["loc"][0] in defaults and e["type"] != "missing"]
+        return "; ".join(f"{'.'.join(map(str, e['loc']))} = {defaults[e['loc'][0]]!r}: {e['msg']}" for e in errors)
+    except Exception as exc:   # a validator of the plugin's that raises something else
+        return f"validating the defaults raised {type(exc).__name__}: {exc}"
+    return ""
 
 
 def _blocked() -> set[str]:

@@ -33,7 +33,10 @@ def summary(stats: "RunStats", source: str, wall_s: float) -> dict[str, Any]:
         why = (f"waiting for a first fix from {init.from_sensor!r} (initial.from_sensor)" if init.from_sensor
                else "no input reached the filter")
         counts = out["sensors"]
-        if not any(counts.get(name, {}).get("received", 0) for name in sched.sensors):
+        mine = [counts.get(name, {}) for name in sched.sensors]
+        if any(c.get("received", 0) for c in mine) and all(c.get("malformed", 0) == c.get("received", 0) for c in mine):
+            why = "every message of the config's sensors was malformed: see the events for what failed on them"
+        elif not any(c.get("received", 0) for c in mine):
             # the likeliest cause by far: a log of other sensors (or another config's), said in so many words
             why += f"; no message of the config's sensors ({', '.join(sched.sensors)}) was in the input"
             if sched.unused:

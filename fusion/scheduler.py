@@ -33,22 +33,22 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from fusion.api import (AlignsState, Belief, Estimate, Event, FusionError, GateRun, HasThreshold, HoldsInput,
+from fusion.api import (AlignsState, Belief, Estimate, Event, Fix, FusionError, HasThreshold, HoldsInput,
                         MalformedMessage, Message, PredictsInputRuns, PseudoMeasurement, ReadsBelief, UsesInput, has)
 from fusion.clock import ClockGuard
 from fusion.recovery import LockoutWatch, recover
 from fusion.config import SensorRuntime, System
+from fusion.scheduling.checks import CheckedGateRun, GateFailed, shown, usable, who as _who
 from fusion.scheduling.initialisation import FIXES_MAX, Initialisation
 from fusion.scheduling.reorder import Reordering
 from fusion.scheduling.replay import Replay, _Snapshot
 from fusion.scheduling.reporting import Reporting
 
 
-def _failed(component, exc: Exception) -> MalformedMessage:
+def _failed(component, exc: Exception, registry=None) -> MalformedMessage:
     """A plugin's unexpected exception on one message, as the reason that message is malformed (the
     plugin should raise MalformedMessage itself; the run goes on either way)."""
-    who = f"{component.kind} {component.name!r}" if component is not None else "a plugin"
-    return MalformedMessage(f"{who} failed on it: {type(exc).__name__}: {exc}")
+    return MalformedMessage(f"{_who(component, registry)} failed on it: {type(exc).__name__}: {exc}")
 
 
 class ProcessModelFailed(FusionError):
@@ -105,9 +105,10 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         self._log_start = 0
         self._replaying = False
         self._live = False   # in a replay's re-run, processing the late message itself (its outcome is new)
-        # Plugin failures inside the filter's steps (an exception in a model's h, jacobian or f): per sensor
-        # [count, first reason] of updates lost, and the predictions that failed in a row.
-        self._update_failures: dict[str, list] = {}
+        # Plugin failures on a measurement (a model's h or jacobian raising in the update, a gate's check, an
+        # unusable Observation): per (sensor, component) [count, first reason] of messages lost; and the
+        # predictions that failed in a row.
+        self._update_failures: dict[tuple[str, str], list] = {}
         self._predict_fails = 0
         self._predict_failures = 0
         self.steps = {"predict": 0, "update": 0}
@@ -167,7 +168,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                         if isinstance(s.model, PseudoMeasurement) and s.model.rule == "after_predict"]
         self._thresholds = {n: s.gate.threshold for n, s in self.sensors.items() if has(s.gate, HasThreshold)}
         # The gates' per-run state and decision counts (fusion.api.GateRun), what the filter's update is given.
-        self.gates = {n: GateRun(s.gate) for n, s in self.sensors.items() if s.gate is not None}
+        self.gates = {n: CheckedGateRun(s.gate) for n, s in self.sensors.items() if s.gate is not None}
         if self._pseudo:
             self._batch = False
 
@@ -198,7 +199,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             yield from self._drain_solver_events(sensor)
         if self._pending:
             yield from self._flush_inputs()
-        for name, (n, why) in self._update_failures.items():
+        for (name, _), (n, why) in self._update_failures.items():
             if n > 1:
                 yield Event(math.nan, "warning", name, f"{why} {n} times, each message lost (counted malformed)")
         if self._predict_failures:
@@ -240,14 +241,22 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             if decoded is None:
                 sensor.counters["absorbed"] += 1     # the decoder dropped it (fusion.run_stats.ABSORBED)
                 return
-            outs = [decoded] if sensor.preprocessor is None else sensor.preprocessor.feed(decoded)
-            if sensor.preprocessor is not None:      # held for a fix, or combined into the fix(es) it emits
+            if type(decoded) is not Message and not isinstance(decoded, Message):
+                raise MalformedMessage(f"{_who(sensor.decoder, self.system.registry)} returned {shown(decoded)}, "
+                                       "expected a fusion.api.Message or None")
+            if sensor.preprocessor is None:
+                outs = [decoded]
+            else:                                    # held for a fix, or combined into the fix(es) it emits
+                outs = sensor.preprocessor.feed(decoded)
+                if type(outs) not in (list, tuple) or not all(isinstance(o, (Message, Fix)) for o in outs):
+                    raise MalformedMessage(f"{_who(sensor.preprocessor, self.system.registry)} feed returned "
+                                           f"{shown(outs)}, expected a list of fusion.api.Message or Fix")
                 sensor.counters["absorbed"] += 1 - len(outs)
         except MalformedMessage as exc:
             yield self._bad(sensor, msg, exc)
             return
         except Exception as exc:  # a plugin that fails on one message must not stop the run
-            yield self._bad(sensor, msg, _failed(sensor.preprocessor or sensor.decoder, exc))
+            yield self._bad(sensor, msg, _failed(sensor.preprocessor or sensor.decoder, exc, self.system.registry))
             return
         if self._deferred:                      # what a belief_at() call released (outputs, input events)
             deferred, self._deferred = self._deferred, []
@@ -346,26 +355,35 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         self.belief = self.belief.with_(t=t)  # type: ignore[union-attr]
 
     def _update_failed(self, sensor: SensorRuntime, model, msg: Message, exc: Exception) -> Event | None:
-        """An update of ``sensor`` raised. When its model is at fault (its ``h`` or ``jacobian`` raises at the
-        belief, or ``h`` returns another shape than ``(dim,)``), the message is lost, counted malformed, the
-        belief kept; the first failure of each sensor is reported (naming the model and the exception), the
-        others counted, their number told at the end. Otherwise it is the filter's own bug: ``exc`` is raised
+        """An update of ``sensor`` raised. When its gate is at fault (GateFailed: its ``check`` raised or
+        returned no ``(GateDecision, state)``) or its model is (its ``h`` or ``jacobian`` raises at the belief, or
+        ``h`` returns another shape than ``(dim,)``), the message is lost (:meth:`_lost`: counted malformed, the
+        belief kept, the first failure of each sensor and component reported naming it and the exception, the
+        others counted, their number told at the end). Otherwise it is the filter's own bug: ``exc`` is raised
         again (an internal error)."""
+        if isinstance(exc, GateFailed):
+            who = _who(exc.gate, self.system.registry)
+            return self._lost(sensor, msg, who, f"failed in the update: {exc}", f"failed in an update ({exc})")
         error = _model_fault(model, self.belief.x)  # type: ignore[union-attr]
         if error is None:
             raise exc
+        who = _who(model, self.system.registry, "measurement model")
+        return self._lost(sensor, msg, who, f"failed in the update: {error}", f"failed in an update ({error})")
+
+    def _lost(self, sensor: SensorRuntime, msg: Message | Fix, who: str, what: str, short: str) -> Event | None:
+        """A message of ``sensor`` lost to a plugin's failure on it (``who`` failed: ``what``): counted
+        malformed; the first of each sensor and component is reported, the others counted and their number
+        told at the end (``who short N times``)."""
         sensor.counters["malformed"] += 1
         if self._replaying and not self._live:   # a re-run message: counted and told when it first ran
             return None
-        name = getattr(model, "name", type(model).__name__)
-        failures = self._update_failures.get(sensor.name)
+        failures = self._update_failures.get((sensor.name, who))
         if failures is not None:
             failures[0] += 1
             return None
-        self._update_failures[sensor.name] = [1, f"measurement model {name!r} failed in an update ({error})"]
-        return Event(msg.t, "malformed", sensor.name, f"line {msg.line}: measurement model {name!r} failed in the "
-                     f"update: {error}; the message is lost, the belief kept (further failures of {sensor.name} are "
-                     "counted)")
+        self._update_failures[(sensor.name, who)] = [1, f"{who} {short}"]
+        return Event(msg.t, "malformed", sensor.name, f"line {msg.line}: {who} {what}; the message is lost, the belief "
+                     f"kept (further failures of {sensor.name} are counted)")
 
     def _pseudo_updates(self) -> None:
         """The after-predict pseudo-measurements (fusion.api.PseudoMeasurement), in config order."""
@@ -373,6 +391,16 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             obs = sensor.model.pseudo_observation(self.belief)  # type: ignore[union-attr]
             if obs is None:
                 continue
+            checked = usable(obs)
+            if type(checked) is str:
+                who = _who(sensor.model, self.system.registry, "measurement model")
+                event = self._lost(sensor, Message(self.belief.t, sensor.name, (), "-"), who,  # type: ignore[union-attr]
+                                   f"returned an unusable pseudo-observation: {checked}",
+                                   f"returned an unusable pseudo-observation ({checked})")
+                if event is not None:
+                    self._filter_events.append(event)
+                continue
+            obs = checked
             R = obs.R if obs.R is not None else sensor.R
             try:
                 result = self.filter.update(self.belief, obs.model, obs.z, R, self.gates.get(sensor.name))
@@ -483,11 +511,20 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             yield self._bad(sensor, msg, exc)
             return
         except Exception as exc:  # a plugin that fails on one message must not stop the run
-            yield self._bad(sensor, msg, _failed(sensor.model, exc))
+            yield self._bad(sensor, msg, _failed(sensor.model, exc, self.system.registry))
             return
         if obs is None:
             sensor.counters["absorbed"] += 1
             return
+        checked = usable(obs)
+        if type(checked) is str:   # the model's bug (it should raise MalformedMessage): lose this message
+            who = _who(sensor.model, self.system.registry, "measurement model")
+            event = self._lost(sensor, msg, who, f"returned an unusable Observation: {checked}",
+                               f"returned an unusable Observation ({checked})")
+            if event is not None:
+                yield event
+            return
+        obs = checked
         if self._pending:
             yield from self._flush_inputs(until=obs.t)
         if self.belief is None and self._from_sensor == sensor.name:

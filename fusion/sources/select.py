@@ -24,7 +24,7 @@ import stat
 from pathlib import Path
 from typing import Any
 
-from fusion.api import ConfigError, Sink, Source, StateLayout
+from fusion.api import ConfigError, FusionError, Sink, Source, StateLayout
 
 __all__ = ["open_source", "source_class", "open_sink", "sink_class"]
 
@@ -120,5 +120,16 @@ def sink_class(path: str, registry=None) -> type[Sink]:
 
 
 def open_sink(path: str, layout: StateLayout, registry=None) -> Sink:
-    """The sink for ``--output path``, opened for estimates of ``layout``."""
-    return sink_class(path, registry).for_path(str(path), layout)
+    """The sink for ``--output path``, opened for estimates of ``layout``. A third-party sink that raises
+    while it is built (anything but a FusionError, which says what itself) is a ConfigError naming it."""
+    cls = sink_class(path, registry)
+    try:
+        return cls.for_path(str(path), layout)
+    except FusionError:
+        raise
+    except Exception as exc:
+        provider = _registry(registry).provider_of(cls)
+        if provider.endswith("(built-in)") and not isinstance(exc, OSError):
+            raise
+        raise ConfigError(f"--output {path}: component {cls.name!r} (sink, from {provider}) failed to build: "
+                          f"{type(exc).__name__}: {exc}") from exc

@@ -26,7 +26,7 @@ class BracketParams(Params):
 
 class Bracketed(MeasurementModel[BracketParams]):
     __doc__ = DOC
-    name = "bracketed[1]"
+    name = "bracketed"   # a registry name has no brackets (fusion.registry.NAME); its docstring may
     Params = BracketParams
     dim = 1
 
@@ -45,14 +45,14 @@ def test_fusion_plugins_shows_docstrings_with_brackets_as_written(monkeypatch, c
     _registry(monkeypatch)
     assert main(["plugins", "--kind", "measurement"]) == 0
     out = capsys.readouterr().out
-    assert DOC in out and "bracketed[1]" in out
+    assert DOC in out and "bracketed" in out
 
 
 def test_fusion_plugins_verbose_shows_names_defaults_and_descriptions_as_written(monkeypatch, capsys):
     _registry(monkeypatch)
     assert main(["plugins", "--kind", "measurement", "--verbose"]) == 0
     out = capsys.readouterr().out
-    assert DOC in out and "bracketed[1]" in out and "offset [m]" in out and "[0, 1]" in out
+    assert DOC in out and "bracketed" in out and "offset [m]" in out and "[0, 1]" in out
 
 
 def test_the_summary_shows_paths_names_and_notes_as_written():
