@@ -175,7 +175,10 @@ def linearised_predict(belief: Belief, process: ProcessModel, u: np.ndarray | No
     value raising ModelFault."""
     x = frozen(belief.x)
     n = x.shape[0]
-    F = array_of(process_jacobian(process, x, u, dt), (n, n), "jacobian", MEAN)
+    F = process_jacobian(process, x, u, dt)
+    if type(F) is not _ndarray or F.shape != (n, n):   # a numerical F of an f of the wrong shape: f is named
+        array_of(process.f(x, u, dt), (n,), "f", MEAN)
+        F = array_of(F, (n, n), "jacobian", MEAN)
     finite(F, "jacobian", MEAN, x)
     Q = (check_Q or QCheck())(process.Q(x, u, dt), n, "Q", MEAN, x)
     x1 = array_of(process.f(x, u, dt), (n,), "f", MEAN)
@@ -220,7 +223,10 @@ def linearised_update(flt: KalmanBase, belief: Belief, model: MeasurementModel, 
     events: tuple = ()
     for it in range(max_iterations):
         xv, at = (x0, MEAN) if it == 0 else (frozen(xi), ITERATE)
-        H = array_of(measurement_jacobian(model, xv), (m, n), "jacobian", at)
+        H = measurement_jacobian(model, xv)
+        if H.shape != (m, n):                    # a numerical H of an h of the wrong shape: h is named
+            array_of(model.h(xv), (m,), "h", at)
+            H = array_of(H, (m, n), "jacobian", at)
         finite(H, "jacobian", at, xv)
         HP = H @ P                               # (P H^T)^T, P symmetric
         Ly, S, event = flt.factor(HP @ H.T + R, belief.t, "innovation covariance")

@@ -55,7 +55,11 @@ def array_of(out, shape: tuple, what: str, given: str) -> np.ndarray:
             raise ModelFault(f"{what} returned {type(out).__name__}, not an array of shape {shape} "
                              f"(at {given}: {exc})") from None
     if out.shape != shape:
-        raise ModelFault(f"{what} returned shape {out.shape} at {given}, expected {shape}")
+        got = out.shape
+        if given == SIGMA and got:   # said per state, as for one state: the same words from every filter
+            raise ModelFault(f"{what} returned shape {got[1:]} a state ({got} on the {shape[0]} sigma points), "
+                             f"expected {shape[1:]}")
+        raise ModelFault(f"{what} returned shape {got} at {given}, expected {shape}")
     return out
 
 
