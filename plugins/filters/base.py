@@ -20,7 +20,7 @@ import numpy as np
 
 from fusion.api import Belief, Event, Filter, Gate, MeasurementModel, ProcessModel, UpdateResult
 
-from .checks import MEAN, ITERATE, QCheck, array_of, finite, frozen
+from .checks import MEAN, ITERATE, QCheck, array_of, frozen, nonfinite, trusted
 from .jacobian import measurement_jacobian, process_jacobian
 from .linalg import cholesky_lower, recover_factor, solve_lower, symmetrise
 
@@ -29,6 +29,7 @@ __all__ = ["KalmanBase", "Factor", "linear_predict", "linearised_predict", "line
 
 _ndarray = np.ndarray
 _float64 = np.dtype(float)
+_vdot = np.vdot
 
 
 def as_vector(z) -> np.ndarray:
@@ -172,17 +173,24 @@ def linearised_predict(belief: Belief, process: ProcessModel, u: np.ndarray | No
     returned as ``(x^-, F, Q)``; the covariance (``F P F^T + Q``, or its square root) is the caller's.
     The models get a read-only view of the mean; what they return is checked (f (n,), F and Q (n, n),
     finite, Q positive semi-definite: ``check_Q``, the filter's, else a full test every call), a bad
-    value raising ModelFault."""
+    value raising ModelFault (not for one of fusion's own models: checks.trusted)."""
+    if trusted(process):
+        x = belief.x
+        F = process_jacobian(process, x, u, dt)
+        Q = process.Q(x, u, dt)
+        return process.normalize(process.f(x, u, dt)), F, Q
     x = frozen(belief.x)
     n = x.shape[0]
     F = process_jacobian(process, x, u, dt)
     if type(F) is not _ndarray or F.shape != (n, n):   # a numerical F of an f of the wrong shape: f is named
         array_of(process.f(x, u, dt), (n,), "f", MEAN)
         F = array_of(F, (n, n), "jacobian", MEAN)
-    finite(F, "jacobian", MEAN, x)
     Q = (check_Q or QCheck())(process.Q(x, u, dt), n, "Q", MEAN, x)
     x1 = array_of(process.f(x, u, dt), (n,), "f", MEAN)
-    finite(x1, "f", MEAN, x)
+    s = x1.dot(x1) + _vdot(F, F)                 # finite: one test for both (checks.finite)
+    if s - s != 0.0:
+        nonfinite(x1, "f", MEAN, x)
+        nonfinite(F, "jacobian", MEAN, x)
     return process.normalize(x1), F, Q
 
 
@@ -213,7 +221,8 @@ def linearised_update(flt: KalmanBase, belief: Belief, model: MeasurementModel, 
     its covariance, the NIS and the gate decision are those of the prior (iteration 0), the same as
     the EKF's.
     """
-    x0 = frozen(belief.x)                        # the models get read-only views (checks.py)
+    chk = not trusted(model)
+    x0 = frozen(belief.x) if chk else belief.x   # a plugin's model gets read-only views (checks.py)
     n = x0.shape[0]
     P = covariance_of(belief)
     z = np.asarray(z, dtype=float).reshape(-1)
@@ -222,18 +231,25 @@ def linearised_update(flt: KalmanBase, belief: Belief, model: MeasurementModel, 
     xi = x0
     events: tuple = ()
     for it in range(max_iterations):
-        xv, at = (x0, MEAN) if it == 0 else (frozen(xi), ITERATE)
+        xv, at = (x0, MEAN) if it == 0 or not chk else (frozen(xi), ITERATE)
         H = measurement_jacobian(model, xv)
-        if H.shape != (m, n):                    # a numerical H of an h of the wrong shape: h is named
-            array_of(model.h(xv), (m,), "h", at)
-            H = array_of(H, (m, n), "jacobian", at)
-        finite(H, "jacobian", at, xv)
+        if chk:
+            if H.shape != (m, n):                # a numerical H of an h of the wrong shape: h is named
+                array_of(model.h(xv), (m,), "h", at)
+                H = array_of(H, (m, n), "jacobian", at)
+            s = _vdot(H, H)                      # finite (checks.finite, inline)
+            if s - s != 0.0:
+                nonfinite(H, "jacobian", at, xv)
         HP = H @ P                               # (P H^T)^T, P symmetric
         Ly, S, event = flt.factor(HP @ H.T + R, belief.t, "innovation covariance")
         if event is not None:
             events += (event,)
-        zh = array_of(model.h(xv), (m,), "h", at)
-        finite(zh, "h", at, xv)
+        zh = model.h(xv)
+        if chk:
+            zh = array_of(zh, (m,), "h", at)
+            s = zh.dot(zh)
+            if s - s != 0.0:
+                nonfinite(zh, "h", at, xv)
         r = model.residual(z, zh)
         W = solve_lower(Ly, HP)                  # L_y^-1 H P   (m, n)
         if it == 0:

@@ -10,7 +10,7 @@ from pydantic import Field
 from fusion.api import Belief, Gate, MeasurementModel, ProcessModel, UpdateResult
 
 from .base import as_covariance, as_vector, linearised_predict
-from .checks import MEAN, SIGMA, array_of, finite, frozen
+from .checks import MEAN, SIGMA, array_of, finite, frozen, trusted
 from .linalg import cholupdate, psd_sqrt_rows, qr_lower, qr_lower_scaled, recover_factor, solve_lower
 from .sigma_point_filter import SigmaPointFilter, measurement_transform
 from .sigma_points import SigmaPoints, UnscentedParams
@@ -155,7 +155,10 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
             BQ = psd_sqrt_rows(Q)
             S1 = qr_lower(np.concatenate((F @ S, BQ.T), axis=1).T, overwrite=True)   # sqrt(F P F^T + Q)
             return Belief(belief.t + dt, x1, S=S1, events=tuple(events))
-        Q = self.check_Q(process.Q(frozen(belief.x), u, dt), belief.x.shape[0], "Q", MEAN, belief.x)
+        if trusted(process):
+            Q = process.Q(belief.x, u, dt)
+        else:
+            Q = self.check_Q(process.Q(frozen(belief.x), u, dt), belief.x.shape[0], "Q", MEAN, belief.x)
         return self.sigma_predict(belief, process, lambda X: process.f(X, u, dt), lambda x0, x1: Q, dt)
 
     def sigma_predict(self, belief: Belief, process: ProcessModel, propagate, noise, dt: float) -> Belief:
@@ -164,8 +167,10 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         S = self.sqrt_of(belief, events)
         sp = self.sigma_points(x.shape[0])
         dX = sp.E @ S.T
-        Y = array_of(propagate(x + dX), dX.shape, "f", SIGMA)      # eqs. 3-4, one call
-        finite(Y, "f", SIGMA, x, dX)
+        Y = propagate(x + dX)                                       # eqs. 3-4, one call
+        if not trusted(process):
+            Y = array_of(Y, dX.shape, "f", SIGMA)
+            finite(Y, "f", SIGMA, x, dX)
         xm, D1, v0, w0 = self.deviations(sp, Y, np.subtract)        # eq. 5
         xm = process.normalize(xm)
         BQ = psd_sqrt_rows(noise(x, xm))

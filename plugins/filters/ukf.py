@@ -9,7 +9,7 @@ from fusion.api import (Belief, Gate, MeasurementModel, NonAdditiveMeasurementNo
                         ProcessModel, UpdateResult, has)
 
 from .base import as_covariance, as_vector, covariance_of, linear_predict, linearised_predict, residual_of
-from .checks import MEAN, SIGMA, array_of, finite, frozen
+from .checks import MEAN, SIGMA, array_of, finite, frozen, trusted
 from .linalg import psd_sqrt_rows, symmetrise
 from .sigma_point_filter import SigmaPointFilter, measurement_transform
 from .sigma_points import UnscentedParams
@@ -70,7 +70,10 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         if self.use_linear_prediction(process):
             x1, F, Q = linearised_predict(belief, process, u, dt, self.check_Q)
             return Belief(belief.t + dt, x1, P=linear_predict(belief.x, covariance_of(belief), F, Q))
-        Q = self.check_Q(process.Q(frozen(belief.x), u, dt), belief.x.shape[0], "Q", MEAN, belief.x)
+        if trusted(process):
+            Q = process.Q(belief.x, u, dt)
+        else:
+            Q = self.check_Q(process.Q(frozen(belief.x), u, dt), belief.x.shape[0], "Q", MEAN, belief.x)
         if self._augmented:
             return self._predict_augmented(belief, process, u, dt, covariance_of(belief), Q)
         return self.sigma_predict(belief, process, lambda X: process.f(X, u, dt), lambda x0, x1: Q, dt)
@@ -80,8 +83,10 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         sp = self.sigma_points(x.shape[0])
         L, _, event = self.factor(covariance_of(belief), belief.t, "ukf predict")   # L L^T = P
         dX = sp.E @ L.T
-        Y = array_of(propagate(x + dX), dX.shape, "f", SIGMA)   # 000 eq. 4, one call
-        finite(Y, "f", SIGMA, x, dX)
+        Y = propagate(x + dX)                                # 000 eq. 4, one call
+        if not trusted(process):
+            Y = array_of(Y, dX.shape, "f", SIGMA)
+            finite(Y, "f", SIGMA, x, dX)
         xm = sp.Wm @ Y                                       # 000 eq. 5
         D = Y - xm
         xm = process.normalize(xm)
@@ -98,10 +103,14 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         X = belief.x + dX[:, :n]
         W = dX[:, n:]
         if has(process, NonAdditiveProcessNoise):
-            Y = array_of(process.f_with_noise(X, W, u, dt), X.shape, "f_with_noise", SIGMA)
+            Y = process.f_with_noise(X, W, u, dt)
+            if not trusted(process):
+                Y = array_of(Y, X.shape, "f_with_noise", SIGMA)
         else:
-            Y = array_of(process.f(X, u, dt), X.shape, "f", SIGMA) + W
-        finite(Y, "f", SIGMA, X, W)
+            Y = process.f(X, u, dt)
+            Y = (Y if trusted(process) else array_of(Y, X.shape, "f", SIGMA)) + W
+        if not trusted(process):
+            finite(Y, "f", SIGMA, X, W)
         xm = sp.Wm @ Y
         D = Y - xm
         return Belief(belief.t + dt, process.normalize(xm), P=symmetrise((D.T * sp.Wc) @ D),
@@ -126,10 +135,14 @@ class UnscentedKalmanFilter(SigmaPointFilter):
             dXa = sp.E @ La.T
             dX = dXa[:, :n]
             if has(model, NonAdditiveMeasurementNoise):
-                Z = array_of(model.h_with_noise(x + dX, dXa[:, n:]), (dX.shape[0], m), "h_with_noise", SIGMA)
+                Z = model.h_with_noise(x + dX, dXa[:, n:])
+                if not trusted(model):
+                    Z = array_of(Z, (dX.shape[0], m), "h_with_noise", SIGMA)
             else:
-                Z = array_of(model.h(x + dX), (dX.shape[0], m), "h", SIGMA) + dXa[:, n:]
-            finite(Z, "h", SIGMA, x, dXa)
+                Z = model.h(x + dX)
+                Z = (Z if trusted(model) else array_of(Z, (dX.shape[0], m), "h", SIGMA)) + dXa[:, n:]
+            if not trusted(model):
+                finite(Z, "h", SIGMA, x, dXa)
             R = None
             diff = residual_of(model)
         else:
