@@ -231,7 +231,10 @@ def linearised_update(flt: KalmanBase, belief: Belief, model: MeasurementModel, 
     xi = x0
     events: tuple = ()
     for it in range(max_iterations):
-        xv, at = (x0, MEAN) if it == 0 or not chk else (frozen(xi), ITERATE)
+        if not chk:
+            xv = xi
+        else:
+            xv, at = (x0, MEAN) if it == 0 else (frozen(xi), ITERATE)
         H = measurement_jacobian(model, xv)
         if chk:
             if H.shape != (m, n):                # a numerical H of an h of the wrong shape: h is named
