@@ -94,8 +94,9 @@ class KalmanBase(Filter):
     (``StateLayout.normalize``): the filter's own layout (the system's, given at wiring), else the
     measurement model's. The predicted mean by the process model's ``normalize``.
 
-    Models are given read-only views of the belief and every value they return is checked where it is
-    received (plugins/filters/checks.py): a bad one raises ModelFault, which the run charges to the model.
+    A plugin's models are given read-only views of the belief and every value they return is checked where
+    it is received (plugins/filters/checks.py; fusion's own models are trusted): a bad one raises
+    ModelFault, which the run charges to the model.
     ``check_Q`` is the process noise's test (it remembers which sources it has fully checked once).
     """
 
@@ -274,6 +275,6 @@ def linearised_update(flt: KalmanBase, belief: Belief, model: MeasurementModel, 
             break
     iterations = it + 1
     Kt = solve_lower(Ly, W, trans=1)             # K^T = S^-1 H P   (m, n)
-    A = _eye(n) - Kt.T @ H             # I - K H
+    A = _eye(n) - Kt.T @ H                      # I - K H
     P1 = symmetrise(A @ P @ A.T + Kt.T @ R @ Kt)  # Joseph form
     return UpdateResult(Belief(belief.t, flt.normalizer(model)(xi), P=P1), y0, S0, nis, True, events, iterations)
