@@ -4,7 +4,7 @@ Kept free of numpy and pydantic so that ``fusion --help`` and the CLI's error re
 """
 from __future__ import annotations
 
-__all__ = ["FusionError", "ConfigError", "InputError", "MalformedMessage", "RejectedMessage"]
+__all__ = ["FusionError", "ConfigError", "InputError", "MalformedMessage", "RejectedMessage", "ModelFault"]
 
 
 class FusionError(Exception):
@@ -26,3 +26,12 @@ class MalformedMessage(ValueError):
 class RejectedMessage(MalformedMessage):
     """A well-formed message outside the sensor's limits (a NaN or an out-of-range IMU sample): counted as
     rejected and not used."""
+
+
+class ModelFault(Exception):
+    """A model returned what the filter cannot use: the wrong shape or type, NaN or inf at a finite state, a
+    process noise Q that is not symmetric positive semi-definite (raised by the filters, which check each
+    value a model returns where they receive it). The run treats it as the model failing, as if the model
+    had raised: a measurement model's update is lost (counted malformed, the model named), a process
+    model's prediction held (and the run stopped after several in a row). The message says what was wrong
+    (e.g. ``f returned shape (2,) at the belief's mean, expected (3,)``); the run adds the model's name."""

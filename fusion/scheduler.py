@@ -36,6 +36,7 @@ import numpy as np
 from fusion.api import (AlignsState, Belief, Estimate, Event, Fix, FusionError, HasThreshold, HoldsInput,
                         MalformedMessage, Message, PredictsInputRuns, PseudoMeasurement, ReadsBelief, UsesInput, has)
 from fusion.clock import ClockGuard
+from fusion.errors import ModelFault
 from fusion.recovery import LockoutWatch, recover
 from fusion.config import SensorRuntime, System
 from fusion.scheduling.checks import CheckedGateRun, GateFailed, shown, usable, who as _who
@@ -334,19 +335,23 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         """A prediction to ``t`` raised. When the process model's own ``f`` or ``Q`` raises at the belief (input
         ``u``, step ``dt`` s), the belief is held over the step (moved to ``t`` unchanged), the first failure is
         reported, and :data:`PREDICT_FAILS_MAX` in a row stop the run with ProcessModelFailed, which names the
-        process model. Otherwise it is the filter's own bug: ``exc`` is raised again (an internal error)."""
-        x = self.belief.x  # type: ignore[union-attr]
-        try:
-            self.process.f(x, u, dt)
-            self.process.Q(x, u, dt)
-            self.process.jacobian(x, u, dt)
-        except Exception as own:
-            exc = own
-        else:
-            raise exc
+        process model. So does a ModelFault (the filter found a value the model returned unusable: the wrong
+        shape, NaN, a Q not positive semi-definite). Otherwise it is the filter's own bug: ``exc`` is raised
+        again (an internal error)."""
+        if not isinstance(exc, ModelFault):
+            x = _read_only(self.belief.x)  # type: ignore[union-attr]
+            try:
+                self.process.f(x, u, dt)
+                self.process.Q(x, u, dt)
+                self.process.jacobian(x, u, dt)
+            except Exception as own:
+                exc = own
+            else:
+                raise exc
         self._predict_fails += 1
         self._predict_failures += 1
-        why = f"process model {self.process.name!r} failed in a prediction: {type(exc).__name__}: {exc}"
+        what = str(exc) if isinstance(exc, ModelFault) else f"{type(exc).__name__}: {exc}"
+        why = f"process model {self.process.name!r} failed in a prediction: {what}"
         if self._predict_fails >= PREDICT_FAILS_MAX:
             raise ProcessModelFailed(f"{why} ({self._predict_fails} predictions in a row, at t = {t:.3f} s); the "
                                      "belief cannot be carried on") from exc
@@ -364,7 +369,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         if isinstance(exc, GateFailed):
             who = _who(exc.gate, self.system.registry)
             return self._lost(sensor, msg, who, f"failed in the update: {exc}", f"failed in an update ({exc})")
-        error = _model_fault(model, self.belief.x)  # type: ignore[union-attr]
+        error = str(exc) if isinstance(exc, ModelFault) else _model_fault(model, _read_only(self.belief.x))  # type: ignore[union-attr]
         if error is None:
             raise exc
         who = _who(model, self.system.registry, "measurement model")
@@ -637,6 +642,13 @@ def _model_fault(model, x: np.ndarray) -> str | None:
     except Exception as exc:
         return f"{type(exc).__name__}: {exc}"
     return None
+
+
+def _read_only(x: np.ndarray) -> np.ndarray:
+    """A read-only view of the belief's mean for a model probed after a failure (one that writes into it raises)."""
+    v = x.view()
+    v.flags.writeable = False
+    return v
 
 
 def _finite(nis: float, belief: Belief | None) -> bool:

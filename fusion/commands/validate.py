@@ -12,7 +12,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("validate", help="check configs without running them",
                        description="Check each system YAML: schema, plugin names and parameters, dimensions "
                                    "(R is m x m for its model, the initial belief fits the state, beacons exist, "
-                                   "a measurement model's h at the initial mean has its dim values) "
+                                   "a measurement model's h and jacobian at the initial mean have its dim values, "
+                                   "the process model's f, jacobian and Q there have the state's shape, are finite, "
+                                   "and Q is symmetric positive semi-definite) "
                                    "and that its recording exists. Exit code 2 if any is invalid.")
     p.add_argument("files", nargs="+", metavar="FILE", help="system YAML files")
     p.set_defaults(func=run)
@@ -42,32 +44,104 @@ def _check_recording(path: str, system, rec) -> None:
                           f"({shown}); their ranges would all be malformed. Defined: {sorted(system.beacons)}")
 
 
+#: The step (s) the process model is probed over.
+PROBE_DT = 0.1
+
+
+def _writes_its_argument(exc: Exception) -> bool:
+    """The exception of a model that wrote into the read-only state it was given."""
+    return isinstance(exc, ValueError) and "read-only" in str(exc)
+
+
 def _check_models(path: str, system) -> None:
     """Each measurement model's ``h`` at the initial mean returns ``(dim,)``, and ``(2, dim)`` for two states
-    (fusion.testing.check_measurement_vectorised checks the same on random states): a wrong shape would fail
-    every update of the sensor in the run. A model whose ``h`` needs a message first (the range to the beacon
-    a message names) raises here and is not checked."""
+    (fusion.testing.check_measurement_vectorised checks the same on random states), finite, and its
+    ``jacobian`` (when the filter uses it) ``(dim, n)``: a wrong one would fail every update of the sensor in
+    the run. A model whose ``h`` needs a message first (the range to the beacon a message names) raises here
+    and is not checked. The process model: :func:`_check_process`."""
     import numpy as np
 
-    from fusion.errors import ConfigError
+    from fusion.errors import ConfigError, ModelFault
     from fusion.yamlsource import load_yaml
+    from fusion_plugins.filters.checks import array_of, finite, frozen
 
-    x0 = np.asarray(system.x0, dtype=float)
+    x0 = frozen(np.asarray(system.x0, dtype=float))   # read-only: a model that writes into it raises
+    n = x0.shape[0]
+    _check_process(path, system, x0)
+    uses_h_jacobian = not _sigma_point(system.filter)
     for name, sensor in system.sensors.items():
         model = sensor.model
         if model is None or not hasattr(model, "h"):
             continue
+        where = load_yaml(path).where(["sensors", name, "model"])
         try:
             dim = int(model.dim)
-            one, two = np.shape(model.h(x0)), np.shape(model.h(np.stack([x0, x0])))
-        except Exception:   # unbound until observe(), or needs what the run builds: the run reports it
+            h1, h2 = model.h(x0), model.h(np.stack([x0, x0]))
+            H = model.jacobian(x0) if uses_h_jacobian else None
+        except Exception as exc:   # unbound until observe(), or needs what the run builds: the run reports it
+            if _writes_its_argument(exc):
+                raise ConfigError(f"{where}: measurement model {model.name!r} writes into the state it is given "
+                                  f"({type(exc).__name__}: {exc}); every update of {name} would fail") from None
             continue
+        one, two = np.shape(h1), np.shape(h2)
         if one != (dim,) or two != (2, dim):
-            where = load_yaml(path).where(["sensors", name, "model"])
             raise ConfigError(f"{where}: measurement model {model.name!r} (dim {dim}): h at the initial mean "
                               f"returned shape {one}, expected ({dim},)" + ("" if two == (2, dim) else
                               f"; on 2 states {two}, expected (2, {dim})") + "; every update of "
                               f"{name} would fail")
+        try:
+            finite(array_of(h1, (dim,), "h", "the initial mean"), "h", "the initial mean", x0)
+            if H is not None:
+                H = array_of(np.atleast_2d(H), (dim, n), "jacobian", "the initial mean")
+                finite(H, "jacobian", "the initial mean", x0)
+        except ModelFault as exc:
+            raise ConfigError(f"{where}: measurement model {model.name!r} (dim {dim}): {exc}; every update of "
+                              f"{name} would fail") from None
+
+
+def _sigma_point(flt) -> bool:
+    """Whether the filter is a sigma-point one (ukf, srukf), which never calls a measurement ``jacobian``."""
+    from fusion_plugins.filters.sigma_point_filter import SigmaPointFilter
+
+    return isinstance(flt, SigmaPointFilter)
+
+
+def _check_process(path: str, system, x0) -> None:
+    """The process model at the initial mean ``x0`` (read-only), with a zero input and a step of
+    :data:`PROBE_DT`: ``f`` returns ``(n,)`` (``(2, n)`` for two states), ``jacobian`` ``(n, n)`` or None (when
+    the filter uses it), ``Q`` ``(n, n)``, all finite, Q symmetric positive semi-definite (the filters' own
+    checks, plugins/filters/checks.py): a wrong one would fail every prediction. A model that raises there
+    (it may need a real input) is not checked, unless it wrote into the state it was given."""
+    import numpy as np
+
+    from fusion.errors import ConfigError, ModelFault
+    from fusion.yamlsource import load_yaml
+    from fusion_plugins.filters.checks import QCheck, array_of, finite
+
+    process, n = system.process, x0.shape[0]
+    u = np.zeros(process.input_dim) if process.input_dim else None
+    flt = system.filter
+    uses_jacobian = not _sigma_point(flt) or flt.use_linear_prediction(process)
+    where = load_yaml(path).where(["process"])
+    at = f"the initial mean (dt = {PROBE_DT} s{', zero input' if u is not None else ''})"
+    try:
+        f1, f2 = process.f(x0, u, PROBE_DT), process.f(np.stack([x0, x0]), u, PROBE_DT)
+        F = process.jacobian(x0, u, PROBE_DT) if uses_jacobian else None
+        Q = process.Q(x0, u, PROBE_DT)
+    except Exception as exc:
+        if _writes_its_argument(exc):
+            raise ConfigError(f"{where}: process model {process.name!r} writes into the state it is given "
+                              f"({type(exc).__name__}: {exc}); every prediction would fail") from None
+        return
+    try:
+        finite(array_of(f1, (n,), "f", at), "f", at, x0)
+        array_of(f2, (2, n), "f", "2 states")
+        if F is not None:
+            finite(array_of(F, (n, n), "jacobian", at), "jacobian", at, x0)
+        QCheck()(Q, n, "Q", at, x0)
+    except ModelFault as exc:
+        raise ConfigError(f"{where}: process model {process.name!r} ({n} states): {exc}; every prediction "
+                          "would fail") from None
 
 
 def run(args: argparse.Namespace) -> int:

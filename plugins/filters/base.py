@@ -20,6 +20,7 @@ import numpy as np
 
 from fusion.api import Belief, Event, Filter, Gate, MeasurementModel, ProcessModel, UpdateResult
 
+from .checks import MEAN, ITERATE, QCheck, array_of, frozen, nonfinite, trusted
 from .jacobian import measurement_jacobian, process_jacobian
 from .linalg import cholesky_lower, recover_factor, solve_lower, symmetrise
 
@@ -28,6 +29,7 @@ __all__ = ["KalmanBase", "Factor", "linear_predict", "linearised_predict", "line
 
 _ndarray = np.ndarray
 _float64 = np.dtype(float)
+_vdot = np.vdot
 
 
 def as_vector(z) -> np.ndarray:
@@ -91,7 +93,16 @@ class KalmanBase(Filter):
     The updated mean is brought back to the state's manifold by the layout's unit quaternion blocks
     (``StateLayout.normalize``): the filter's own layout (the system's, given at wiring), else the
     measurement model's. The predicted mean by the process model's ``normalize``.
+
+    A plugin's models are given read-only views of the belief and every value they return is checked where
+    it is received (plugins/filters/checks.py; fusion's own models are trusted): a bad one raises
+    ModelFault, which the run charges to the model.
+    ``check_Q`` is the process noise's test (it remembers which sources it has fully checked once).
     """
+
+    def __init__(self, params=None, context=None):
+        super().__init__(params, context)
+        self.check_Q = QCheck()
 
     # ------------------------------------------------------------------ diagnostics
     def event(self, t: float, kind: str, detail: str = "") -> Event:
@@ -154,17 +165,34 @@ def _identity(x: np.ndarray) -> np.ndarray:
     return x
 
 
-def linearised_predict(belief: Belief, process: ProcessModel, u: np.ndarray | None, dt: float
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def linearised_predict(belief: Belief, process: ProcessModel, u: np.ndarray | None, dt: float,
+                       check_Q: QCheck | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The linearised prediction's terms (paper 001 eqs. 9-10), shared by ekf, ukf and srukf::
 
         x^- = normalize(f(x, u, dt)),   F = df/dx (x, u, dt),   Q = Q(x, u, dt)
 
-    returned as ``(x^-, F, Q)``; the covariance (``F P F^T + Q``, or its square root) is the caller's."""
-    x = belief.x
+    returned as ``(x^-, F, Q)``; the covariance (``F P F^T + Q``, or its square root) is the caller's.
+    The models get a read-only view of the mean; what they return is checked (f (n,), F and Q (n, n),
+    finite, Q positive semi-definite: ``check_Q``, the filter's, else a full test every call), a bad
+    value raising ModelFault (not for one of fusion's own models: checks.trusted)."""
+    if trusted(process):
+        x = belief.x
+        F = process_jacobian(process, x, u, dt)
+        Q = process.Q(x, u, dt)
+        return process.normalize(process.f(x, u, dt)), F, Q
+    x = frozen(belief.x)
+    n = x.shape[0]
     F = process_jacobian(process, x, u, dt)
-    Q = process.Q(x, u, dt)
-    return process.normalize(process.f(x, u, dt)), F, Q
+    if type(F) is not _ndarray or F.shape != (n, n):   # a numerical F of an f of the wrong shape: f is named
+        array_of(process.f(x, u, dt), (n,), "f", MEAN)
+        F = array_of(F, (n, n), "jacobian", MEAN)
+    Q = (check_Q or QCheck())(process.Q(x, u, dt), n, "Q", MEAN, x)
+    x1 = array_of(process.f(x, u, dt), (n,), "f", MEAN)
+    s = x1.dot(x1) + _vdot(F, F)                 # finite: one test for both (checks.finite)
+    if s - s != 0.0:
+        nonfinite(x1, "f", MEAN, x)
+        nonfinite(F, "jacobian", MEAN, x)
+    return process.normalize(x1), F, Q
 
 
 _EYE: dict[int, np.ndarray] = {}
@@ -194,7 +222,9 @@ def linearised_update(flt: KalmanBase, belief: Belief, model: MeasurementModel, 
     its covariance, the NIS and the gate decision are those of the prior (iteration 0), the same as
     the EKF's.
     """
-    x0 = belief.x
+    chk = not trusted(model)
+    x0 = frozen(belief.x) if chk else belief.x   # a plugin's model gets read-only views (checks.py)
+    n = x0.shape[0]
     P = covariance_of(belief)
     z = np.asarray(z, dtype=float).reshape(-1)
     m = z.shape[0]
@@ -202,12 +232,29 @@ def linearised_update(flt: KalmanBase, belief: Belief, model: MeasurementModel, 
     xi = x0
     events: tuple = ()
     for it in range(max_iterations):
-        H = measurement_jacobian(model, xi)
+        if not chk:
+            xv = xi
+        else:
+            xv, at = (x0, MEAN) if it == 0 else (frozen(xi), ITERATE)
+        H = measurement_jacobian(model, xv)
+        if chk:
+            if H.shape != (m, n):                # a numerical H of an h of the wrong shape: h is named
+                array_of(model.h(xv), (m,), "h", at)
+                H = array_of(H, (m, n), "jacobian", at)
+            s = _vdot(H, H)                      # finite (checks.finite, inline)
+            if s - s != 0.0:
+                nonfinite(H, "jacobian", at, xv)
         HP = H @ P                               # (P H^T)^T, P symmetric
         Ly, S, event = flt.factor(HP @ H.T + R, belief.t, "innovation covariance")
         if event is not None:
             events += (event,)
-        r = model.residual(z, model.h(xi))
+        zh = model.h(xv)
+        if chk:
+            zh = array_of(zh, (m,), "h", at)
+            s = zh.dot(zh)
+            if s - s != 0.0:
+                nonfinite(zh, "h", at, xv)
+        r = model.residual(z, zh)
         W = solve_lower(Ly, HP)                  # L_y^-1 H P   (m, n)
         if it == 0:
             y0, S0 = r, S
@@ -228,6 +275,6 @@ def linearised_update(flt: KalmanBase, belief: Belief, model: MeasurementModel, 
             break
     iterations = it + 1
     Kt = solve_lower(Ly, W, trans=1)             # K^T = S^-1 H P   (m, n)
-    A = _eye(x0.shape[0]) - Kt.T @ H             # I - K H
+    A = _eye(n) - Kt.T @ H                      # I - K H
     P1 = symmetrise(A @ P @ A.T + Kt.T @ R @ Kt)  # Joseph form
     return UpdateResult(Belief(belief.t, flt.normalizer(model)(xi), P=P1), y0, S0, nis, True, events, iterations)

@@ -6,6 +6,7 @@ import numpy as np
 from fusion.api import Belief, Gate, LinearisesInputRuns, MeasurementModel, Params, ProcessModel, UpdateResult, has
 
 from .base import KalmanBase, covariance_of, linear_predict, linearised_predict, linearised_update
+from .checks import MEAN, array_of, finite, frozen, trusted
 from .linalg import symmetrise
 
 
@@ -35,7 +36,7 @@ class ExtendedKalmanFilter(KalmanBase):
     def predict(self, belief: Belief, process: ProcessModel, u: np.ndarray | None, dt: float) -> Belief:
         if dt == 0.0:
             return belief
-        x1, F, Q = linearised_predict(belief, process, u, dt)
+        x1, F, Q = linearised_predict(belief, process, u, dt, self.check_Q)
         return Belief(belief.t + dt, x1, P=linear_predict(belief.x, covariance_of(belief), F, Q))
 
     def predict_inputs(self, belief: Belief, process: ProcessModel, us: np.ndarray, dts: np.ndarray) -> Belief:
@@ -44,16 +45,30 @@ class ExtendedKalmanFilter(KalmanBase):
         is propagated through them, ``P <- F_j P F_j^T + Q_j`` sample by sample (symmetrised once, at the
         end of the run: ~2 us a sample less), the same numbers as k calls of :meth:`predict` to rounding;
         otherwise k calls of :meth:`predict`."""
-        run = process.linearise_inputs(belief.x, us, dts) if has(process, LinearisesInputRuns) else None
+        chk = not trusted(process)
+        x = frozen(belief.x) if chk else belief.x
+        run = process.linearise_inputs(x, us, dts) if has(process, LinearisesInputRuns) else None
         if run is None:
             return super().predict_inputs(belief, process, us, dts)
         x1, F, Q = run
+        if chk:
+            x1, F, Q = self._checked_run(x, x1, F, Q, us, len(dts))
         P = covariance_of(belief)
         for Fj, Qj in zip(F, Q):
             P = Fj @ P @ Fj.T
             P += Qj
         # sum() adds left to right from belief.t: the same time as t += dt sample by sample
         return Belief(sum(np.asarray(dts, dtype=float).tolist(), belief.t), x1, P=symmetrise(P))
+
+    def _checked_run(self, x, x1, F, Q, us, k: int):
+        """A plugin's ``linearise_inputs`` result, checked (plugins/filters/checks.py)."""
+        n = x.shape[0]
+        x1 = array_of(x1, (n,), "linearise_inputs' mean", MEAN)
+        finite(x1, "linearise_inputs' mean", MEAN, x, us)
+        F = array_of(F, (k, n, n), "linearise_inputs' jacobians", MEAN)
+        finite(F, "linearise_inputs' jacobians", MEAN, x, us)
+        Q = self.check_Q.stack(Q, k, n, "linearise_inputs' Q", MEAN, x, us)
+        return x1, F, Q
 
     def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                gate: Gate | None = None) -> UpdateResult:

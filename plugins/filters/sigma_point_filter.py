@@ -7,17 +7,23 @@ import numpy as np
 from fusion.api import Belief, InputRunNoise, IntegratesInputRuns, MeasurementModel, ProcessModel, has
 
 from .base import KalmanBase, residual_of
+from .checks import MEAN, SIGMA, array_of, finite, frozen, trusted
 from .sigma_points import SigmaPoints
 
 __all__ = ["SigmaPointFilter", "measurement_transform"]
 
 
-def measurement_transform(sp: SigmaPoints, x: np.ndarray, L: np.ndarray, model: MeasurementModel):
+def measurement_transform(sp: SigmaPoints, x: np.ndarray, L: np.ndarray, model: MeasurementModel, m: int):
     """The sigma points' deviations ``dX`` (2n+1, n) from the mean x (n,) for the lower factor L of P
     (P = L L^T), the predicted measurements ``Z = h(x + dX)`` (2n+1, m) in ONE call of h (paper 001
-    eq. 14, paper 000 eq. 8), and the model's difference function (``residual``, or plain subtraction)."""
+    eq. 14, paper 000 eq. 8), and the model's difference function (``residual``, or plain subtraction).
+    Z is checked (shape (2n+1, m), finite at finite points: checks.py), a bad one raising ModelFault."""
     dX = sp.E @ L.T
-    return dX, model.h(x + dX), residual_of(model)
+    Z = model.h(x + dX)
+    if not trusted(model):
+        Z = array_of(Z, (dX.shape[0], m), "h", SIGMA)
+        finite(Z, "h", SIGMA, x, dX)
+    return dX, Z, residual_of(model)
 
 
 class SigmaPointFilter(KalmanBase):
@@ -88,7 +94,9 @@ class SigmaPointFilter(KalmanBase):
             return X
 
         def noise(x0: np.ndarray, x1: np.ndarray) -> np.ndarray:
-            return Q_inputs(x0, x1, us, dts)
+            if trusted(process):
+                return Q_inputs(x0, x1, us, dts)
+            return self.check_Q(Q_inputs(frozen(x0), frozen(x1), us, dts), x0.shape[0], "Q_inputs", MEAN, x0, x1)
 
         return self.sigma_predict(belief, process, propagate, noise, float(dts.sum()))
 

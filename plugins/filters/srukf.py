@@ -10,6 +10,7 @@ from pydantic import Field
 from fusion.api import Belief, Gate, MeasurementModel, ProcessModel, UpdateResult
 
 from .base import as_covariance, as_vector, linearised_predict
+from .checks import MEAN, SIGMA, array_of, finite, frozen, trusted
 from .linalg import cholupdate, psd_sqrt_rows, qr_lower, qr_lower_scaled, recover_factor, solve_lower
 from .sigma_point_filter import SigmaPointFilter, measurement_transform
 from .sigma_points import SigmaPoints, UnscentedParams
@@ -150,11 +151,14 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         if self.use_linear_prediction(process):
             events: list = []
             S = self.sqrt_of(belief, events)
-            x1, F, Q = linearised_predict(belief, process, u, dt)
+            x1, F, Q = linearised_predict(belief, process, u, dt, self.check_Q)
             BQ = psd_sqrt_rows(Q)
             S1 = qr_lower(np.concatenate((F @ S, BQ.T), axis=1).T, overwrite=True)   # sqrt(F P F^T + Q)
             return Belief(belief.t + dt, x1, S=S1, events=tuple(events))
-        Q = process.Q(belief.x, u, dt)
+        if trusted(process):
+            Q = process.Q(belief.x, u, dt)
+        else:
+            Q = self.check_Q(process.Q(frozen(belief.x), u, dt), belief.x.shape[0], "Q", MEAN, belief.x)
         return self.sigma_predict(belief, process, lambda X: process.f(X, u, dt), lambda x0, x1: Q, dt)
 
     def sigma_predict(self, belief: Belief, process: ProcessModel, propagate, noise, dt: float) -> Belief:
@@ -162,7 +166,11 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         events: list = []
         S = self.sqrt_of(belief, events)
         sp = self.sigma_points(x.shape[0])
-        Y = propagate(x + sp.E @ S.T)                               # eqs. 3-4, one call
+        dX = sp.E @ S.T
+        Y = propagate(x + dX)                                       # eqs. 3-4, one call
+        if not trusted(process):
+            Y = array_of(Y, dX.shape, "f", SIGMA)
+            finite(Y, "f", SIGMA, x, dX)
         xm, D1, v0, w0 = self.deviations(sp, Y, np.subtract)        # eq. 5
         xm = process.normalize(xm)
         BQ = psd_sqrt_rows(noise(x, xm))
@@ -187,7 +195,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         n = x.shape[0]
         BR = psd_sqrt_rows(as_covariance(R, m))
         sp = self.sigma_points(n)
-        dX, Z, diff = measurement_transform(sp, x, S, model)         # eq. 8, one call
+        dX, Z, diff = measurement_transform(sp, x, S, model, m)      # eq. 8, one call
         if self._recentred:                                          # eq. 9 (deviations(), inline)
             Z0 = Z[0]
             D1 = diff(Z[1:], Z0)

@@ -9,6 +9,7 @@ from fusion.api import (Belief, Gate, MeasurementModel, NonAdditiveMeasurementNo
                         ProcessModel, UpdateResult, has)
 
 from .base import as_covariance, as_vector, covariance_of, linear_predict, linearised_predict, residual_of
+from .checks import MEAN, SIGMA, array_of, finite, frozen, trusted
 from .linalg import psd_sqrt_rows, symmetrise
 from .sigma_point_filter import SigmaPointFilter, measurement_transform
 from .sigma_points import UnscentedParams
@@ -67,9 +68,12 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         if dt == 0.0:
             return belief
         if self.use_linear_prediction(process):
-            x1, F, Q = linearised_predict(belief, process, u, dt)
+            x1, F, Q = linearised_predict(belief, process, u, dt, self.check_Q)
             return Belief(belief.t + dt, x1, P=linear_predict(belief.x, covariance_of(belief), F, Q))
-        Q = process.Q(belief.x, u, dt)
+        if trusted(process):
+            Q = process.Q(belief.x, u, dt)
+        else:
+            Q = self.check_Q(process.Q(frozen(belief.x), u, dt), belief.x.shape[0], "Q", MEAN, belief.x)
         if self._augmented:
             return self._predict_augmented(belief, process, u, dt, covariance_of(belief), Q)
         return self.sigma_predict(belief, process, lambda X: process.f(X, u, dt), lambda x0, x1: Q, dt)
@@ -78,7 +82,11 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         x = belief.x
         sp = self.sigma_points(x.shape[0])
         L, _, event = self.factor(covariance_of(belief), belief.t, "ukf predict")   # L L^T = P
-        Y = propagate(x + sp.E @ L.T)                        # 000 eq. 4, one call
+        dX = sp.E @ L.T
+        Y = propagate(x + dX)                                # 000 eq. 4, one call
+        if not trusted(process):
+            Y = array_of(Y, dX.shape, "f", SIGMA)
+            finite(Y, "f", SIGMA, x, dX)
         xm = sp.Wm @ Y                                       # 000 eq. 5
         D = Y - xm
         xm = process.normalize(xm)
@@ -96,8 +104,13 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         W = dX[:, n:]
         if has(process, NonAdditiveProcessNoise):
             Y = process.f_with_noise(X, W, u, dt)
+            if not trusted(process):
+                Y = array_of(Y, X.shape, "f_with_noise", SIGMA)
         else:
-            Y = process.f(X, u, dt) + W
+            Y = process.f(X, u, dt)
+            Y = (Y if trusted(process) else array_of(Y, X.shape, "f", SIGMA)) + W
+        if not trusted(process):
+            finite(Y, "f", SIGMA, X, W)
         xm = sp.Wm @ Y
         D = Y - xm
         return Belief(belief.t + dt, process.normalize(xm), P=symmetrise((D.T * sp.Wc) @ D),
@@ -123,13 +136,18 @@ class UnscentedKalmanFilter(SigmaPointFilter):
             dX = dXa[:, :n]
             if has(model, NonAdditiveMeasurementNoise):
                 Z = model.h_with_noise(x + dX, dXa[:, n:])
+                if not trusted(model):
+                    Z = array_of(Z, (dX.shape[0], m), "h_with_noise", SIGMA)
             else:
-                Z = model.h(x + dX) + dXa[:, n:]
+                Z = model.h(x + dX)
+                Z = (Z if trusted(model) else array_of(Z, (dX.shape[0], m), "h", SIGMA)) + dXa[:, n:]
+            if not trusted(model):
+                finite(Z, "h", SIGMA, x, dXa)
             R = None
             diff = residual_of(model)
         else:
             sp = self.sigma_points(n)
-            dX, Z, diff = measurement_transform(sp, x, L, model)   # 001 eq. 14, one call
+            dX, Z, diff = measurement_transform(sp, x, L, model, m)   # 001 eq. 14, one call
         zm = sp.Wm @ Z
         dZ = diff(Z, zm)
         A = dZ * sp.Wc_col
