@@ -44,7 +44,7 @@ def summary(stats: "RunStats", source: str, wall_s: float) -> dict[str, Any]:
         failed = getattr(sched, "_update_failures", None)
         if failed:
             # the messages reached the filter and its measurement model failed on each (scheduler._update_failed)
-            told = "; ".join(f"{name}: {what} {n} time{'s' if n > 1 else ''}" for name, (n, what) in failed.items())
+            told = "; ".join(f"{name}: {what} {n} time{'s' if n > 1 else ''}" for (name, _), (n, what) in failed.items())
             out["not_started"] = f"no estimate was made: every measurement that reached the filter was lost ({told})"
         else:
             out["not_started"] = f"no estimate was made: the filter was never initialised ({why})"
