@@ -253,7 +253,8 @@ class Registry:
             broken = [p for p in self.broken if p.name is None]
             also = "".join(f"; {p.source} could not be loaded and may provide it ({p.what}): {p.way_out}"
                            for p in broken)
-            raise ConfigError(f"{at}unknown {kind} {name!r}{hint} (known {kind}s: {', '.join(known) or 'none'})"
+            kinds = f"{kind}es" if kind.endswith("s") else f"{kind}s"      # 'process' -> 'processes'
+            raise ConfigError(f"{at}unknown {kind} {name!r}{hint} (known {kinds}: {', '.join(known) or 'none'})"
                               f"{also}") from None
 
 

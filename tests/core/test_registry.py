@@ -65,6 +65,13 @@ def test_unknown_name_lists_known_and_suggests():
         reg.get("filter", "ufk")
 
 
+def test_the_known_processes_are_spelt_so():
+    from fusion.registry import default_registry
+
+    with pytest.raises(ConfigError, match=r"\(known processes: .*\bins\b"):
+        default_registry().get("process", "insx")
+
+
 def test_double_registration_of_a_name_is_an_error():
     reg = Registry()
 
