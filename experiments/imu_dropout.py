@@ -74,7 +74,8 @@ def replay(config: str, lines: list[str], filt: str | None, work: Path) -> dict:
     s = json.loads(summary.read_text())
     summary.unlink()
     err = s.get("errors") or {}
-    nees = ((s.get("consistency") or {}).get("nees") or {}).get("mean", float("nan"))
+    nees = (s.get("consistency") or {}).get("nees_mean")
+    nees = float("nan") if nees is None else nees
     rejected = sum(v.get("rejected", 0) for k, v in (s.get("sensors") or {}).items() if k != "imu")
     return {"exit": proc.returncode, "rmse": err.get("position_rmse_m", float("nan")),
             "max": err.get("position_max_m", float("nan")), "nees": nees,
@@ -123,8 +124,12 @@ def _fmt(v: float, digits: int = 3) -> str:
 
 def page(rows: dict, ship: dict, before: dict | None, args, wall: float) -> str:
     out = ["# IMU dropouts: the IMU alone silent while the other sensors go on", "",
-           f"Regenerate: `python experiments/imu_dropout.py --seeds {args.seeds} --per-seed {args.per_seed}` "
-           f"({platform.machine()}, Python {platform.python_version()}; {wall / 60:.1f} min). Every number is a "
+           f"Regenerate: `python experiments/imu_dropout.py --seeds {args.seeds} --per-seed {args.per_seed}"
+           + (" --before BEFORE.json" if before else "") + "` "
+           f"({platform.machine()}, Python {platform.python_version()}; {wall / 60:.1f} min)"
+           + ("; the \"before\" rows: `python experiments/imu_dropout.py --shipped --json BEFORE.json --root OLD` "
+              "with OLD a checkout of commit b218d91 and its package installed" if before else "")
+           + ". Every number is a "
            "`fusion run CONFIG --input CUT.log` of a recording whose IMU lines in one window were cut out "
            "(the other sensors' lines and the truth kept).", "",
            "## The model", "",
@@ -209,6 +214,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--shipped", action="store_true", help="the shipped recordings only (no page)")
     ap.add_argument("--json", type=Path, help="write the numbers here too")
     ap.add_argument("--before", type=Path, help="a --shipped --json of the code before, quoted on the page")
+    ap.add_argument("--from-json", type=Path, help="rewrite the page from the numbers of an earlier --json")
     ap.add_argument("--root", type=Path, help="the checkout whose configs and recordings are used (default: "
                     "this one; another commit's, with its package installed, for --shipped)")
     args = ap.parse_args(argv)
@@ -216,6 +222,13 @@ def main(argv: list[str] | None = None) -> int:
         global ROOT
         ROOT = args.root.resolve()
     t0 = time.perf_counter()
+    if args.from_json:
+        saved = json.loads(args.from_json.read_text())
+        before = json.loads(args.before.read_text()) if args.before else None
+        figure(saved["seeds"])
+        OUT.write_text(page(saved["seeds"], saved["shipped"], before, args, saved.get("wall_s", 0.0)))
+        print(f"wrote {OUT.relative_to(ROOT)}")
+        return 0
     with tempfile.TemporaryDirectory() as d:
         work = Path(d)
         ship = shipped(work)
@@ -227,7 +240,8 @@ def main(argv: list[str] | None = None) -> int:
         rows = study(args.seeds, args.per_seed, work)
     before = json.loads(args.before.read_text()) if args.before else None
     if args.json:
-        args.json.write_text(json.dumps({"shipped": ship, "seeds": rows}, indent=1))
+        args.json.write_text(json.dumps({"shipped": ship, "seeds": rows, "wall_s": time.perf_counter() - t0},
+                                        indent=1))
     figure(rows)
     OUT.write_text(page(rows, ship, before, args, time.perf_counter() - t0))
     print(f"wrote {OUT.relative_to(ROOT)}")
