@@ -527,7 +527,7 @@ def write_page(table, align, filters, seeds, wall, smoothed=None) -> None:
     L.append(f"- **Disturbed field without a gate**: position RMSE {m(ng, 'pos'):.1f} m (max over seeds "
              f"{np.nanmax([r['pos'] for r in ng]):.0f} m), {m(ng, 'gps_rejected'):.0f} GPS fixes rejected on average "
              f"(against {m(sh, 'gps_rejected'):.0f}, the lost fix, with the gate): the ~10 uT field drags the yaw, "
-             "the GPS fixes then fail their own gate, and only the gps recovery (5 s of fixes refused by far: the "
+             "the GPS fixes then fail their own gate, and only the gps recovery (5 s of fixes refused in a row that agree with each other: the "
              "position re-set from a fix, the velocity and attitude sds widened 10x) brings them back; without it "
              "the filter lost them for good (431.6 m before the recovery was configured). With the chi-square gate on the "
              f"magnetometer, {m(sh, 'mag_rejected'):.0f} samples a run are rejected on average (the disturbed "
