@@ -1,8 +1,21 @@
 """Maps the folder plugins/ to the import package fusion_plugins and configs/ to fusion_configs (the shipped
-YAML, so that defaults are found from an installed package); metadata lives in pyproject.toml."""
-from setuptools import find_packages, setup
+YAML, so that defaults are found from an installed package); metadata lives in pyproject.toml.
+
+Compiled kernels (``ext_modules``): a few hot loops of the built-in INS are also written in C (plain C API
+and the buffer protocol, no numpy headers, so building needs only a C compiler and Python's headers). Each
+is ``optional``: where it cannot be built (no compiler), the install still succeeds and the numpy code it
+mirrors runs instead, with the same results to rounding (fusion/kernels.py; ``FUSION_PURE_PYTHON=1``
+selects the numpy code at run time too)."""
+from setuptools import Extension, find_packages, setup
 
 core = find_packages(include=["fusion", "fusion.*"])
 builtins = ["fusion_plugins" + name[len("plugins"):] for name in find_packages(include=["plugins", "plugins.*"])]
+
+# name -> C source; add a kernel here and load it with fusion.kernels.load(name)
+KERNELS = {
+}
+
 setup(packages=core + builtins + ["fusion_configs"], package_dir={"fusion_plugins": "plugins", "fusion_configs": "configs"},
-      package_data={"fusion_configs": ["*.yaml"]})
+      package_data={"fusion_configs": ["*.yaml"]},
+      ext_modules=[Extension(name, sources=[src], optional=True, extra_compile_args=["-O2", "-fno-fast-math"])
+                   for name, src in KERNELS.items()])
