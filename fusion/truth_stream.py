@@ -12,9 +12,13 @@ sample up front; a run of hours (or a live port) cannot keep them. Here:
   interpolated, in order, so the statistics equal those of the whole-recording ``Truth`` (the sample
   period is the median over the window rather than over the whole recording: the same for a regular
   truth rate). At most ``max_pending`` estimates wait: past that (truth has stopped) the oldest is
-  evaluated with what the window has, as at the end of the input.
+  evaluated with what the window has, as at the end of the input. Evaluating takes what depends on the
+  moment (the settle clock, the truth samples around the estimate and the fraction between them:
+  ``ErrorTracker.locate``, ``TruthWindow.locate``); the arithmetic is done for ``SCORE_BATCH`` estimates at
+  once (``ErrorTracker.score``, ``TruthWindow.rows``), to the same bits as one at a time, and ``flush``
+  (called by ``finish``) brings the statistics up to date.
 
-Memory: O(window + max_pending), whatever the length of the run.
+Memory: O(window + max_pending + SCORE_BATCH), whatever the length of the run.
 """
 from __future__ import annotations
 
