@@ -131,3 +131,35 @@ def test_add_with_a_whole_recording_truth_is_the_streamed_scoring():
     for mine, (_, theirs, _) in zip(errs, streamed):
         if mine is not None:
             assert _bits(mine) == _bits(theirs)
+
+
+def test_the_end_of_run_warning_counts_every_estimate_evaluated(tmp_path, monkeypatch):
+    """The coarse-truth warning (fusion.pipeline.truth_warnings, before the comparison's finish) counts the
+    estimates compared so far: the same text whether they were scored one at a time or waited in a batch."""
+    from pathlib import Path
+
+    from fusion import pipeline
+    from fusion.config import load_system
+
+    root = Path(__file__).resolve().parents[2]
+    out, last = [], -9.0
+    for ln in (root / "recordings" / "uwb_route1.log").read_text().splitlines():
+        if ",truth," in ln:
+            t = float(ln.split(",")[0])
+            if t - last < 0.999:
+                continue
+            last = t
+        out.append(ln)
+    coarse = tmp_path / "coarse.log"
+    coarse.write_text("\n".join(out) + "\n")
+
+    def warning(batch):
+        monkeypatch.setattr(TruthComparison, "SCORE_BATCH", batch)
+        events = []
+        system = load_system(root / "configs" / "uwb_pv_ukf.yaml")
+        result = pipeline.run(system, str(coarse), on_event=events.append)
+        return [e.detail for e in events if "sparser" in e.detail], result.summary["errors"]
+
+    one, errors_one = warning(1)
+    many, errors_many = warning(64)
+    assert len(one) == 1 and one == many and repr(errors_one) == repr(errors_many)
