@@ -263,6 +263,22 @@ def parse_values(values: tuple | str) -> tuple:
     return values  # type: ignore[return-value]
 
 
+#: iter_messages reads the common line on its fast path (the tests compare with the full parse alone)
+_FAST_PATH = True
+
+
+def _plain_sensors(header: Header, known: set[str] | None, raw_streams: Collection[str]) -> dict[str, int]:
+    """``{sensor: number of fields}`` of the sensors whose lines :func:`iter_messages` may read on its fast
+    path: a ``# fields`` line names them (not a repeating group), the name is one the full parse accepts as
+    it stands (no spaces to strip), known (when ``known`` is given), not a raw stream."""
+    out = {}
+    for sensor, names in header.fields.items():
+        if (sensor not in header.repeating and names and sensor not in raw_streams and sensor == sensor.strip()
+                and _SENSOR.match(sensor) and (known is None or sensor in known or sensor in ("truth", "reference"))):
+            out[sensor] = len(names)
+    return out
+
+
 def iter_messages(lines: Iterable[str], state: ParsedStream | None = None,
                   known_sensors: set[str] | None = None,
                   raw_streams: Collection[str] = ()) -> Iterator[Message | MalformedMessage]:
@@ -276,6 +292,8 @@ def iter_messages(lines: Iterable[str], state: ParsedStream | None = None,
     values is ~60% of its cost. Every other line of them parses as usual (same verdicts, same errors)."""
     st = state if state is not None else ParsedStream()
     fields = st.header.fields
+    plain = _plain_sensors(st.header, known_sensors, raw_streams) if _FAST_PATH else {}
+    new = tuple.__new__
     for lineno, raw in enumerate(lines, 1):
         text = raw.strip()
         if not text:
@@ -284,15 +302,33 @@ def iter_messages(lines: Iterable[str], state: ParsedStream | None = None,
             text = text.lstrip("\ufeff")
             if text.startswith("#"):
                 parse_comment(text, st.header)
+                plain = _plain_sensors(st.header, known_sensors, raw_streams) if _FAST_PATH else {}
                 if st.on_fields is not None and text[1:].lstrip().startswith("fields "):
                     sensor = text[1:].split()[1] if len(text[1:].split()) > 2 else None
                     if sensor is not None:
                         st.on_fields(sensor, st.header.fields.get(sensor, ()), lineno)
                 continue
-        head = None
-        if raw_streams:
-            head = text.split(",", 2)   # (given to the full parse too: split once)
-            if len(head) == 3 and head[1] in raw_streams:
+        head = text.split(",", 2)   # (given to the full parse too: split once)
+        if len(head) == 3:
+            count = plain.get(head[1])
+            if count is not None:
+                # The common line, decided here as the full parse decides it: a sensor of known name with
+                # '# fields' (not a repeating group), as many values, all of them numbers (float() of each, as
+                # the full parse's own fast path), finite, and no binary junk in the line (its first check).
+                # Anything else (a checksum, a label, a raw sentence, nan) takes the full parse.
+                parts = head[2].split(",")
+                if len(parts) == count and "\ufffd" not in text and text.isprintable():
+                    try:
+                        t = float(head[0])
+                        values = tuple(map(float, parts))
+                    except ValueError:
+                        pass
+                    else:
+                        total = t + sum(values)
+                        if total - total == 0.0:   # all finite (an overflowing sum: the full parse decides)
+                            yield new(Message, (t, head[1], values, lineno))
+                            continue
+            elif raw_streams and head[1] in raw_streams:
                 msg = _raw_message(head, fields, lineno)
                 if msg is not None:
                     yield msg

@@ -177,85 +177,150 @@ class ErrorTracker:
         """Errors of ``estimate`` against truth at its time, or None (no truth there, or a reason not
         evaluated). Returns ``{"t", "elements": {name: x_est - x_true}, "position_m", "velocity_mps",
         "attitude_deg", "nees", "nees_dof"}`` with only the keys that apply. Counted in the statistics
-        unless within ``settle_s``."""
+        unless within ``settle_s``. (:meth:`locate` then :meth:`score` of that one estimate.)"""
+        item = self.locate(estimate)
+        if item is None:
+            return None
+        return self.score([item])[0][0]  # type: ignore[index]
+
+    def locate(self, estimate: Estimate) -> tuple | None:
+        """The first half of :meth:`add`, what must be taken when the estimate is evaluated: whether it is
+        settled (this starts the settle clock as ``add`` does) and where truth is at its time (a truth
+        window's ``locate``: its samples and fraction; another truth's row). None when it is not evaluated
+        (a reason not evaluated, no truth there). :meth:`score` does the arithmetic later, for many at once."""
         if self.reasons is not None and estimate.reason not in self.reasons:
             return None
         t = float(estimate.t)
         settled = self._settled(t)
         if self.truth is None or not self._elems:
             return None
-        row = self.truth.row(t)
-        if row is None:
+        locate = getattr(self.truth, "locate", None)
+        where = self.truth.row(t) if locate is None else locate(t)
+        if where is None:
             return None
-        x = np.asarray(estimate.belief.x, dtype=float)
-        xt = row[self._et]
-        # per quaternion block: (q_est unit, q_true aligned to the estimate's hemisphere), as float tuples
-        quats = []
-        for k, (_, xi, ti) in enumerate(self._quats):
-            qe, qt = x[xi].tolist(), row[ti].tolist()
-            if sum(a * b for a, b in zip(qe, qt)) < 0.0:
-                qt = [-a for a in qt]
-            xt[self._quat_pos[k]] = qt  # so the element errors of q are meaningful
-            quats.append((qe, qt))
-        e = x[self._ex] - xt
-        if self._has_wrap:
-            e[self._wrap] = (e[self._wrap] + math.pi) % (2.0 * math.pi) - math.pi
-        el = e.tolist()
-        out: dict = {"t": t, "elements": dict(zip(self._elems, el))}
-        if self._pos is not None:
-            out["position_m"] = math.sqrt(sum(el[i] * el[i] for i in self._pos))
-        if self._vel is not None:
-            out["velocity_mps"] = math.sqrt(sum(el[i] * el[i] for i in self._vel))
-        dth = []
-        if quats:
-            ang = 0.0
-            for qe, qt in quats:
-                # d = q_est^-1 (x) q_true: its angle is that of q_true^-1 (x) q_est; 2 vec(d) ~ dtheta
-                n = math.sqrt(sum(a * a for a in qe)) or 1.0
-                d = quat.conj_multiply_floats(qe, qt)
-                w, v = abs(d[0]) / n, math.sqrt(d[1] ** 2 + d[2] ** 2 + d[3] ** 2) / n
-                ang = max(ang, math.degrees(2.0 * math.atan2(v, w)))
-                sgn = 2.0 / n if d[0] >= 0.0 else -2.0 / n
-                dth.append(([a / n for a in qe], [sgn * d[1], sgn * d[2], sgn * d[3]]))
-            out["attitude_deg"] = ang
-        if self.nees_dof:
-            out["nees"] = self._nees(estimate.belief.cov, e, dth)
-            out["nees_dof"] = self.nees_dof
-        if settled and not np.isfinite(e).all():
-            # a diverged filter's estimate: left out of the errors (counted), so RMSE, max and samples
-            # are over the same finite estimates; its NaN NEES is counted skipped
-            self.nonfinite += 1
-            if "nees" in out:
-                self.nees_stat.add(out["nees"], self.nees_dof)
-        elif settled:
-            self.compared += 1
-            self._ess += e * e
-            np.fmax(self._emax, np.abs(e), out=self._emax)
-            for key, k in (("position", "position_m"), ("velocity", "velocity_mps"), ("attitude", "attitude_deg")):
-                if k in out:
-                    self._acc[key].add(out[k])
-            if "nees" in out:
-                self.nees_stat.add(out["nees"], self.nees_dof)
-        return out
+        return (estimate, t, settled, where)
 
-    def _nees(self, P: np.ndarray, e: np.ndarray, dth: list) -> float:
+    def score(self, items: Sequence[tuple], want: bool = True) -> tuple[list[dict] | None, np.ndarray]:
+        """The second half of :meth:`add` for the :meth:`locate` results ``items``, in their order: the
+        statistics updated as by one ``add`` each (the same numbers to the last bit: the arithmetic is
+        elementwise over the batch, the running sums accumulate in order, and each NEES is its own
+        Cholesky), and ``(the errors dicts, or None without want, the truth rows (k, m))``."""
+        k = len(items)
+        wheres = [it[3] for it in items]
+        if all(w.__class__ is tuple for w in wheres):
+            rows = self.truth.rows(wheres)  # type: ignore[union-attr]
+        else:
+            rows = np.array([w if w.__class__ is not tuple else self.truth.rows([w])[0]  # type: ignore[union-attr]
+                             for w in wheres], dtype=float)
+        X = np.array([it[0].belief.x for it in items], dtype=float).reshape(k, -1)
+        XT = rows[:, self._et]
+        xl, rl = X.tolist(), rows.tolist()
+        # per estimate and quaternion block: (q_est, q_true aligned to the estimate's hemisphere) as floats
+        quats: list[list[tuple[list[float], list[float]]]] = []
+        for j in range(k):
+            qs = []
+            for q, (_, xi, ti) in enumerate(self._quats):
+                qe, qt = [xl[j][i] for i in xi], [rl[j][i] for i in ti]
+                if sum(a * b for a, b in zip(qe, qt)) < 0.0:
+                    qt = [-a for a in qt]
+                    XT[j, self._quat_pos[q]] = qt  # so the element errors of q are meaningful
+                qs.append((qe, qt))
+            quats.append(qs)
+        E = X[:, self._ex] - XT
+        if self._has_wrap:
+            E[:, self._wrap] = (E[:, self._wrap] + math.pi) % (2.0 * math.pi) - math.pi
+        EL = E.tolist()
+        finite = np.isfinite(E).all(axis=1).tolist()
+        pos, vel = self._pos, self._vel
+        found: list[tuple[float | None, float | None, float | None]] = []
+        dths: list[list] = []
+        for j in range(k):
+            el = EL[j]
+            p = math.sqrt(sum(el[i] * el[i] for i in pos)) if pos is not None else None
+            v = math.sqrt(sum(el[i] * el[i] for i in vel)) if vel is not None else None
+            ang = None
+            dth = []
+            if quats[j]:
+                ang = 0.0
+                for qe, qt in quats[j]:
+                    # d = q_est^-1 (x) q_true: its angle is that of q_true^-1 (x) q_est; 2 vec(d) ~ dtheta
+                    n = math.sqrt(sum(a * a for a in qe)) or 1.0
+                    d = quat.conj_multiply_floats(qe, qt)
+                    w, vv = abs(d[0]) / n, math.sqrt(d[1] ** 2 + d[2] ** 2 + d[3] ** 2) / n
+                    ang = max(ang, math.degrees(2.0 * math.atan2(vv, w)))
+                    sgn = 2.0 / n if d[0] >= 0.0 else -2.0 / n
+                    dth.append(([a / n for a in qe], [sgn * d[1], sgn * d[2], sgn * d[3]]))
+            found.append((p, v, ang))
+            dths.append(dth)
+        nees_values = self._nees(items, E, dths) if self.nees_dof else None
+        outs: list[dict] | None = [] if want else None
+        compared = []
+        acc = self._acc
+        for j in range(k):
+            p, v, ang = found[j]
+            settled = items[j][2]
+            if settled and not finite[j]:
+                # a diverged filter's estimate: left out of the errors (counted), so RMSE, max and samples
+                # are over the same finite estimates; its NaN NEES is counted skipped
+                self.nonfinite += 1
+                if nees_values is not None:
+                    self.nees_stat.add(nees_values[j], self.nees_dof)
+            elif settled:
+                self.compared += 1
+                compared.append(j)
+                for key, value in (("position", p), ("velocity", v), ("attitude", ang)):
+                    if value is not None:
+                        acc[key].add(value)
+                if nees_values is not None:
+                    self.nees_stat.add(nees_values[j], self.nees_dof)
+            if outs is not None:
+                out: dict = {"t": items[j][1], "elements": dict(zip(self._elems, EL[j]))}
+                if p is not None:
+                    out["position_m"] = p
+                if v is not None:
+                    out["velocity_mps"] = v
+                if ang is not None:
+                    out["attitude_deg"] = ang
+                if nees_values is not None:
+                    out["nees"] = nees_values[j]
+                    out["nees_dof"] = self.nees_dof
+                outs.append(out)
+        if compared:
+            Ec = E[compared]
+            # in order, as a running += per estimate: the same sums to the last bit
+            self._ess = np.add.accumulate(np.concatenate([self._ess[None], Ec * Ec]), axis=0)[-1]
+            np.fmax(self._emax, np.abs(Ec).max(axis=0), out=self._emax)
+        return outs, rows
+
+    def _nees(self, items: Sequence[tuple], E: np.ndarray, dths: list) -> list[float]:
+        """NEES of each estimate of ``items`` (errors ``E`` (k, elements), attitude errors ``dths``)."""
+        k = len(items)
         idx = self._nees_vec
-        if not self.nees_attitude:
-            return nees(-e[self._nees_vec_pos], P[np.ix_(idx, idx)])
-        # Reduce the state error to [vector elements; 3-dof attitude per quaternion]: err = T (x_true - x_est)
+        P = np.array([it[0].belief.cov for it in items], dtype=float).reshape(k, self.layout.n, self.layout.n)
+        err = np.empty((k, self.nees_dof))
         nv = idx.size
-        T = self._T  # vector rows are fixed selections; the quaternion rows are refilled each step
-        err = np.empty(self.nees_dof)
-        err[:nv] = -e[self._nees_vec_pos]
+        err[:, :nv] = -E[:, self._nees_vec_pos]
+        if not self.nees_attitude:
+            sub = P[:, idx[:, None], idx]
+            return [nees(err[j], sub[j]) for j in range(k)]
+        # Reduce the state error to [vector elements; 3-dof attitude per quaternion]: err = T (x_true - x_est)
+        # with T's vector rows fixed selections and its quaternion rows from each estimate's attitude
+        T = np.repeat(self._T[None], k, axis=0)
         r = nv
-        for (qe, th), (_, xi, _) in zip(dth, self._quats):
-            w, a, b, c = qe[0], -qe[1], -qe[2], -qe[3]  # q_est^-1 (unit)
-            # rows x,y,z of L(q_est^-1) (L(a) b = a (x) b), doubled: dtheta = 2 vec(q_est^-1 (x) dq)
-            T[r:r + 3, xi[0]:xi[0] + 4] = (2.0 * a, 2.0 * w, -2.0 * c, 2.0 * b), \
-                (2.0 * b, 2.0 * c, 2.0 * w, -2.0 * a), (2.0 * c, -2.0 * b, 2.0 * a, 2.0 * w)
-            err[r:r + 3] = th
+        for q, (_, xi, _) in enumerate(self._quats):
+            block = []
+            for j in range(k):
+                qe = dths[j][q][0]
+                w, a, b, c = qe[0], -qe[1], -qe[2], -qe[3]  # q_est^-1 (unit)
+                # rows x,y,z of L(q_est^-1) (L(a) b = a (x) b), doubled: dtheta = 2 vec(q_est^-1 (x) dq)
+                block.append(((2.0 * a, 2.0 * w, -2.0 * c, 2.0 * b), (2.0 * b, 2.0 * c, 2.0 * w, -2.0 * a),
+                              (2.0 * c, -2.0 * b, 2.0 * a, 2.0 * w)))
+            T[:, r:r + 3, xi[0]:xi[0] + 4] = block
+            err[:, r:r + 3] = [dths[j][q][1] for j in range(k)]
             r += 3
-        return nees(err, T @ P @ T.T)
+        # one matrix product per estimate, as T @ P @ T.T (numpy's matmul calls the same BLAS per stacked pair)
+        M = np.matmul(np.matmul(T, P), T.transpose(0, 2, 1))
+        return [nees(err[j], M[j]) for j in range(k)]
 
     def add_nis(self, sensor: str, nis: float, dim: int, t: float | None = None,
                 accepted: bool | None = None) -> None:

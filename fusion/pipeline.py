@@ -411,6 +411,7 @@ def truth_warnings(stats: RunStats, unnamed: dict[str, int], state_names: Sequen
                                 f"of the state, and the state's {' '.join(absent)} are not among the {stream} "
                                 "columns: those are not compared (a column is compared when it has the "
                                 "element's name)"))
+        comp.flush()   # the estimates evaluated so far, scored (TruthComparison.SCORE_BATCH): their count
         w, compared = comp.window, comp.tracker.compared
         if w.received >= 2 and w.period > COARSE_TRUTH_S and compared > 2 * w.received:
             T = w.period

@@ -241,7 +241,11 @@ def conj_multiply_floats(a: Sequence[float], b: Sequence[float]) -> tuple[float,
 def slerp_floats(q0: np.ndarray, q1: np.ndarray, f: float) -> list[float]:
     """Spherical interpolation from unit q0 to q1 (shorter arc) at fraction f; unit result (floats: this
     runs once per estimate, where Python floats beat numpy calls on 4-vectors)."""
-    a, b = q0.tolist(), q1.tolist()
+    return slerp_lists(q0.tolist(), q1.tolist(), f)
+
+
+def slerp_lists(a: list[float], b: list[float], f: float) -> list[float]:
+    """:func:`slerp_floats` of two quaternions given as lists of 4 floats (the same operations)."""
     dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
     if dot < 0.0:
         b, dot = [-v for v in b], -dot

@@ -473,29 +473,35 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
             yield from self._predict_to(good[0][0])
         if self._batch and (len(good) > 1 or end is not None) and self.u is not None and self._next_output > last_t:
             # Whole run of samples in one call (the filter integrates them in order, DESIGN: same math).
-            ts = np.array([self.belief.t] + [t for t, _ in good] + ([end] if end is not None else []))  # type: ignore[union-attr]
-            us = np.array([self.u] + [u for _, u in (good if end is not None else good[:-1])], dtype=float)
-            dts = np.diff(ts)
-            capped = dts.max() > self.max_predict
+            # The intervals as floats (the same subtractions np.diff makes), the arrays built once for the
+            # samples kept (a zero interval, a repeated stamp, integrates nothing)
+            ts = [self.belief.t] + [t for t, _ in good] + ([end] if end is not None else [])  # type: ignore[union-attr]
+            ul = [self.u] + [u for _, u in (good if end is not None else good[:-1])]
+            dl = [b - a for a, b in zip(ts, ts[1:])]
+            top = max(dl)
+            capped = top > self.max_predict
             if capped:
-                yield Event(float(ts[-1]), "gap", sensor.name, f"{dts.max():.3f} s between input samples; "
+                yield Event(float(ts[-1]), "gap", sensor.name, f"{top:.3f} s between input samples; "
                             f"prediction bounded to {self.max_predict:g} s (scheduler.max_predict_s)")
-                np.minimum(dts, self.max_predict, out=dts)
-            keep = dts > 0
-            if keep.any():
+                dl = [d if d <= self.max_predict else self.max_predict for d in dl]
+            if not all(d > 0 for d in dl):
+                ul = [u for u, d in zip(ul, dl) if d > 0]
+                dl = [d for d in dl if d > 0]
+            if dl:
                 t0 = time.perf_counter()
-                k = int(keep.sum())
+                k = len(dl)
+                us, dts = np.array(ul, dtype=float), np.array(dl, dtype=float)
                 try:
-                    belief = self.filter.predict_inputs(self.belief, self.process, us[keep], dts[keep])
+                    belief = self.filter.predict_inputs(self.belief, self.process, us, dts)
                 except FusionError:
                     raise
                 except Exception as exc:   # as in _step: held over the run of samples
-                    self._predict_failed(exc, last_t, us[keep][0], float(dts[keep][0]))
+                    self._predict_failed(exc, last_t, us[0], float(dts[0]))
                     belief = None
                 if belief is not None:
                     self._predict_fails = 0
                     self.time_s["predict"] += time.perf_counter() - t0
-                    self.belief = self._predicted(belief, k, batched=k > 1, dts=dts[keep])
+                    self.belief = self._predicted(belief, k, batched=k > 1, dts=dts)
                     if capped:  # bounded gap: the run still ends at the last sample's time
                         self.belief = self.belief.with_(t=last_t)
                 if self._filter_events:

@@ -12,9 +12,13 @@ sample up front; a run of hours (or a live port) cannot keep them. Here:
   interpolated, in order, so the statistics equal those of the whole-recording ``Truth`` (the sample
   period is the median over the window rather than over the whole recording: the same for a regular
   truth rate). At most ``max_pending`` estimates wait: past that (truth has stopped) the oldest is
-  evaluated with what the window has, as at the end of the input.
+  evaluated with what the window has, as at the end of the input. Evaluating takes what depends on the
+  moment (the settle clock, the truth samples around the estimate and the fraction between them:
+  ``ErrorTracker.locate``, ``TruthWindow.locate``); the arithmetic is done for ``SCORE_BATCH`` estimates at
+  once (``ErrorTracker.score``, ``TruthWindow.rows``), to the same bits as one at a time, and ``flush``
+  (called by ``finish``) brings the statistics up to date.
 
-Memory: O(window + max_pending), whatever the length of the run.
+Memory: O(window + max_pending + SCORE_BATCH), whatever the length of the run.
 """
 from __future__ import annotations
 
@@ -25,9 +29,9 @@ from typing import Callable, Collection, Sequence
 
 import numpy as np
 
+from fusion import quaternion as quat
 from fusion.api import Estimate, Message
 from fusion.logformat import parse_values
-from fusion.metrics import interpolate_row
 
 __all__ = ["TruthWindow", "TruthComparison"]
 
@@ -172,12 +176,75 @@ class TruthWindow:
     # ------------------------------------------------------------------ output (as fusion.metrics.Truth)
     def row(self, t: float) -> np.ndarray | None:
         """The interpolated truth row at ``t`` (s), or None where truth is not defined (see the module)."""
-        return interpolate_row(self._t, _Rows(self._v, self.quaternions), t, self.period, self.GAP_PERIODS,
-                               self.quaternions, self._angle_cols)
+        where = self.locate(t)
+        return None if where is None else self.rows([where])[0]
+
+    def locate(self, t: float) -> tuple | None:
+        """What :meth:`row` interpolates at ``t`` (s), taken now (the samples, the fraction), for
+        :meth:`rows` to compute later even after the window has moved on: ``(sample, None, 0.0)`` for the
+        first or last sample within half a period outside the span, ``(sample0, sample1, f)`` between two,
+        None where truth is not defined. The same rules as fusion.truth.interpolate_row (the stored
+        samples are immutable: text or tuples)."""
+        tl = self._t
+        n = len(tl)
+        if n == 0:
+            return None
+        half = 0.5 * self.period
+        if t < tl[0]:
+            return (self._v[0], None, 0.0) if tl[0] - t <= half else None
+        if t >= tl[-1]:
+            return (self._v[n - 1], None, 0.0) if t - tl[-1] <= half else None
+        i = bisect.bisect_right(tl, t)  # tl[i-1] <= t < tl[i]
+        t0, t1 = tl[i - 1], tl[i]
+        dt = t1 - t0
+        if dt > self.GAP_PERIODS * self.period and min(t - t0, t1 - t) > half:
+            return None
+        return (self._v[i - 1], self._v[i], (t - t0) / dt if dt > 0 else 1.0)
+
+    def rows(self, located: Sequence[tuple]) -> np.ndarray:
+        """The rows (k, m) of :meth:`locate` results, all at once: the same numbers as ``row(t)`` gave when
+        each was located (linear interpolation as one array expression, elementwise as fusion.truth.
+        interpolate_row; quaternions by the same float slerp; angle columns wrapped)."""
+        quats = list(self.quaternions.values())
+        seen: dict[int, list[float]] = {}   # a sample shared by estimates (two sensors at one time): parsed once
+
+        def floats(sample) -> list[float]:
+            got = seen.get(id(sample))
+            if got is None:
+                got = seen[id(sample)] = _floats(sample, quats)
+            return got
+
+        first = [floats(w[0]) for w in located]
+        out = np.array(first, dtype=float).reshape(len(located), len(self.names))
+        inner = [k for k, w in enumerate(located) if w[1] is not None]
+        if inner:
+            second = [floats(located[k][1]) for k in inner]
+            f = [located[k][2] for k in inner]
+            v0 = out[inner]
+            out[inner] = v0 + np.array(f)[:, None] * (np.array(second, dtype=float) - v0)
+            for cols in quats:
+                out[np.ix_(inner, cols)] = [
+                    quat.slerp_lists([first[k][c] for c in cols], [second[j][c] for c in cols], f[j])
+                    for j, k in enumerate(inner)]
+        for c in self._angle_cols:
+            out[:, c] = (out[:, c] + math.pi) % (2.0 * math.pi) - math.pi
+        return out
 
     def at(self, t: float) -> dict[str, float] | None:
         row = self.row(t)
         return None if row is None else dict(zip(self.names, row.tolist()))
+
+
+def _floats(sample, quats: list[list[int]]) -> list[float]:
+    """A stored sample (text or tuple) as floats with its quaternion columns normalised, as :class:`_Rows`."""
+    vals = list(parse_values(sample))
+    for cols in quats:
+        w, x, y, z = vals[cols[0]], vals[cols[1]], vals[cols[2]], vals[cols[3]]
+        nrm = math.sqrt(w * w + x * x + y * y + z * z)
+        if nrm > 0.0:
+            for c in cols:
+                vals[c] = vals[c] / nrm
+    return vals
 
 
 class _Rows:
@@ -221,6 +288,10 @@ class TruthComparison:
         self.max_pending = int(max_pending)
         self._pending: deque[Estimate] = deque()
         self._last_t = -math.inf  # time of the last estimate evaluated
+        # Estimates evaluated (where truth is at their time taken: ErrorTracker.locate) whose arithmetic waits
+        # to be done for SCORE_BATCH at once (ErrorTracker.score): the same numbers, a fraction of the numpy
+        # calls. With on_result, the unlocated ones wait in line too (None), so it sees every estimate in order.
+        self._located: list[tuple[Estimate, tuple | None]] = []
 
     def add_truth(self, message: Message) -> None:
         w = self.window
@@ -239,6 +310,24 @@ class TruthComparison:
         """End of input: evaluate what is still waiting with the truth there is."""
         while self._pending:
             self._evaluate(self._pending.popleft())
+        self.flush()
+
+    def flush(self) -> None:
+        """Score the estimates evaluated so far (the tracker's statistics are then up to date)."""
+        located, self._located = self._located, []
+        items = [it for _, it in located if it is not None]
+        outs: list = []
+        rows = None
+        if items:
+            outs, rows = self.tracker.score(items, want=self.on_result is not None)
+        if self.on_result is not None:
+            k = 0
+            for estimate, item in located:
+                if item is None:
+                    self.on_result(estimate, None, None)
+                else:
+                    self.on_result(estimate, outs[k], rows[k].copy())  # type: ignore[index]
+                    k += 1
 
     def _release(self, newest: float) -> None:
         pend = self._pending
@@ -249,8 +338,13 @@ class TruthComparison:
         if len(self.window._t) > 4 * _KEEP_BEHIND:  # trim now and then, not at every sample (len(): no call)
             self.window.forget_before(pend[0].t if pend else self._last_t)
 
+    #: Estimates scored at once (bounded memory: at most this many beliefs wait besides ``max_pending``).
+    SCORE_BATCH = 64
+
     def _evaluate(self, estimate: Estimate) -> None:
-        errors = self.tracker.add(estimate)
+        item = self.tracker.locate(estimate)
         self._last_t = estimate.t
-        if self.on_result is not None:
-            self.on_result(estimate, errors, self.window.row(float(estimate.t)) if errors is not None else None)
+        if item is not None or self.on_result is not None:
+            self._located.append((estimate, item))
+            if len(self._located) >= self.SCORE_BATCH:
+                self.flush()

@@ -189,7 +189,9 @@ class Belief:
         """Standard deviations sqrt(diag P)."""
         if self.S is not None and self.P is None:
             return np.sqrt(np.einsum("ij,ij->i", self.S, self.S))
-        return np.sqrt(np.clip(np.diagonal(self.P), 0.0, None))  # type: ignore[arg-type]
+        # np.clip(d, 0.0, None) is np.maximum(d, 0.0) (numpy's _methods._clip with no upper bound), without its
+        # three Python-level wrappers (~9 us of ~13 a call; called per estimate by the run's statistics and sinks)
+        return np.sqrt(np.maximum(np.diagonal(self.P), 0.0))  # type: ignore[arg-type]
 
     def with_(self, **changes: Any) -> "Belief":
         return replace(self, **changes)
