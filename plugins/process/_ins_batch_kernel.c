@@ -288,8 +288,141 @@ r1:
     return NULL;
 }
 
+/* ------------------------------------------------------------------ interval_noise */
+
+#define NE 15     /* error state [dp dv dth dba dbw] */
+
+/* ins_batch._GL_POWERS and _GL_WEIGHTS (4-point Gauss-Legendre on [0, 1]: [s, s^2 / 2, s^3 / 6] at the
+ * nodes, and the weights), to the last bit (repr) */
+static const double GL_POWERS[4][3] = {
+    {0.06943184420297371, 0.002410390494713007, 5.578595243241409e-05},
+    {0.33000947820757187, 0.054453127853416924, 0.005990016103225439},
+    {0.6699905217924281, 0.22444364964584507, 0.05012503931307222},
+    {0.9305681557970262, 0.43297854629173926, 0.13430534910746036},
+};
+static const double GL_WEIGHTS[4] = {0.17392742256872679, 0.3260725774312732, 0.3260725774312732, 0.17392742256872679};
+
+static void matmul15(const double A[NE][NE], const double B[NE][NE], double C[NE][NE])
+{
+    for (int i = 0; i < NE; i++)
+        for (int j = 0; j < NE; j++) {
+            double s = 0.0;
+            for (int l = 0; l < NE; l++)
+                s += A[i][l] * B[l][j];
+            C[i][j] = s;
+        }
+}
+
+/* ins_batch.interval_noise for isotropic white noises (qc, the diagonal of Q_c, given): Qm (16, 16) =
+ * sum_m w_m G Phi_m Q_c Phi_m^T G^T (+ the quaternion-norm term), the numpy code's operations. */
+static void interval_noise_iso(const double *x0, const double *x1, const double *dts, Py_ssize_t k, const double *g,
+                               const double *qc, double qnv, double *Qm)
+{
+    const double T = np_sum(dts, k, 1);
+    double fn[3], qm[4], R[9];
+    for (int i = 0; i < 3; i++)
+        fn[i] = (x1[3 + i] - x0[3 + i]) / T - g[i];
+    for (int i = 0; i < 4; i++)
+        qm[i] = x0[6 + i] + x1[6 + i];
+    rot(qm, R);
+    const double n2 = qm[0] * qm[0] + qm[1] * qm[1] + qm[2] * qm[2] + qm[3] * qm[3];
+    static const double zero[NE][NE];
+    double F[NE][NE], F2[NE][NE], F3[NE][NE];
+    memcpy(F, zero, sizeof F);
+    for (int i = 0; i < 3; i++) {
+        F[i][3 + i] = 1.0;
+        for (int j = 0; j < 3; j++)
+            F[3 + i][9 + j] = F[6 + i][12 + j] = -(R[3 * i + j] / n2);   /* -C_b^n at mid-interval */
+    }
+    F[3][7] = fn[2]; F[3][8] = -fn[1];                                   /* -[f_n x] */
+    F[4][6] = -fn[2]; F[4][8] = fn[0];
+    F[5][6] = fn[1]; F[5][7] = -fn[0];
+    matmul15(F, F, F2);
+    matmul15(F2, F, F3);
+    const double Tp[3] = {T, T * T, T * T * T};
+    const double *q = x1 + 6;
+    const double Xi[4][3] = {{-0.5 * q[1], -0.5 * q[2], -0.5 * q[3]}, {0.5 * q[0], 0.5 * q[3], -0.5 * q[2]},
+                             {-0.5 * q[3], 0.5 * q[0], 0.5 * q[1]}, {0.5 * q[2], -0.5 * q[1], 0.5 * q[0]}};
+    double A[NSTATE][4 * NE];                  /* A = [G Phi_m sqrt(w_m Q_c)]_m, Qm = A A^T */
+    for (int m = 0; m < 4; m++) {
+        const double c0 = GL_POWERS[m][0] * Tp[0], c1 = GL_POWERS[m][1] * Tp[1], c2 = GL_POWERS[m][2] * Tp[2];
+        const double wm = GL_WEIGHTS[m] * T;
+        double Phi[NE][NE];
+        for (int i = 0; i < NE; i++)
+            for (int j = 0; j < NE; j++)
+                Phi[i][j] = c0 * F[i][j] + c1 * F2[i][j] + c2 * F3[i][j] + (i == j ? 1.0 : 0.0);
+        for (int j = 0; j < NE; j++) {
+            const double sc = sqrt(wm * qc[j]);
+            double *col = &A[0][m * NE + j];
+            for (int i = 0; i < 6; i++)                                  /* dp, dv */
+                col[i * 4 * NE] = Phi[i][j] * sc;
+            for (int i = 0; i < 4; i++)                                  /* q = [0, dth] (x) q1 / 2 */
+                col[(6 + i) * 4 * NE] = (Xi[i][0] * Phi[6][j] + Xi[i][1] * Phi[7][j] + Xi[i][2] * Phi[8][j]) * sc;
+            for (int i = 0; i < 6; i++)                                  /* dba, dbw */
+                col[(10 + i) * 4 * NE] = Phi[9 + i][j] * sc;
+        }
+    }
+    for (int i = 0; i < NSTATE; i++)
+        for (int j = 0; j <= i; j++) {
+            double s = 0.0;
+            for (int l = 0; l < 4 * NE; l++)
+                s += A[i][l] * A[j][l];
+            Qm[NSTATE * i + j] = Qm[NSTATE * j + i] = s;
+        }
+    if (qnv != 0.0) {
+        const double c = qnv * (double)k / (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+        for (int i = 0; i < 4; i++)
+            for (int j = 0; j < 4; j++)
+                Qm[NSTATE * (6 + i) + 6 + j] += q[i] * q[j] * c;
+    }
+}
+
+PyDoc_STRVAR(interval_noise_doc,
+"interval_noise(x0, x1, dts, g, qc, qnv, out) -> None\n\n"
+"ins_batch.interval_noise into out (16, 16) for isotropic noises: the means x0, x1 (16,) before and after\n"
+"the run, dts (k,) s (k >= 1, sum > 0), g (3,) g_n (m/s^2), qc (15,) the diagonal of Q_c (0, N_a^2, N_w^2,\n"
+"N_ba^2, N_bw^2 per axis), qnv (float) the quaternion-norm variance per sample. All float64, C-contiguous;\n"
+"out writable, apart from the inputs.");
+
+static PyObject *interval_noise(PyObject *self, PyObject *args)
+{
+    PyObject *ox0, *ox1, *odts, *og, *oqc, *oout;
+    double qnv;
+    if (!PyArg_ParseTuple(args, "OOOOOdO:interval_noise", &ox0, &ox1, &odts, &og, &oqc, &qnv, &oout))
+        return NULL;
+    Py_buffer b[6];
+    PyObject *objs[6] = {ox0, ox1, odts, og, oqc, oout};
+    const char *names[6] = {"x0", "x1", "dts", "g", "qc", "out"};
+    const Py_ssize_t shapes[6][2] = {{NSTATE}, {NSTATE}, {-1}, {3}, {NE}, {NSTATE, NSTATE}};
+    int got = 0;
+    for (; got < 6; got++)
+        if (get_array(objs[got], names[got], got == 5 ? 2 : 1, shapes[got], got == 5, &b[got]) < 0)
+            goto done;
+    const Py_ssize_t k = b[2].shape[0];
+    for (int i = 0; i < 5; i++)
+        if (overlaps(&b[5], &b[i])) {
+            PyErr_Format(PyExc_ValueError, "out must not overlap %s", names[i]);
+            goto done;
+        }
+    const double *dts = (const double *)b[2].buf;
+    const double T = np_sum(dts, k, 1);
+    if (k < 1 || !(T > 0.0) || !isfinite(T)) {
+        PyErr_SetString(PyExc_ValueError, "dts must hold at least one sample and sum to a finite T > 0");
+        goto done;
+    }
+    interval_noise_iso((const double *)b[0].buf, (const double *)b[1].buf, dts, k, (const double *)b[3].buf,
+                       (const double *)b[4].buf, qnv, (double *)b[5].buf);
+done:
+    for (int i = 0; i < got; i++)
+        PyBuffer_Release(&b[i]);
+    if (PyErr_Occurred())
+        return NULL;
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef methods[] = {
     {"integrate", integrate, METH_VARARGS, integrate_doc},
+    {"interval_noise", interval_noise, METH_VARARGS, interval_noise_doc},
     {NULL, NULL, 0, NULL},
 };
 

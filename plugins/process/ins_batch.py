@@ -21,7 +21,7 @@ import numpy as np
 from fusion import kernels
 from fusion import quaternion as quat
 
-__all__ = ["integrate_inputs", "integrate_inputs_numpy", "interval_noise", "add_hold_noise", "integrated_gm_variance", "gm_rate_noise", "K10T", "T16T"]
+__all__ = ["integrate_inputs", "integrate_inputs_numpy", "interval_noise", "interval_noise_numpy", "add_hold_noise", "integrated_gm_variance", "gm_rate_noise", "K10T", "T16T"]
 
 # [R(q).ravel(), |q|^2] = outer(q, q).ravel() @ K10 (one product gives the rotation matrix and its normaliser)
 K10 = np.concatenate([quat.ROTATION_FORM, np.eye(16)[:, quat.NORM_TERMS].sum(axis=1, keepdims=True)], axis=1)
@@ -173,7 +173,24 @@ def interval_noise(x0: np.ndarray, x1: np.ndarray, dts: np.ndarray, g_n: np.ndar
     polynomial of degree 6 in s, integrated exactly by 4-point Gauss-Legendre quadrature. f_n is the
     mean specific force in the navigation frame, (v1 - v0) / T - g_n; C the attitude at mid-interval;
     dth maps to q at the end as ``dq = [0, dth] (x) q1 / 2``. For one sample of dt this is :meth:`Q` plus the
-    couplings of order dt^2 and higher that :meth:`Q` leaves to the propagation of later steps."""
+    couplings of order dt^2 and higher that :meth:`Q` leaves to the propagation of later steps.
+
+    With isotropic noises (``qc_diag`` given) by the compiled kernel when it is loaded, else
+    :func:`interval_noise_numpy`."""
+    if _KERNEL is not None and qc_diag is not None:          # the compiled kernel (isotropic noises)
+        Qm = np.empty((16, 16))
+        _KERNEL.interval_noise(np.ascontiguousarray(x0, dtype=float), np.ascontiguousarray(x1, dtype=float),
+                               np.ascontiguousarray(dts, dtype=float), np.ascontiguousarray(g_n, dtype=float),
+                               np.ascontiguousarray(qc_diag, dtype=float), float(qnv), Qm)
+        return Qm
+    return interval_noise_numpy(x0, x1, dts, g_n, var_a, var_w, var_ba, var_bw, qc_diag, qnv)
+
+
+def interval_noise_numpy(x0: np.ndarray, x1: np.ndarray, dts: np.ndarray, g_n: np.ndarray, var_a: np.ndarray,
+                         var_w: np.ndarray, var_ba: np.ndarray, var_bw: np.ndarray, qc_diag: np.ndarray | None,
+                         qnv: float) -> np.ndarray:
+    """:func:`interval_noise` in numpy: the reference of the compiled kernel, and the general case
+    (non-isotropic noises) it leaves to numpy."""
     dts = np.asarray(dts, dtype=float)
     T = float(dts.sum())
     x0 = np.asarray(x0, dtype=float)
