@@ -88,7 +88,7 @@ static int overlaps(const Py_buffer *a, const Py_buffer *b)
 /* ------------------------------------------------------------------ numerics */
 
 /* numpy's pairwise summation (numpy/_core/src/umath/loops_utils.h.src, PW_BLOCKSIZE 128) of n values
- * a[0], a[stride], ...: what ndarray.sum() computes after its first element (below), bit for bit. */
+ * a[0], a[stride], ...: what ndarray.sum() computes, bit for bit. */
 static double pairwise_sum(const double *a, Py_ssize_t n, Py_ssize_t stride)
 {
     if (n < 8) {
@@ -115,10 +115,10 @@ static double pairwise_sum(const double *a, Py_ssize_t n, Py_ssize_t stride)
     return pairwise_sum(a, n2, stride) + pairwise_sum(a + n2 * stride, n - n2, stride);
 }
 
-/* ndarray.sum() of a 1-D float64 array of n >= 1 values: the first, plus the pairwise sum of the rest. */
+/* ndarray.sum() of a 1-D float64 array of n values (its identity, 0, plus the pairwise sum of all). */
 static double np_sum(const double *a, Py_ssize_t n, Py_ssize_t stride)
 {
-    return n > 0 ? a[0] + pairwise_sum(a + stride, n - 1, stride) : 0.0;
+    return 0.0 + pairwise_sum(a, n, stride);
 }
 
 /* Hamilton product r = p (x) q (scalar first); r may be p or q. */
