@@ -420,7 +420,39 @@ done:
     Py_RETURN_NONE;
 }
 
+/* ------------------------------------------------------------------ imu_ok */
+
+PyDoc_STRVAR(imu_ok_doc,
+"imu_ok(values, max_f, max_w) -> bool\n\n"
+"True when values is a tuple of exactly 6 floats [ax ay az gx gy gz], all finite, |a| <= max_f and\n"
+"|w| <= max_w (floats, inf for no limit): the common case of Ins.input_from in one call. False for anything\n"
+"else, which the Python code then refuses with its own messages (or converts: ints, numpy scalars).");
+
+static PyObject *imu_ok(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 3) {
+        PyErr_Format(PyExc_TypeError, "imu_ok expects 3 arguments, got %zd", nargs);
+        return NULL;
+    }
+    const double lim_f = PyFloat_AsDouble(args[1]), lim_w = PyFloat_AsDouble(args[2]);
+    if ((lim_f == -1.0 || lim_w == -1.0) && PyErr_Occurred())
+        return NULL;
+    PyObject *vals = args[0];
+    if (!PyTuple_CheckExact(vals) || PyTuple_GET_SIZE(vals) != 6)
+        Py_RETURN_FALSE;
+    for (int i = 0; i < 6; i++) {
+        PyObject *item = PyTuple_GET_ITEM(vals, i);
+        if (!PyFloat_CheckExact(item))
+            Py_RETURN_FALSE;
+        const double v = fabs(PyFloat_AS_DOUBLE(item));
+        if (!(v <= (i < 3 ? lim_f : lim_w)) || !isfinite(v))    /* nan fails the comparison */
+            Py_RETURN_FALSE;
+    }
+    Py_RETURN_TRUE;
+}
+
 static PyMethodDef methods[] = {
+    {"imu_ok", (PyCFunction)(void (*)(void))imu_ok, METH_FASTCALL, imu_ok_doc},
     {"integrate", integrate, METH_VARARGS, integrate_doc},
     {"interval_noise", interval_noise, METH_VARARGS, interval_noise_doc},
     {NULL, NULL, 0, NULL},

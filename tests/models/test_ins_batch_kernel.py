@@ -6,6 +6,7 @@ tests/filters/test_predict_inputs.py (which, with the kernel built, checks the k
 from __future__ import annotations
 
 import csv
+import math
 import os
 import subprocess
 import sys
@@ -281,3 +282,45 @@ def test_abps_ins_run_same_estimates_with_and_without_the_kernel(tmp_path):
     B = np.array([[float(r[i]) for i in num] for r in kern[1:]])
     assert not np.array_equal(A, B)                       # the kernel did run (the last bits move)
     np.testing.assert_allclose(B, A, rtol=1e-9, atol=1e-12)
+
+
+# ---------------------------------------------------------------------------------------- input_from's checks
+@needs_kernel
+def test_imu_ok_accepts_only_six_finite_floats_within_the_limits():
+    ok = (0.1, -0.2, -9.8, 0.01, 0.02, -0.03)
+    assert K.imu_ok(ok, 49.0, 5.24) is True
+    assert K.imu_ok(ok, math.inf, math.inf) is True
+    assert K.imu_ok(ok, 9.8, 0.03) is True                   # the limits are inclusive
+    for bad in (list(ok), ok[:5], ok + (0.0,), (1, *ok[1:]), (np.float64(0.1), *ok[1:]), ("0.1", *ok[1:]),
+                (math.nan, *ok[1:]), (*ok[:5], math.inf), (*ok[:5], -math.inf)):
+        assert K.imu_ok(bad, 49.0, 5.24) is False, bad
+    assert K.imu_ok(ok, 9.7, 5.24) is False                  # |az| beyond max_f
+    assert K.imu_ok(ok, 49.0, 0.029) is False                # |gz| beyond max_w
+    with pytest.raises(TypeError):
+        K.imu_ok(ok, None, 5.24)
+    with pytest.raises(TypeError):
+        K.imu_ok(ok, 49.0)
+
+
+@needs_kernel
+@pytest.mark.parametrize("values", [
+    (0.1, -0.2, -9.8, 0.01, 0.02, -0.03), (1, 2, 3, 0, 0, 0), (np.float64(0.1), 0.0, -9.8, 0.0, 0.0, 0.0),
+    (0.1, 0.2), (0.1, -0.2, -9.8, 0.01, 0.02, math.nan), (60.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+    (0.0, 0.0, 0.0, 6.0, 0.0, 0.0), ("x", 0.0, 0.0, 0.0, 0.0, 0.0), [0.1, -0.2, -9.8, 0.01, 0.02, -0.03],
+])
+def test_input_from_is_the_same_with_and_without_the_kernel(values, monkeypatch):
+    """The fast path changes nothing: the same array, or the same exception and message."""
+    from fusion import testing
+    from fusion.api import Message
+    from fusion_plugins.process import ins as ins_module
+    proc = testing.build("process", "ins", {"max_specific_force": 49.0, "max_rate": 5.24})
+
+    def outcome():
+        try:
+            u = proc.input_from(Message(1.0, "imu", values))
+            return u.dtype, u.tolist()
+        except Exception as exc:   # noqa: BLE001 - the outcome compared is the exception itself
+            return type(exc), str(exc)
+    with_kernel = outcome()
+    monkeypatch.setattr(ins_module, "_KERNEL", None)
+    assert outcome() == with_kernel
