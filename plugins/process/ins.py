@@ -2,10 +2,12 @@
 from __future__ import annotations
 
 import copy
+import math
 from typing import ClassVar
 
 import numpy as np
 
+from fusion import kernels
 from fusion import quaternion as quat
 from fusion.api import (BuildContext, Event, MalformedMessage, Message, Params, ProcessModel,  # noqa: F401
                         RejectedMessage, StateLayout)
@@ -14,6 +16,8 @@ from .ins_batch import K10T as _K10T, T16T as _T16T, integrate_inputs
 from .ins_noise import InsNoise
 from .ins_params import (ADIS16364_ACCEL_BIAS_RW, ADIS16364_ACCEL_ND, ADIS16364_GYRO_BIAS_RW, ADIS16364_GYRO_ND,  # noqa: F401
                          EARTH_RATE, STANDARD_GRAVITY, Density, InsParams, density_variance, somigliana_gravity)
+
+_KERNEL = kernels.load("fusion_plugins.process._ins_batch_kernel")   # input_from's checks (imu_ok)
 
 #: The alignment's stillness test (Ins.stillness): significance of each test, and the factor on the noise
 #: density's sd that a window's spread must exceed. Data-sheet densities are typical values: a static unit on
@@ -141,6 +145,7 @@ class Ins(InsNoise, ProcessModel):
                          if self._iso_w and np.ptp(self._var_a) == 0.0 else None)
         # Nothing is counted inside the model: clamps are step_events, counted by the run.
         self._max_f, self._max_w = p.max_specific_force, p.max_rate
+        self._lim_f, self._lim_w = (math.inf if v is None else float(v) for v in (self._max_f, self._max_w))
         self._hold = p.hold_after
         self.hold_after = p.hold_after        # fusion.api.HoldsInput (``_hold`` is what is left of it: held())
         self._excess0 = 0.0                   # s the held sample is already past hold_after (held())
@@ -340,6 +345,8 @@ class Ins(InsNoise, ProcessModel):
         wrong count or a non-number, RejectedMessage (a MalformedMessage) for a non-finite value or one
         beyond ``max_specific_force`` / ``max_rate``: the sample is counted, never integrated."""
         vals = message.values
+        if _KERNEL is not None and _KERNEL.imu_ok(vals, self._lim_f, self._lim_w):   # the usual sample, ~0.1 us
+            return np.array(vals)
         if len(vals) != 6:
             raise MalformedMessage(f"process 'ins' expects 6 IMU values (ax ay az gx gy gz), got {len(vals)}")
         # plain floats first (the parser's tuple): these checks cost ~1 us, numpy's ~10, and the array is

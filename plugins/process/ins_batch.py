@@ -6,6 +6,11 @@ so that each module stays small; the maths is paper 000 eqs. 33-52.
 
 States are handled component-first, ``(16, N)`` (one row per element, one column per sigma point), so
 every product is one BLAS call on whole rows instead of N tiny ones.
+
+:func:`integrate_inputs` runs the compiled kernel ``_ins_batch_kernel.c`` when it is built (fusion.kernels;
+the same operations as loops, ~10x faster on a run of 40 samples and 33 points, the same numbers to
+rounding); :func:`integrate_inputs_numpy` is the reference it is tested against, and what runs without a
+C compiler or with ``FUSION_PURE_PYTHON=1``.
 """
 from __future__ import annotations
 
@@ -13,9 +18,10 @@ import math
 
 import numpy as np
 
+from fusion import kernels
 from fusion import quaternion as quat
 
-__all__ = ["integrate_inputs", "interval_noise", "add_hold_noise", "integrated_gm_variance", "gm_rate_noise", "K10T", "T16T"]
+__all__ = ["integrate_inputs", "integrate_inputs_numpy", "interval_noise", "interval_noise_numpy", "add_hold_noise", "integrated_gm_variance", "gm_rate_noise", "K10T", "T16T"]
 
 # [R(q).ravel(), |q|^2] = outer(q, q).ravel() @ K10 (one product gives the rotation matrix and its normaliser)
 K10 = np.concatenate([quat.ROTATION_FORM, np.eye(16)[:, quat.NORM_TERMS].sum(axis=1, keepdims=True)], axis=1)
@@ -70,8 +76,28 @@ def _prefix_products(D: np.ndarray, N: int) -> None:
         np.matmul(T16T, (D[j - 1][:, None] * D[j]).reshape(16, N), out=D[j])
 
 
+_KERNEL = kernels.load("fusion_plugins.process._ins_batch_kernel")
+
+
 def integrate_inputs(x: np.ndarray, us: np.ndarray, dts: np.ndarray, g_col: np.ndarray,
                      trapezoidal: bool) -> np.ndarray:
+    """States x (..., 16) after the IMU samples ``us`` (k, 6) (m/s^2, rad/s, FRD), each held over ``dts``
+    (k,) (s), without eta and Earth rate; ``g_col`` (3, 1) is g_n (m/s^2, NED): :func:`integrate_inputs_numpy`
+    (the maths), by the compiled kernel when it is loaded (C-contiguous float64 copies of the arguments
+    where needed; the result is a new C-contiguous array)."""
+    if _KERNEL is None:
+        return integrate_inputs_numpy(x, us, dts, g_col, trapezoidal)
+    X = np.ascontiguousarray(x, dtype=float)
+    if X.shape[-1:] != (16,):
+        raise ValueError(f"integrate_inputs: states must be (..., 16), got shape {X.shape}")
+    out = np.empty(X.shape)
+    _KERNEL.integrate(X.reshape(-1, 16), np.ascontiguousarray(us, dtype=float), np.ascontiguousarray(dts, dtype=float),
+                      np.ascontiguousarray(g_col, dtype=float).reshape(3), bool(trapezoidal), out.reshape(-1, 16))
+    return out
+
+
+def integrate_inputs_numpy(x: np.ndarray, us: np.ndarray, dts: np.ndarray, g_col: np.ndarray,
+                           trapezoidal: bool) -> np.ndarray:
     """States x (..., 16) after the IMU samples ``us`` (k, 6), each held over ``dts`` (k,) (s), without
     eta and Earth rate (see :meth:`Ins.f_inputs`); ``g_col`` (3, 1) is g_n. The same numbers as k
     calls of ``Ins.f`` to rounding (~1e-15).
@@ -147,7 +173,24 @@ def interval_noise(x0: np.ndarray, x1: np.ndarray, dts: np.ndarray, g_n: np.ndar
     polynomial of degree 6 in s, integrated exactly by 4-point Gauss-Legendre quadrature. f_n is the
     mean specific force in the navigation frame, (v1 - v0) / T - g_n; C the attitude at mid-interval;
     dth maps to q at the end as ``dq = [0, dth] (x) q1 / 2``. For one sample of dt this is :meth:`Q` plus the
-    couplings of order dt^2 and higher that :meth:`Q` leaves to the propagation of later steps."""
+    couplings of order dt^2 and higher that :meth:`Q` leaves to the propagation of later steps.
+
+    With isotropic noises (``qc_diag`` given) by the compiled kernel when it is loaded, else
+    :func:`interval_noise_numpy`."""
+    if _KERNEL is not None and qc_diag is not None:          # the compiled kernel (isotropic noises)
+        Qm = np.empty((16, 16))
+        _KERNEL.interval_noise(np.ascontiguousarray(x0, dtype=float), np.ascontiguousarray(x1, dtype=float),
+                               np.ascontiguousarray(dts, dtype=float), np.ascontiguousarray(g_n, dtype=float),
+                               np.ascontiguousarray(qc_diag, dtype=float), float(qnv), Qm)
+        return Qm
+    return interval_noise_numpy(x0, x1, dts, g_n, var_a, var_w, var_ba, var_bw, qc_diag, qnv)
+
+
+def interval_noise_numpy(x0: np.ndarray, x1: np.ndarray, dts: np.ndarray, g_n: np.ndarray, var_a: np.ndarray,
+                         var_w: np.ndarray, var_ba: np.ndarray, var_bw: np.ndarray, qc_diag: np.ndarray | None,
+                         qnv: float) -> np.ndarray:
+    """:func:`interval_noise` in numpy: the reference of the compiled kernel, and the general case
+    (non-isotropic noises) it leaves to numpy."""
     dts = np.asarray(dts, dtype=float)
     T = float(dts.sum())
     x0 = np.asarray(x0, dtype=float)

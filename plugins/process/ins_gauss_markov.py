@@ -86,7 +86,7 @@ class InsGaussMarkov(InsProcess):
         n, m = self.layout.n, self.m
         Q = np.zeros((n, n))
         Q[:m, :m] = Q_ins
-        Q[range(m, n), range(m, n)] = self.block_noise(T)
+        Q.reshape(-1)[m * (n + 1)::n + 1] = self.block_noise(T)    # the blocks' diagonal (a view, no fancy index)
         return Q
 
     # ------------------------------------------------------------------ process model
@@ -100,7 +100,8 @@ class InsGaussMarkov(InsProcess):
         """States (..., n) after the samples ``us`` (k, 6) held over ``dts`` (k,) (s): ``ins.f_inputs`` for
         the INS part, exp(-sum dts / tau) for the blocks (the same as k calls of :meth:`f`)."""
         x = np.asarray(x, dtype=float)
-        return self._join(x, self.core.f_inputs(x[..., :self.m], us, dts), float(np.sum(dts)))
+        dts = np.asarray(dts, dtype=float)
+        return self._join(x, self.core.f_inputs(x[..., :self.m], us, dts), float(dts.sum()))
 
     def jacobian(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
         """F (n, n) at x (n,): the INS F and diag(exp(-dt / tau)), block diagonal."""
@@ -155,7 +156,7 @@ class InsGaussMarkov(InsProcess):
         """Q (n, n) of a run of samples: ``ins.Q_inputs`` and the blocks' noise over T = sum dts."""
         m = self.m
         Qi = self.core.Q_inputs(np.asarray(x0, float)[:m], np.asarray(x1, float)[:m], us, dts)
-        return self._embed(Qi, float(np.sum(dts)))
+        return self._embed(Qi, float(np.asarray(dts, dtype=float).sum()))
 
     def step_events(self, t: float, dts: np.ndarray) -> tuple[Event, ...]:
         """The INS part's (fusion.api.ReportsStepEvents: ``ins``'s eta clamps); the blocks report nothing."""
