@@ -29,6 +29,7 @@ from fusion.api import BuildContext, Event, Message, StateLayout
 
 from .ins import Ins, InsParams, density_variance
 from .ins_params import InsProcess
+from . import ins_linearise
 from .ins_linearise import linearise_run
 
 __all__ = ["InsStates"]
@@ -195,6 +196,11 @@ class InsStates(InsProcess):
                 Q1[16:, 16:] = np.diag(self._var_s)                   # eq. 13: scale-factor random walks
             self._base_coef = tuple(c.reshape(n * n) for c in (Q1, Q2, Q3))
         c1, c2, c3 = self._base_coef
+        kernel = ins_linearise.KERNEL
+        if kernel is not None:                        # the same sums in C (_ins_run_kernel.c noise_base)
+            Q = np.empty((k, n, n))
+            kernel.noise_base(np.ascontiguousarray(dts, dtype=float), c1, c2, c3, Q)
+            return Q
         d2 = dts * dts
         # zero coefficients give exact zeros, so the sums are those of the nonzero terms, in Q's order
         Q = np.multiply.outer(dts, c1)
