@@ -3,17 +3,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from fusion import kernels
 from fusion.api import Belief, Gate, LinearisesInputRuns, MeasurementModel, Params, ProcessModel, UpdateResult, has
 
+from . import base
 from .base import KalmanBase, covariance_of, linear_predict, linearised_predict, linearised_update
 from .checks import MEAN, array_of, finite, frozen, trusted
 from .linalg import symmetrise
-
-#: the compiled covariance chain (_ekf_kernel.c), or None: not built, or FUSION_PURE_PYTHON=1 at import
-KERNEL = kernels.load("fusion_plugins.filters._ekf_kernel")
-#: the kernel's sparse products beat BLAS's dense ones for small n only (no blocking): n above this uses numpy
-KERNEL_MAX_STATES = 64
 
 
 class ExtendedKalmanFilter(KalmanBase):
@@ -50,7 +45,7 @@ class ExtendedKalmanFilter(KalmanBase):
         (LinearisesInputRuns: the INS's means, F_j and Q_j vectorised over the samples), the covariance
         is propagated through them, ``P <- F_j P F_j^T + Q_j`` sample by sample (symmetrised once, at the
         end of the run: ~2 us a sample less), the same numbers as k calls of :meth:`predict` to rounding;
-        otherwise k calls of :meth:`predict`. The chain runs in C when the kernel is built (_ekf_kernel.c:
+        otherwise k calls of :meth:`predict`. The chain runs in C when the kernel is built (_kalman_kernel.c:
         F's nonzeros only, the upper triangle; ~1 us a sample against ~5 us), else :func:`propagate_run`."""
         chk = not trusted(process)
         x = frozen(belief.x) if chk else belief.x
@@ -62,9 +57,10 @@ class ExtendedKalmanFilter(KalmanBase):
             x1, F, Q = self._checked_run(x, x1, F, Q, us, len(dts))
         P = covariance_of(belief)
         n = P.shape[0]
-        if KERNEL is not None and n <= KERNEL_MAX_STATES:
+        kernel = base.KERNEL
+        if kernel is not None and n <= base.KERNEL_MAX_STATES:
             P1 = np.empty((n, n))
-            KERNEL.propagate(np.ascontiguousarray(P, dtype=float), np.ascontiguousarray(F, dtype=float),
+            kernel.propagate(np.ascontiguousarray(P, dtype=float), np.ascontiguousarray(F, dtype=float),
                              np.ascontiguousarray(Q, dtype=float), P1)
         else:
             P1 = propagate_run(P, F, Q)
