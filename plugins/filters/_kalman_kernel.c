@@ -2,16 +2,16 @@
  *
  *   propagate  the EKF's chain over a run of input samples,  P <- F_j P F_j^T + Q_j  (then symmetric)
  *   update     the EKF / KF update about one linearisation point (base.linearised_update, one iteration):
- *              S = H P H^T + R, its Cholesky factor, the NIS, then (when the gate accepts) the mean and the
- *              Joseph-form covariance
+ *              S = H P H^T + R, its Cholesky factor, the NIS, the mean and the Joseph-form covariance
  *
  * The numpy code costs ~5 us a sample of the chain and ~40 us an update, nearly all of it call overhead on
- * 22 x 22 and 3 x 22 arrays. The products A P A^T (A = F_j, or I - K H) read A once into per-row lists of its
- * nonzero entries: the INS's F is the identity but for ~10 rows of a few entries, I - K H the identity but for
- * the few columns H touches; rows of A that are rows of the identity are not multiplied at all, and only the
- * upper triangle is formed and mirrored. Exact zeros contribute nothing to a sum, so every entry is the dense
- * product's with its sums taken left to right (BLAS and LAPACK may order them otherwise: the last bit or two
- * can differ from the numpy code, which stays the reference: tests/filters/test_kalman_kernel.py).
+ * 22 x 22 and 3 x 22 arrays. The chain's F_j P F_j^T reads F_j once into per-row lists of its nonzero entries
+ * (the INS's F is the identity but for ~10 rows of a few entries): rows of F that are rows of the identity are
+ * not multiplied at all, and only the upper triangle is formed and mirrored. Exact zeros contribute nothing
+ * to a sum, so every entry is the dense product's with its sums taken left to right. The update's Joseph form
+ * is associated as (P - K HP) - ((P - K HP) H^T) K^T + (K R) K^T, the products skipping H's zero columns.
+ * BLAS and LAPACK order their sums otherwise: the last bit or two can differ from the numpy code, which stays
+ * the reference (tests/filters/test_kalman_kernel.py).
  *
  * Built by setup.py (KERNELS) as fusion_plugins.filters._kalman_kernel; loaded with fusion.kernels.load.
  * Plain C API and the buffer protocol (no numpy headers): the caller allocates every output (C-contiguous
@@ -260,111 +260,26 @@ fail:
 
 /* ------------------------------------------------------------------ update */
 
-/* innovate(P, H, R, r, HP, S, L, w) -> nis, or None when S is not positive definite
+/* update(x, P, H, R, r, S, x1, P1) -> nis, or None when S is not positive definite
  *
- *   HP = H P (m, n),  S = HP H^T + R (m, m),  L L^T = S (lower, zeros above),  w = L^-1 r,  nis = w.w
- * P (n, n), H (m, n), R (m, m), r (m,); outputs HP, S, L, w. None: a pivot of the factorisation is not
- * positive (or NaN), the outputs are then garbage and the caller repairs S its own way. */
-static PyObject *innovate(PyObject *self, PyObject *args)
+ *   HP = H P,  S = HP H^T + R,  L L^T = S (from S's lower triangle),  w = L^-1 r,  nis = w.w,
+ *   W = L^-1 HP,  x1 = x + W^T w  (x + K r),  K^T = L^-T W,
+ *   P1 = (I - K H) P (I - K H)^T + K R K^T   (Joseph form), evaluated as
+ *        AP = P - K HP,   P1 = AP - (AP H^T) K^T + (K R) K^T   (upper triangle, mirrored)
+ *
+ * x (n,), P (n, n), H (m, n), R (m, m), r (m,) the residual; outputs S (m, m), x1 (n,), P1 (n, n). The
+ * mean and covariance are computed whatever the NIS (the caller's gate decides afterwards: one call
+ * instead of two, and a rejection is rare). None: a pivot of the factorisation is not positive (or NaN);
+ * the outputs but S are then garbage and the caller repairs S its own way (base.linearised_update_numpy).
+ * The products skip the exact zeros of H (a measurement of a few states touches a few columns). */
+static PyObject *update(PyObject *self, PyObject *args)
 {
     PyObject *o[8];
-    if (!PyArg_ParseTuple(args, "OOOOOOOO:innovate", &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6], &o[7]))
+    if (!PyArg_ParseTuple(args, "OOOOOOOO:update", &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6], &o[7]))
         return NULL;
     Arr A[8] = {{{0}}};
-    Py_ssize_t sP[2] = {-1, -1}, sH[2] = {-1, -1};
-    if (get_array(o[0], &A[0], "P", 2, sP, 0) < 0)
-        goto fail;
-    const Py_ssize_t n = sP[0];
-    if (sP[1] != n) {
-        PyErr_Format(PyExc_ValueError, "P must be square, got (%zd, %zd)", sP[0], sP[1]);
-        goto fail;
-    }
-    sH[1] = n;
-    if (get_array(o[1], &A[1], "H", 2, sH, 0) < 0)
-        goto fail;
-    const Py_ssize_t m = sH[0];
-    Py_ssize_t sR[2] = {m, m}, sr[1] = {m}, sHP[2] = {m, n}, sS[2] = {m, m}, sL[2] = {m, m}, sw[1] = {m};
-    if (get_array(o[2], &A[2], "R", 2, sR, 0) < 0 || get_array(o[3], &A[3], "r", 1, sr, 0) < 0
-        || get_array(o[4], &A[4], "HP", 2, sHP, 1) < 0 || get_array(o[5], &A[5], "S", 2, sS, 1) < 0
-        || get_array(o[6], &A[6], "L", 2, sL, 1) < 0 || get_array(o[7], &A[7], "w", 1, sw, 1) < 0)
-        goto fail;
-    const double *P = DATA(A[0]), *H = DATA(A[1]), *R = DATA(A[2]), *r = DATA(A[3]);
-    double *HP = DATA(A[4]), *S = DATA(A[5]), *L = DATA(A[6]), *w = DATA(A[7]);
-    for (Py_ssize_t a = 0; a < m; a++) {             /* HP = H P */
-        double *HPa = HP + a * n;
-        const double *Ha = H + a * n;
-        for (Py_ssize_t j = 0; j < n; j++)
-            HPa[j] = 0.0;
-        for (Py_ssize_t l = 0; l < n; l++) {
-            const double h = Ha[l];
-            if (h == 0.0)
-                continue;
-            const double *Pl = P + l * n;
-            for (Py_ssize_t j = 0; j < n; j++)
-                HPa[j] += h * Pl[j];
-        }
-    }
-    for (Py_ssize_t a = 0; a < m; a++)               /* S = HP H^T + R */
-        for (Py_ssize_t b = 0; b < m; b++) {
-            const double *HPa = HP + a * n, *Hb = H + b * n;
-            double s = 0.0;
-            for (Py_ssize_t l = 0; l < n; l++)
-                if (Hb[l] != 0.0)
-                    s += HPa[l] * Hb[l];
-            S[a * m + b] = s + R[a * m + b];
-        }
-    int ok = 1;                                      /* L L^T = S, from S's lower triangle */
-    for (Py_ssize_t j = 0; j < m && ok; j++) {
-        double d = S[j * m + j];
-        for (Py_ssize_t l = 0; l < j; l++)
-            d -= L[j * m + l] * L[j * m + l];
-        if (!(d > 0.0)) {
-            ok = 0;
-            break;
-        }
-        d = sqrt(d);
-        L[j * m + j] = d;
-        for (Py_ssize_t l = j + 1; l < m; l++)
-            L[j * m + l] = 0.0;
-        for (Py_ssize_t i = j + 1; i < m; i++) {
-            double s = S[i * m + j];
-            for (Py_ssize_t l = 0; l < j; l++)
-                s -= L[i * m + l] * L[j * m + l];
-            L[i * m + j] = s / d;
-        }
-    }
-    double nis = 0.0;
-    if (ok) {
-        for (Py_ssize_t a = 0; a < m; a++) {         /* w = L^-1 r */
-            double s = r[a];
-            for (Py_ssize_t l = 0; l < a; l++)
-                s -= L[a * m + l] * w[l];
-            w[a] = s / L[a * m + a];
-            nis += w[a] * w[a];
-        }
-    }
-    release(A, 8);
-    if (!ok)
-        Py_RETURN_NONE;
-    return PyFloat_FromDouble(nis);
-fail:
-    release(A, 8);
-    return NULL;
-}
-
-/* correct(x, P, H, R, HP, L, w, x1, P1) -> None
- *
- *   W = L^-1 HP,  x1 = x + W^T w  (x + K r),  K^T = L^-T W,  A = I - K H,
- *   P1 = A P A^T + K R K^T  (Joseph form; symmetric: the upper triangle mirrored)
- * x (n,), P (n, n), H (m, n), R (m, m), HP (m, n) and L, w of innovate; outputs x1 (n,), P1 (n, n). */
-static PyObject *correct(PyObject *self, PyObject *args)
-{
-    PyObject *o[9];
-    if (!PyArg_ParseTuple(args, "OOOOOOOOO:correct", &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6], &o[7], &o[8]))
-        return NULL;
-    Arr A[9] = {{{0}}};
-    Work wk = {0};
     double *mem = NULL;
+    Py_ssize_t *supp = NULL;
     Py_ssize_t sx[1] = {-1}, sH[2] = {-1, -1};
     if (get_array(o[0], &A[0], "x", 1, sx, 0) < 0)
         goto fail;
@@ -374,79 +289,137 @@ static PyObject *correct(PyObject *self, PyObject *args)
     if (get_array(o[1], &A[1], "P", 2, sP, 0) < 0 || get_array(o[2], &A[2], "H", 2, sH, 0) < 0)
         goto fail;
     const Py_ssize_t m = sH[0];
-    Py_ssize_t sR[2] = {m, m}, sHP[2] = {m, n}, sL[2] = {m, m}, sw[1] = {m}, sx1[1] = {n}, sP1[2] = {n, n};
-    if (get_array(o[3], &A[3], "R", 2, sR, 0) < 0 || get_array(o[4], &A[4], "HP", 2, sHP, 0) < 0
-        || get_array(o[5], &A[5], "L", 2, sL, 0) < 0 || get_array(o[6], &A[6], "w", 1, sw, 0) < 0
-        || get_array(o[7], &A[7], "x1", 1, sx1, 1) < 0 || get_array(o[8], &A[8], "P1", 2, sP1, 1) < 0)
+    Py_ssize_t sR[2] = {m, m}, sr[1] = {m}, sS[2] = {m, m}, sx1[1] = {n}, sP1[2] = {n, n};
+    if (get_array(o[3], &A[3], "R", 2, sR, 0) < 0 || get_array(o[4], &A[4], "r", 1, sr, 0) < 0
+        || get_array(o[5], &A[5], "S", 2, sS, 1) < 0 || get_array(o[6], &A[6], "x1", 1, sx1, 1) < 0
+        || get_array(o[7], &A[7], "P1", 2, sP1, 1) < 0)
         goto fail;
-    const double *x = DATA(A[0]), *P = DATA(A[1]), *H = DATA(A[2]), *R = DATA(A[3]), *HP = DATA(A[4]);
-    const double *L = DATA(A[5]), *w = DATA(A[6]);
-    double *x1 = DATA(A[7]), *P1 = DATA(A[8]);
-    const size_t nn = (size_t)(n * n), mn = (size_t)(m * n);
-    mem = PyMem_Malloc((nn + 3 * mn + 1) * sizeof(double));
-    if (mem == NULL) {
+    const double *x = DATA(A[0]), *P = DATA(A[1]), *H = DATA(A[2]), *R = DATA(A[3]), *r = DATA(A[4]);
+    double *S = DATA(A[5]), *x1 = DATA(A[6]), *P1 = DATA(A[7]);
+    const size_t nn = (size_t)(n * n), mn = (size_t)(m * n), mm = (size_t)(m * m);
+    mem = PyMem_Malloc((nn + 6 * mn + mm + (size_t)m + 1) * sizeof(double));
+    supp = PyMem_Malloc(((size_t)n + 1) * sizeof(Py_ssize_t));
+    if (mem == NULL || supp == NULL) {
         PyErr_NoMemory();
         goto fail;
     }
-    if (work_alloc(&wk, n) < 0)
-        goto fail;
-    double *Am = mem, *W = mem + nn, *Kt = W + mn, *KtR = Kt + mn;   /* KtR: (K^T)^T R as (n, m) */
-    for (Py_ssize_t j = 0; j < n; j++)               /* W = L^-1 HP, column by column */
-        for (Py_ssize_t a = 0; a < m; a++) {
-            double s = HP[a * n + j];
-            for (Py_ssize_t l = 0; l < a; l++)
-                s -= L[a * m + l] * W[l * n + j];
-            W[a * n + j] = s / L[a * m + a];
+    double *AP = mem, *HP = AP + nn, *W = HP + mn, *Kt = W + mn, *G = Kt + mn, *KtR = G + mn, *L = KtR + mn;
+    double *w = L + mm;
+    (void)W;
+
+    Py_ssize_t ns = 0;                               /* the columns H touches */
+    for (Py_ssize_t j = 0; j < n; j++) {
+        int any = 0;
+        for (Py_ssize_t a = 0; a < m; a++)
+            any |= (H[a * n + j] != 0.0);
+        if (any)
+            supp[ns++] = j;
+    }
+    for (Py_ssize_t a = 0; a < m; a++) {             /* HP = H P */
+        double *HPa = HP + a * n;
+        const double *Ha = H + a * n;
+        for (Py_ssize_t j = 0; j < n; j++)
+            HPa[j] = 0.0;
+        for (Py_ssize_t t = 0; t < ns; t++) {
+            const double h = Ha[supp[t]];
+            if (h != 0.0)
+                axpy(n, h, P + supp[t] * n, HPa);
         }
+    }
+    for (Py_ssize_t a = 0; a < m; a++)               /* S = HP H^T + R */
+        for (Py_ssize_t b = 0; b < m; b++) {
+            const double *HPa = HP + a * n, *Hb = H + b * n;
+            double s = 0.0;
+            for (Py_ssize_t t = 0; t < ns; t++)
+                if (Hb[supp[t]] != 0.0)
+                    s += HPa[supp[t]] * Hb[supp[t]];
+            S[a * m + b] = s + R[a * m + b];
+        }
+    for (Py_ssize_t j = 0; j < m; j++) {             /* L L^T = S, from S's lower triangle */
+        double d = S[j * m + j];
+        for (Py_ssize_t l = 0; l < j; l++)
+            d -= L[j * m + l] * L[j * m + l];
+        if (!(d > 0.0)) {
+            PyMem_Free(mem);
+            PyMem_Free(supp);
+            release(A, 8);
+            Py_RETURN_NONE;
+        }
+        d = sqrt(d);
+        L[j * m + j] = d;
+        for (Py_ssize_t i = j + 1; i < m; i++) {
+            double s = S[i * m + j];
+            for (Py_ssize_t l = 0; l < j; l++)
+                s -= L[i * m + l] * L[j * m + l];
+            L[i * m + j] = s / d;
+        }
+    }
+    double nis = 0.0;
+    for (Py_ssize_t a = 0; a < m; a++) {             /* w = L^-1 r */
+        double s = r[a];
+        for (Py_ssize_t l = 0; l < a; l++)
+            s -= L[a * m + l] * w[l];
+        w[a] = s / L[a * m + a];
+        nis += w[a] * w[a];
+    }
+    for (Py_ssize_t a = 0; a < m; a++) {             /* W = L^-1 HP, row by row */
+        double *Wa = W + a * n;
+        memcpy(Wa, HP + a * n, (size_t)n * sizeof(double));
+        for (Py_ssize_t l = 0; l < a; l++)
+            axpy(n, -L[a * m + l], W + l * n, Wa);
+        const double d = L[a * m + a];
+        for (Py_ssize_t j = 0; j < n; j++)
+            Wa[j] /= d;
+    }
     for (Py_ssize_t i = 0; i < n; i++) {             /* x1 = x + w W */
         double s = 0.0;
         for (Py_ssize_t a = 0; a < m; a++)
             s += w[a] * W[a * n + i];
         x1[i] = x[i] + s;
     }
-    for (Py_ssize_t j = 0; j < n; j++)               /* L^T Kt = W, column by column */
-        for (Py_ssize_t a = m - 1; a >= 0; a--) {
-            double s = W[a * n + j];
-            for (Py_ssize_t l = a + 1; l < m; l++)
-                s -= L[l * m + a] * Kt[l * n + j];
-            Kt[a * n + j] = s / L[a * m + a];
-        }
-    for (Py_ssize_t i = 0; i < n; i++) {             /* A = I - Kt^T H */
-        double *Ai = Am + i * n;
-        for (Py_ssize_t j = 0; j < n; j++) {
-            double s = 0.0;
-            for (Py_ssize_t a = 0; a < m; a++) {
-                const double h = H[a * n + j];
-                if (h != 0.0)
-                    s += Kt[a * n + i] * h;
-            }
-            Ai[j] = (i == j ? 1.0 : 0.0) - s;
-        }
+    for (Py_ssize_t a = m - 1; a >= 0; a--) {        /* L^T Kt = W, row by row from the last */
+        double *Ka = Kt + a * n;
+        memcpy(Ka, W + a * n, (size_t)n * sizeof(double));
+        for (Py_ssize_t l = a + 1; l < m; l++)
+            axpy(n, -L[l * m + a], Kt + l * n, Ka);
+        const double d = L[a * m + a];
+        for (Py_ssize_t j = 0; j < n; j++)
+            Ka[j] /= d;
     }
-    for (Py_ssize_t i = 0; i < n; i++)               /* (Kt^T R) (n, m) */
-        for (Py_ssize_t b = 0; b < m; b++) {
-            double s = 0.0;
-            for (Py_ssize_t a = 0; a < m; a++)
-                s += Kt[a * n + i] * R[a * m + b];
-            KtR[i * m + b] = s;
-        }
-    sandwich(Am, P, n, &wk, P1);                     /* A P A^T, upper triangle */
-    for (Py_ssize_t i = 0; i < n; i++)               /* + (Kt^T R) Kt, mirrored */
-        for (Py_ssize_t j = i; j < n; j++) {
-            double s = 0.0;
+    for (Py_ssize_t i = 0; i < n; i++) {             /* AP = P - K HP */
+        double *APi = AP + i * n;
+        memcpy(APi, P + i * n, (size_t)n * sizeof(double));
+        for (Py_ssize_t a = 0; a < m; a++)
+            axpy(n, -Kt[a * n + i], HP + a * n, APi);
+    }
+    for (Py_ssize_t i = 0; i < n; i++)               /* G = AP H^T (n, m), KtR = K R (n, m) */
+        for (Py_ssize_t a = 0; a < m; a++) {
+            const double *APi = AP + i * n, *Ha = H + a * n;
+            double g = 0.0, kr = 0.0;
+            for (Py_ssize_t t = 0; t < ns; t++)
+                g += APi[supp[t]] * Ha[supp[t]];
             for (Py_ssize_t b = 0; b < m; b++)
-                s += KtR[i * m + b] * Kt[b * n + j];
-            P1[i * n + j] += s;
-            P1[j * n + i] = P1[i * n + j];
+                kr += Kt[b * n + i] * R[b * m + a];
+            G[i * m + a] = g;
+            KtR[i * m + a] = kr;
+        }
+    for (Py_ssize_t i = 0; i < n; i++)               /* P1 = AP - G K^T + (K R) K^T, mirrored */
+        for (Py_ssize_t j = i; j < n; j++) {
+            double g = 0.0, kr = 0.0;
+            for (Py_ssize_t a = 0; a < m; a++) {
+                g += G[i * m + a] * Kt[a * n + j];
+                kr += KtR[i * m + a] * Kt[a * n + j];
+            }
+            P1[j * n + i] = P1[i * n + j] = (AP[i * n + j] - g) + kr;
         }
     PyMem_Free(mem);
-    work_free(&wk);
-    release(A, 9);
-    Py_RETURN_NONE;
+    PyMem_Free(supp);
+    release(A, 8);
+    return PyFloat_FromDouble(nis);
 fail:
     PyMem_Free(mem);
-    work_free(&wk);
-    release(A, 9);
+    PyMem_Free(supp);
+    release(A, 8);
     return NULL;
 }
 
@@ -454,12 +427,10 @@ static PyMethodDef methods[] = {
     {"propagate", propagate, METH_VARARGS,
      "propagate(P, F, Q, out): out = the covariance after P <- F_j P F_j^T + Q_j over F, Q (k, n, n), "
      "symmetric (F P F^T of P's symmetric part plus Q_j's symmetric part; ekf.predict_inputs)."},
-    {"innovate", innovate, METH_VARARGS,
-     "innovate(P, H, R, r, HP, S, L, w) -> nis or None: HP = H P, S = HP H^T + R, L its lower Cholesky "
-     "factor, w = L^-1 r, nis = w.w; None when S is not positive definite (base.linearised_update)."},
-    {"correct", correct, METH_VARARGS,
-     "correct(x, P, H, R, HP, L, w, x1, P1): x1 = x + K r, P1 = (I - K H) P (I - K H)^T + K R K^T "
-     "(symmetric) from innovate's HP, L, w (base.linearised_update)."},
+    {"update", update, METH_VARARGS,
+     "update(x, P, H, R, r, S, x1, P1) -> nis or None: S = H P H^T + R, nis = r^T S^-1 r, x1 = x + K r, "
+     "P1 = (I - K H) P (I - K H)^T + K R K^T (symmetric); None when S is not positive definite "
+     "(base.linearised_update, one iteration)."},
     {NULL, NULL, 0, NULL},
 };
 

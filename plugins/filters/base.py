@@ -230,9 +230,10 @@ def linearised_update(flt: KalmanBase, belief: Belief, model: MeasurementModel, 
 
 def _update_compiled(flt: KalmanBase, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                      gate: Gate | None) -> UpdateResult | None:
-    """:func:`linearised_update_numpy` with ``max_iterations=1``, its arithmetic in C (_kalman_kernel.c
-    ``innovate``, then ``correct`` when the gate accepts), the model's calls and checks unchanged (h is
-    evaluated before S is factored: neither has side effects). None when the numpy code must run instead:
+    """:func:`linearised_update_numpy` with ``max_iterations=1``, its arithmetic in one C call
+    (_kalman_kernel.c ``update``: S, the NIS, and the mean and Joseph-form covariance the gate then takes or
+    leaves), the model's calls and checks unchanged (h is evaluated before S is factored: neither has side
+    effects). None when the numpy code must run instead:
     more than KERNEL_MAX_STATES states, or S not positive definite (its repair and event are the numpy
     code's)."""
     chk = not trusted(model)
@@ -259,18 +260,15 @@ def _update_compiled(flt: KalmanBase, belief: Belief, model: MeasurementModel, z
         if s - s != 0.0:
             nonfinite(zh, "h", MEAN, x0)
     r = model.residual(z, zh)
-    P = np.ascontiguousarray(P, dtype=float)
-    H = np.ascontiguousarray(H, dtype=float)
-    R = np.ascontiguousarray(R, dtype=float)
-    HP, S, L, w = np.empty((m, n)), np.empty((m, m)), np.empty((m, m)), np.empty(m)
-    nis = KERNEL.innovate(P, H, R, np.ascontiguousarray(r, dtype=float), HP, S, L, w)
+    S, x1, P1 = np.empty((m, m)), np.empty(n), np.empty((n, n))
+    nis = KERNEL.update(np.ascontiguousarray(x0, dtype=float), np.ascontiguousarray(P, dtype=float),
+                        np.ascontiguousarray(H, dtype=float), np.ascontiguousarray(R, dtype=float),
+                        np.ascontiguousarray(r, dtype=float), S, x1, P1)
     if nis is None:
         return None
     out = flt.rejected(belief, r, S, nis, gate, m)
     if out is not None:
         return out
-    x1, P1 = np.empty(n), np.empty((n, n))
-    KERNEL.correct(np.ascontiguousarray(x0, dtype=float), P, H, R, HP, L, w, x1, P1)
     return UpdateResult(Belief(belief.t, flt.normalizer(model)(x1), P=P1), r, S, nis, True, (), 1)
 
 
