@@ -8,10 +8,10 @@
  * output, a non-contiguous array) raises TypeError or ValueError naming the argument.
  *
  * Functions:
- *   linearise(x, us, dts, g, unit, var_w, quat_norm_variance, x1, F, Q) -> None
+ *   linearise(x, us, dts, g, unit, var_w, quat_norm_variance, x1, F, Q[, c1, c2, c3]) -> None
  *       x (n,) = [p v q (ba bw sa sw)], n = 10 or 22; us (k, 6) IMU samples (m/s^2, rad/s, FRD); dts (k,) s;
  *       fills x1 (n,) (the mean after the run), F (k, n, n) entirely, and the q block Q[:, 6:10, 6:10]
- *       of Q (k, n, n) (the rest of Q is the caller's: noise_base).
+ *       of Q (k, n, n); the rest of Q is the caller's, or with c1, c2, c3 (n*n,) noise_base's (one call).
  *   noise_base(dts, c1, c2, c3, Q) -> None
  *       Q[j] = dts[j] c1 + dts[j]^2 c2 + dts[j]^3 c3 (c1, c2, c3 (n*n,), Q (k, n, n)).
  *
@@ -87,17 +87,33 @@ static int get_array(PyObject *obj, Arr *a, const char *name, int ndim, Py_ssize
 
 #define DATA(a) ((double *)(a).view.buf)
 
+/* Q[j] = dts[j] c1 + dts[j]^2 c2 + dts[j]^3 c3, (k, nn): InsStates._q_base_run's numpy sums, elementwise */
+static void fill_base(const double *dts, Py_ssize_t k, Py_ssize_t nn, const double *c1, const double *c2,
+                      const double *c3, double *Q)
+{
+    for (Py_ssize_t j = 0; j < k; j++) {
+        const double dt = dts[j], d2 = dt * dt, d3 = d2 * dt;
+        double *Qj = Q + j * nn;
+        for (Py_ssize_t e = 0; e < nn; e++)
+            Qj[e] = dt * c1[e] + d2 * c2[e] + d3 * c3[e];
+    }
+}
+
 /* ------------------------------------------------------------------ linearise */
 
 static PyObject *linearise(PyObject *self, PyObject *args)
 {
-    PyObject *ox, *ous, *odts, *ox1, *oF, *oQ;
+    PyObject *ox, *ous, *odts, *ox1, *oF, *oQ, *oc[3] = {NULL, NULL, NULL};
     double g, var_w, qnv;
     int unit;
-    if (!PyArg_ParseTuple(args, "OOOdpddOOO:linearise", &ox, &ous, &odts, &g, &unit, &var_w, &qnv,
-                          &ox1, &oF, &oQ))
+    if (!PyArg_ParseTuple(args, "OOOdpddOOO|OOO:linearise", &ox, &ous, &odts, &g, &unit, &var_w, &qnv,
+                          &ox1, &oF, &oQ, &oc[0], &oc[1], &oc[2]))
         return NULL;
-    Arr A[6] = {{{0}}};
+    if ((oc[0] != NULL) != (oc[2] != NULL)) {
+        PyErr_SetString(PyExc_TypeError, "linearise: give the noise coefficients c1, c2, c3 together, or none");
+        return NULL;
+    }
+    Arr A[9] = {{{0}}};
     Py_ssize_t sx[1] = {-1}, sus[2] = {-1, 6}, sdts[1] = {-1};
     if (get_array(ox, &A[0], "x", 1, sx, 0) < 0)
         goto fail;
@@ -118,6 +134,15 @@ static PyObject *linearise(PyObject *self, PyObject *args)
     if (get_array(odts, &A[2], "dts", 1, sdts, 0) < 0 || get_array(ox1, &A[3], "x1", 1, sx1, 1) < 0
         || get_array(oF, &A[4], "F", 3, sF, 1) < 0 || get_array(oQ, &A[5], "Q", 3, sQ, 1) < 0)
         goto fail;
+    if (oc[0] != NULL) {                             /* Q's attitude-independent part first (noise_base) */
+        static const char *cname[3] = {"c1", "c2", "c3"};
+        for (int i = 0; i < 3; i++) {
+            Py_ssize_t sc[1] = {n * n};
+            if (get_array(oc[i], &A[6 + i], cname[i], 1, sc, 0) < 0)
+                goto fail;
+        }
+        fill_base(DATA(A[2]), k, n * n, DATA(A[6]), DATA(A[7]), DATA(A[8]), DATA(A[5]));
+    }
 
     const double *x = DATA(A[0]), *us = DATA(A[1]), *dts = DATA(A[2]);
     double *x1 = DATA(A[3]), *F = DATA(A[4]), *Q = DATA(A[5]);
@@ -256,10 +281,10 @@ static PyObject *linearise(PyObject *self, PyObject *args)
     x1[0] = r[0], x1[1] = r[1], x1[2] = r[2];
     x1[3] = v[0], x1[4] = v[1], x1[5] = v[2];
     x1[6] = q0, x1[7] = q1, x1[8] = q2, x1[9] = q3;
-    release(A, 6);
+    release(A, 9);
     Py_RETURN_NONE;
 fail:
-    release(A, 6);
+    release(A, 9);
     return NULL;
 }
 
@@ -286,14 +311,7 @@ static PyObject *noise_base(PyObject *self, PyObject *args)
     if (get_array(oc1, &A[1], "c1", 1, s1, 0) < 0 || get_array(oc2, &A[2], "c2", 1, s2, 0) < 0
         || get_array(oc3, &A[3], "c3", 1, s3, 0) < 0)
         goto fail;
-    const double *dts = DATA(A[0]), *c1 = DATA(A[1]), *c2 = DATA(A[2]), *c3 = DATA(A[3]);
-    double *Q = DATA(A[4]);
-    for (Py_ssize_t j = 0; j < sdts[0]; j++) {
-        const double dt = dts[j], d2 = dt * dt, d3 = d2 * dt;
-        double *Qj = Q + j * nn;
-        for (Py_ssize_t e = 0; e < nn; e++)
-            Qj[e] = dt * c1[e] + d2 * c2[e] + d3 * c3[e];
-    }
+    fill_base(DATA(A[0]), sdts[0], nn, DATA(A[1]), DATA(A[2]), DATA(A[3]), DATA(A[4]));
     release(A, 5);
     Py_RETURN_NONE;
 fail:
@@ -303,8 +321,9 @@ fail:
 
 static PyMethodDef methods[] = {
     {"linearise", linearise, METH_VARARGS,
-     "linearise(x, us, dts, g, unit, var_w, quat_norm_variance, x1, F, Q): the run of IMU samples of "
-     "ins_linearise.linearise_run; fills x1 (n,), F (k, n, n) and the q block of Q (k, n, n)."},
+     "linearise(x, us, dts, g, unit, var_w, quat_norm_variance, x1, F, Q[, c1, c2, c3]): the run of IMU "
+     "samples of ins_linearise.linearise_run; fills x1 (n,), F (k, n, n) and the q block of Q (k, n, n), "
+     "with c1, c2, c3 also the rest of Q (noise_base)."},
     {"noise_base", noise_base, METH_VARARGS,
      "noise_base(dts, c1, c2, c3, Q): Q[j] = dts[j] c1 + dts[j]^2 c2 + dts[j]^3 c3 (InsStates._q_base_run)."},
     {NULL, NULL, 0, NULL},

@@ -176,3 +176,23 @@ def test_noise_base_refuses_bad_input():
         KERNEL.noise_base(dts, c, c, c, np.empty((3, 10, 10)))
     with pytest.raises(TypeError):
         KERNEL.noise_base(dts, c, c, c)
+
+
+def test_one_call_with_the_noise_coefficients_is_the_two_calls():
+    """linearise(..., c1, c2, c3) (InsStates.linearise_inputs' one call) fills Q's base as noise_base does."""
+    rng = np.random.default_rng(7)
+    for n in (10, 22):
+        x = _state(rng, n, 1.0)
+        us, dts = _run(rng, n, 9, "ordinary")
+        c = [rng.normal(size=n * n) for _ in range(3)]
+        one = (np.empty(n), np.empty((9, n, n)), np.full((9, n, n), np.nan))
+        KERNEL.linearise(x, us, dts, G, True, VAR_W, QNV, *one, *c)
+        two = (np.empty(n), np.empty((9, n, n)), np.empty((9, n, n)))
+        KERNEL.noise_base(dts, *c, two[2])
+        KERNEL.linearise(x, us, dts, G, True, VAR_W, QNV, *two)
+        for a, b in zip(one, two):
+            np.testing.assert_array_equal(a, b)
+    with pytest.raises(TypeError, match="c1, c2, c3 together"):
+        KERNEL.linearise(x, us, dts, G, True, VAR_W, QNV, *two, c[0])
+    with pytest.raises(ValueError, match="c2 has length"):
+        KERNEL.linearise(x, us, dts, G, True, VAR_W, QNV, *two, c[0], c[1][:5], c[2])
