@@ -242,7 +242,7 @@ def _update_compiled(flt: KalmanBase, belief: Belief, model: MeasurementModel, z
     if n > KERNEL_MAX_STATES:
         return None
     P = covariance_of(belief)
-    z = np.asarray(z, dtype=float).reshape(-1)
+    z = as_vector(z)
     m = z.shape[0]
     R = as_covariance(R, m)
     H = measurement_jacobian(model, x0)
@@ -259,11 +259,12 @@ def _update_compiled(flt: KalmanBase, belief: Belief, model: MeasurementModel, z
         s = zh.dot(zh)
         if s - s != 0.0:
             nonfinite(zh, "h", MEAN, x0)
-    r = model.residual(z, zh)
+    r = residual_of(model)(z, zh)
     S, x1, P1 = np.empty((m, m)), np.empty(n), np.empty((n, n))
-    nis = KERNEL.update(np.ascontiguousarray(x0, dtype=float), np.ascontiguousarray(P, dtype=float),
-                        np.ascontiguousarray(H, dtype=float), np.ascontiguousarray(R, dtype=float),
-                        np.ascontiguousarray(r, dtype=float), S, x1, P1)
+    try:                                         # the arrays as they are (nearly always float64, C-ordered)
+        nis = KERNEL.update(x0, P, H, R, r, S, x1, P1)
+    except (TypeError, ValueError):              # else contiguous float64 copies (a wrong shape raises again)
+        nis = KERNEL.update(*(np.ascontiguousarray(a, dtype=float) for a in (x0, P, H, R, r)), S, x1, P1)
     if nis is None:
         return None
     out = flt.rejected(belief, r, S, nis, gate, m)
