@@ -14,6 +14,9 @@ builtins = ["fusion_plugins" + name[len("plugins"):] for name in find_packages(i
 # name -> C source; add a kernel here and load it with fusion.kernels.load(name)
 KERNELS = {
     "fusion_plugins.process._ins_batch_kernel": "plugins/process/_ins_batch_kernel.c",   # ins_batch.integrate_inputs
+    "fusion_plugins.process._ins_run_kernel": "plugins/process/_ins_run_kernel.c",   # ins_linearise.linearise_run
+    "fusion_plugins.filters._kalman_kernel": "plugins/filters/_kalman_kernel.c",        # ekf chain, linearised_update
+    "fusion_plugins.measurement._magnetometer_kernel": "plugins/measurement/_magnetometer_kernel.c",  # h, jacobian
 }
 
 setup(packages=core + builtins + ["fusion_configs"], package_dir={"fusion_plugins": "plugins", "fusion_configs": "configs"},

@@ -4,6 +4,7 @@ time, per filter, and the replay alone (no interpreter start-up).
     python benchmarks/bench_imu_gps_mag.py              # ~1 min
     python benchmarks/bench_imu_gps_mag.py --repeats 5
     python benchmarks/bench_imu_gps_mag.py --instructions   # + instruction counts (valgrind), ~4 min
+    python benchmarks/bench_imu_gps_mag.py --pure --filters ekf   # the numpy code, not the compiled kernels
 
 The process is timed as a subprocess (``fusion run CONFIG -q``: Python start-up, imports, parsing, the
 filter); its CPU time (user + sys of the child, best of ``--repeats``) and wall time are divided into the
@@ -12,6 +13,9 @@ recording's duration (309 s of data). The replay alone is fusion.pipeline.run in
 ``--instructions`` adds the instructions the whole process executes (valgrind's callgrind, "Collected"),
 a measure that other load on the machine does not disturb (times on a shared VM vary by 15% and more):
 compare two versions by it, and by times measured in the same session.
+
+``--pure`` sets ``FUSION_PURE_PYTHON=1`` (fusion/kernels.py) for the runs: the plugins' numpy code instead of
+their compiled kernels (setup.py KERNELS), the "before" of a kernel, measured in the same session.
 """
 from __future__ import annotations
 
@@ -73,7 +77,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--instructions", action="store_true", help="also count the process's instructions (valgrind)")
+    ap.add_argument("--pure", action="store_true", help="FUSION_PURE_PYTHON=1: the numpy code, not the C kernels")
+    ap.add_argument("--filters", default="ekf,ukf,srukf", help="comma-separated subset of ekf,ukf,srukf")
     args = ap.parse_args(argv)
+    if args.pure:
+        os.environ["FUSION_PURE_PYTHON"] = "1"          # the children inherit it; this process imports later
+    chosen = set(args.filters.split(","))
     extra_head = " process instructions (G) |" if args.instructions else ""
     print("| filter | process CPU s | x real time (CPU) | process wall s | replay CPU s | replay x real time |"
           + extra_head)
@@ -82,6 +91,8 @@ def main(argv=None) -> int:
                                                   {"type": "ukf", "alpha": 0.5}),
                               ("srukf", ["--filter", "srukf", "--filter-param", "alpha=0.5"],
                                {"type": "srukf", "alpha": 0.5})):
+        if name not in chosen:
+            continue
         cpu, wall = process_time(extra, args.repeats)
         rep = replay_time(spec, args.repeats)
         ir = ""

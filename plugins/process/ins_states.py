@@ -29,6 +29,7 @@ from fusion.api import BuildContext, Event, Message, StateLayout
 
 from .ins import Ins, InsParams, density_variance
 from .ins_params import InsProcess
+from . import ins_linearise
 from .ins_linearise import linearise_run
 
 __all__ = ["InsStates"]
@@ -176,6 +177,15 @@ class InsStates(InsProcess):
         # plain floats: ~0.1 us each against ~1.5 us for a numpy reduction (the run has ~10 samples)
         if not dl or max(dl) > self._hold or min(dl) <= 0.0:
             return None
+        kernel = ins_linearise.KERNEL
+        if kernel is not None:       # linearise_run and _q_base_run in one C call (_ins_run_kernel.c)
+            n, k = self.layout.n, len(dl)
+            x1, F, Q = np.empty(n), np.empty((k, n, n)), np.empty((k, n, n))
+            kernel.linearise(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(us, dtype=float),
+                             np.ascontiguousarray(dts), self.g, bool(self.layout.unit_quaternions),
+                             float(self.core._var_w[0]), self.params.quat_norm_variance,  # type: ignore[attr-defined]
+                             x1, F, Q, *self._noise_coefficients())
+            return x1, F, Q
         return linearise_run(np.asarray(x, dtype=float), np.asarray(us, dtype=float), dts, self.g,
                              bool(self.layout.unit_quaternions), self._q_base_run(dts), float(self.core._var_w[0]),
                              self.params.quat_norm_variance)  # type: ignore[attr-defined]
@@ -187,20 +197,31 @@ class InsStates(InsProcess):
         :meth:`_q_base` per sample; a cache per dt would miss: the intervals of a recording differ in
         their last bits (0.01999999999999602, 0.020000000000003126, ...)."""
         k, n = dts.shape[0], self.layout.n
-        if self._base_coef is None:                   # Q1, Q2, Q3 (n, n) with the scale walks' N_s^2 in Q1
-            if n == 10:
-                Q1, Q2, Q3 = (np.ascontiguousarray(c[:10, :10]) for c in self.core._Qdt)
-            else:
-                Q1, Q2, Q3 = (np.pad(c, (0, 6)) for c in self.core._Qdt)
-                Q1[16:, 16:] = np.diag(self._var_s)                   # eq. 13: scale-factor random walks
-            self._base_coef = tuple(c.reshape(n * n) for c in (Q1, Q2, Q3))
-        c1, c2, c3 = self._base_coef
+        c1, c2, c3 = self._noise_coefficients()
+        kernel = ins_linearise.KERNEL
+        if kernel is not None:                        # the same sums in C (_ins_run_kernel.c noise_base)
+            Q = np.empty((k, n, n))
+            kernel.noise_base(np.ascontiguousarray(dts, dtype=float), c1, c2, c3, Q)
+            return Q
         d2 = dts * dts
         # zero coefficients give exact zeros, so the sums are those of the nonzero terms, in Q's order
         Q = np.multiply.outer(dts, c1)
         Q += np.multiply.outer(d2, c2)
         Q += np.multiply.outer(d2 * dts, c3)
         return Q.reshape(k, n, n)                                 # the q block: linearise_run's
+
+    def _noise_coefficients(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(c1, c2, c3), each (n*n,): the attitude-independent Q over dt is ``c1 dt + c2 dt^2 + c3 dt^3``
+        (ins.py's Q1, Q2, Q3 with the scale walks' N_s^2 in c1), computed once."""
+        if self._base_coef is None:
+            n = self.layout.n
+            if n == 10:
+                Q1, Q2, Q3 = (np.ascontiguousarray(c[:10, :10]) for c in self.core._Qdt)
+            else:
+                Q1, Q2, Q3 = (np.pad(c, (0, 6)) for c in self.core._Qdt)
+                Q1[16:, 16:] = np.diag(self._var_s)                   # eq. 13: scale-factor random walks
+            self._base_coef = tuple(c.reshape(n * n) for c in (Q1, Q2, Q3))
+        return self._base_coef  # type: ignore[return-value]
 
     # ------------------------------------------------------------------ the one-point fast path
     def _step(self, x: np.ndarray, u: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:

@@ -5,8 +5,9 @@
   step), replayed over the shipped recording for the 10-, 16- and 22-state sets, with the recording as is
   and with IMU gaps longer than ``hold_after`` (the run then falls back to per-sample predictions).
 * The one-state shortcuts that must give the very numbers of the general code, bit for bit: the run's
-  attitude-independent noise, the magnetometer's ``h`` and ``jacobian`` for one state, the truth window's
-  quaternion normalisation and median, the NMEA decoder's NED conversion.
+  attitude-independent noise, the magnetometer's ``h`` and ``jacobian`` for one state (numpy; its compiled
+  kernel to the last bit or two), the truth window's quaternion normalisation and median, the NMEA
+  decoder's NED conversion.
 """
 from __future__ import annotations
 
@@ -25,6 +26,7 @@ from fusion.pipeline import Run
 from fusion.registry import default_registry
 from fusion.truth_stream import _median, _Rows
 from fusion_plugins.filters.jacobian import numerical_jacobian
+from fusion_plugins.measurement import magnetometer
 from fusion_plugins.measurement.magnetometer import Magnetometer, MagnetometerParams
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -118,7 +120,21 @@ def test_run_noise_base_is_the_per_sample_base(states):
         np.testing.assert_array_equal(Qj, m._q_base(dt))
 
 
-def test_magnetometer_one_state_is_the_general_model():
+@pytest.mark.parametrize("compiled", [False, True])
+def test_magnetometer_one_state_is_the_general_model(compiled, monkeypatch):
+    """The numpy one-state code: bit for bit the general code; the compiled kernel (_magnetometer_kernel.c):
+    the same formulas, to the last bit or two."""
+    if compiled and magnetometer.KERNEL is None:
+        pytest.skip("the magnetometer kernel is not built (python setup.py build_ext --inplace)")
+    if not compiled:
+        monkeypatch.setattr(magnetometer, "KERNEL", None)
+
+    def same(a, b):
+        if compiled:
+            np.testing.assert_allclose(a, b, rtol=0, atol=4e-16 * np.abs(b).max())
+        else:
+            np.testing.assert_array_equal(a, b)
+
     rng = np.random.default_rng(5)
     mag = Magnetometer(MagnetometerParams(declination_deg=-20.5, inclination_deg=-36.0, intensity=23.5),
                        BuildContext(layout=L22))
@@ -127,11 +143,11 @@ def test_magnetometer_one_state_is_the_general_model():
     Z = mag.h(X)
     flip = np.array([1.0, -1.0, -1.0, -1.0])
     for x, z in zip(X, Z):
-        np.testing.assert_array_equal(mag.h(x), quat.rotate(x[6:10] * flip, mag.m_n))   # the general code on (4,)
+        same(mag.h(x), quat.rotate(x[6:10] * flip, mag.m_n))              # the general code on (4,)
         np.testing.assert_allclose(mag.h(x), z, rtol=1e-13, atol=1e-13)   # a batch rounds in another order
         H = np.zeros((3, 22))
         H[:, 6:10] = quat.rotate_jacobian(x[6:10] * flip, mag.m_n) * flip
-        np.testing.assert_array_equal(mag.jacobian(x), H)
+        same(mag.jacobian(x), H)
     np.testing.assert_allclose(mag.jacobian(X[0]), numerical_jacobian(mag.h, X[0]), atol=1e-7)
 
 
