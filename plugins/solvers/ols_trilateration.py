@@ -60,6 +60,9 @@ class OlsParams(Params):
     min_beacons: int | None = Field(None, ge=3, description="fewest beacons for a fix (default dim + 1)")
     beacons: list[str] | None = Field(None, description="beacons this receiver ranges (default: all); a cycle "
                                       "closes as soon as each has reported")
+    close_at_last_slot: bool = Field(True, description="close a cycle as soon as the latest slot of the beacons "
+                                     "heard in the last cycles has reported (plugins/solvers/firing_schedule.py), "
+                                     "not at a range of the next cycle: the fix is stamped no later than its data")
     reference: Literal["nearest", "first"] = "nearest"
     qr_condition: float = Field(1e6, gt=1, description="cond(A^T A) above which QR replaces eq. 32")
     degenerate_condition: float = Field(1e12, gt=1, description="cond(A^T A) above which there is no fix")
@@ -162,7 +165,8 @@ class OlsTrilateration(Solver):
                                          "unknown_beacon": 0, "split_cycles": 0, "compensated": 0,
                                          **{r: 0 for r in REASONS}}
         self.events: list[Event] = []
-        self.schedule = FiringSchedule(p.firing_period, p.speed_of_sound, p.learn_s, len(self.beacon_positions))
+        self.schedule = FiringSchedule(p.firing_period, p.speed_of_sound, p.learn_s, len(self.beacon_positions),
+                                       close_at_last_slot=p.close_at_last_slot)
         self._belief_at: Callable[[float], Belief | None] | None = None
         self._sensor = self.context.sensor or "abps"
         self._line: int | None = None
@@ -227,6 +231,12 @@ class OlsTrilateration(Solver):
                                      f"of the pulse of {keep[2]:.3f} m (t={keep[0]:.6f} s), emitted "
                                      f"{1e3 * abs(drop[3] - keep[3]):.3g} ms apart; the shorter (the direct "
                                      f"path) is kept"))
+        for late in self.schedule.take_late():
+            self.counters["late_ranges"] = self.counters.get("late_ranges", 0) + 1
+            self.events.append(Event(late[0], "rejected", self._sensor,
+                                     f"range to {late[1]} ({late[2]:.3f} m, t={late[0]:.6f} s) came after its cycle "
+                                     f"was closed at the last slot heard before (the beacon came into reach); "
+                                     f"expected from the next cycle on"))
         for t, why in self.schedule.take_warnings():
             self.events.append(Event(t, "warning", self._sensor, f"ols_trilateration: {why}"))
 
