@@ -39,7 +39,7 @@ from fusion_plugins.solvers.ols_trilateration import pack_fix, unpack_fix  # noq
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "abps_ins.yaml"
-SCENARIOS = ("abps_mine", "abps_room_eight", "abps_l_drift", "abps_long_legs")
+SCENARIOS = ("abps_mine", "abps_room_eight", "abps_l_drift", "abps_long_legs", "abps_fast_l")
 LEVER_Z = -0.4            # m: the receiver's lever arm z (configs/abps_ins.yaml model.lever_arm)
 
 
@@ -141,13 +141,14 @@ def one(scenario: str, seed: int, tmp: Path, noise: bool = True, changes: dict |
             "max_gap_s": gap, "resets": s["health"]["resets"], "cpu_s": cpu, **fs}
 
 
-def study(seeds: int = 10, scenarios=SCENARIOS, noise_off: bool = True, progress: bool = True) -> list[dict]:
+def study(seeds: int = 10, scenarios=SCENARIOS, noise_off: bool = True, progress: bool = True,
+          changes: dict | None = None) -> list[dict]:
     rows = []
     with tempfile.TemporaryDirectory() as tmpd:
         tmp = Path(tmpd)
         for sc in scenarios:
             for seed in range(1, seeds + 1):
-                rows.append(one(sc, seed, tmp))
+                rows.append(one(sc, seed, tmp, changes=changes))
                 if progress:
                     r = rows[-1]
                     print(f"{sc} seed {seed}: h {r['h_rmse']:.3f} ({r['h_max']:.2f}) fix {r['fix_rmse']:.3f} ({r['fix_max']:.2f}) "
@@ -156,7 +157,7 @@ def study(seeds: int = 10, scenarios=SCENARIOS, noise_off: bool = True, progress
                 for f in tmp.glob("*.log"):
                     f.unlink()
             if noise_off:
-                rows.append(one(sc, 0, tmp, noise=False))
+                rows.append(one(sc, 0, tmp, noise=False, changes=changes))
                 if progress:
                     r = rows[-1]
                     print(f"{sc} noise off: h {r['h_rmse']:.4f} ({r['h_max']:.3f}) fix {r['fix_rmse']:.4f}", flush=True)
@@ -168,6 +169,7 @@ ROUTE_TEXT = {
     "abps_room_eight": "three figure-eights in a 24 x 18 m room, 9 roof beacons 2.2 m above the receiver",
     "abps_l_drift": "an L-shaped drift (90 degree bend), 11 beacons, forward, back, forward",
     "abps_long_legs": "four long legs of a 50 m drift at 1.5 m/s, 10 beacons, U-turns and stops",
+    "abps_fast_l": "the L-shaped drift driven hard: 13 beacons, 3 m/s, 3 m/s^2 braking into stops and U-turns",
 }
 
 
@@ -260,8 +262,16 @@ def main(argv=None) -> None:
     ap.add_argument("--scenario", action="append", help="only these scenarios (default: all ABPS ones)")
     ap.add_argument("--no-noise-off", action="store_true")
     ap.add_argument("--json", help="write the rows here")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=YAML",
+                    help="change the site config, e.g. sensors.abps.model.bridge=imu (a dotted path; the value is YAML)")
     args = ap.parse_args(argv)
-    rows = study(args.seeds, tuple(args.scenario or SCENARIOS), not args.no_noise_off)
+    changes = {}
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep:
+            ap.error(f"--set {item!r}: expected KEY=VALUE")
+        changes[key] = yaml.safe_load(value)
+    rows = study(args.seeds, tuple(args.scenario or SCENARIOS), not args.no_noise_off, changes=changes or None)
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
 

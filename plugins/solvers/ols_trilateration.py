@@ -106,7 +106,11 @@ class OlsTrilateration(Solver):
     The uncertainty of that shift (P_v plus ``velocity_sd``^2, and ``accel_sd``) is part of the fix
     covariance. Every cycle is compensated, also right after a failed fix. The fix is stamped at the
     belief's time; when that is later than t_m (inputs past t_m already integrated), the message carries
-    the age ``t - t_m`` as a 10th value and the ``position`` model bridges it with the state's velocity.
+    the age ``t - t_m`` as a 10th value and the ``position`` model bridges it with the state's velocity
+    (first order, or with the IMU: its ``bridge``). The velocity is then the belief's, ``age`` after t_m:
+    its difference from the velocity at t_m (``accel_sd`` x age) is part of the compensation's uncertainty.
+    The cycle closes at its last heard slot (``close_at_last_slot``), so the belief is no later than the
+    cycle's last range and the age at most about half the cycle's span.
     Before the filter has a belief, v = 0 with sd ``prior_speed_sd``. Without compensation the fix is
     stamped at t_m, and its covariance takes the unknown motion over the cycle (velocity sd
     ``prior_speed_sd``) as correlated range errors.
@@ -260,14 +264,15 @@ class OlsTrilateration(Solver):
             age = t_fix - t_m
             dt = times - t_m
             B = B - dt[:, None] * v
-            # the velocity at t_fix bridges the age too (the position model's p - v age), so it is exact there
+            # v is the belief's at t_fix: off the velocity at t_m by the acceleration over the age, which the
+            # range covariance carries (velocity_age); the position model bridges the age itself
         elif len(names) >= self.min_beacons and len(names) > 1:
             Pv = self._prior_velocity_cov()
         try:
             if len(names) < self.min_beacons:
                 raise NoFix("too_few_beacons", f"{len(names)} beacon(s) {names}, need {self.min_beacons}")
             try:
-                pos, cov, info = self._trilaterate(B, ranges, times - t_m, Pv, start)
+                pos, cov, info = self._trilaterate(B, ranges, times - t_m, Pv, start, age)
             except NoFix as exc:
                 # Lost lock: after a gap the belief can be metres and m/s off, its velocity then spoils the
                 # compensation and every cycle is refused (the fix that would correct the belief refused
@@ -317,7 +322,7 @@ class OlsTrilateration(Solver):
         return np.diag([p.prior_speed_sd ** 2] * 2 + [p.prior_speed_sd ** 2 if p.dim == 3 else 0.0])
 
     def _trilaterate(self, B: np.ndarray, ranges: np.ndarray, offsets: np.ndarray, Pv: np.ndarray | None,
-                     start: np.ndarray | None):
+                     start: np.ndarray | None, age: float = 0.0):
         p: OlsParams = self.params  # type: ignore[assignment]
         with np.errstate(over="ignore", invalid="ignore"):    # overflowing ranges: caught by the caller
             return trilaterate(
@@ -327,7 +332,7 @@ class OlsTrilateration(Solver):
                 max_outliers=p.max_outliers, min_beacons=self.min_beacons,
                 offsets=None if Pv is None else offsets, velocity_cov=Pv,
                 accel_sd=p.accel_sd if Pv is not None else 0.0, solve_height=p.solve_height,
-                inflate_misfit=p.inflate_misfit, start=start if p.refine_iterations else None)
+                inflate_misfit=p.inflate_misfit, start=start if p.refine_iterations else None, velocity_age=age)
 
     def _velocity(self, t: float) -> tuple[np.ndarray, np.ndarray, float, np.ndarray | None]:
         """From the filter's belief predicted to ``t``: the velocity (3,) (m/s, navigation frame), its
