@@ -62,6 +62,11 @@ class Position(MeasurementModel[PositionParams]):
     configured R; a message of 9 values ``x y z cxx cxy cxz cyy cyz czz`` (as ``ols_trilateration``
     emits) carries its own covariance, used as R (leading dim x dim block).
 
+    A fix with an ``age`` (of the position that long before its stamp: ``ols_trilateration`` when the filter has
+    integrated inputs past the cycle's mean range time) is bridged by ``bridge``: ``first_order``
+    (:class:`AgedPosition`, ``p - v age``) or ``imu`` (:class:`ImuAgedPosition`, second order from the latest IMU
+    sample); ``accel_sd`` adds what the bridge leaves out to R.
+
     ``offset_block`` (with ``offset_axes``): a state block added to the fix's axes, ``z = p + C_b^n r + o``:
     a slowly varying error of the fix modelled as a state (e.g. the height error of a 2-D fix that assumes
     a known height, an ``ins`` ``gauss_markov`` block), so that it is not averaged as white noise.
