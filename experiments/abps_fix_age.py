@@ -11,7 +11,8 @@ from this checkout (abps_fast_l*.yaml are new), the config and the shipped recor
 Measured (experiments/abps_routes.py's ``one``: the shipped config with the site's beacons, receiver height and
 initial pose): every ABPS scenario x seeds 1-10 and noise off; 20 seeds of scenarios/abps_mine.yaml; seeds 1-5
 of the fast route with an 800 Hz IMU; the shipped recording (recordings/abps_mine.log). Variants (this checkout
-only): the position model's second-order bridge from the IMU (``sensors.abps.model.bridge: imu``).
+only): the IMU's acceleration in the bridge and the compensation (``sensors.abps.model.bridge: imu`` with
+``sensors.abps.preprocessor.input_acceleration: true``).
 """
 from __future__ import annotations
 
@@ -35,7 +36,7 @@ import abps_routes as routes  # noqa: E402
 
 OUT = HERE / "docs" / "results" / "abps_fix_age.md"
 ROUTES = ("abps_mine", "abps_room_eight", "abps_l_drift", "abps_long_legs", "abps_fast_l")
-IMU = {"sensors.abps.model.bridge": "imu"}
+IMU = {"sensors.abps.model.bridge": "imu", "sensors.abps.preprocessor.input_acceleration": True}
 
 
 def shipped(root: Path) -> dict:
@@ -122,10 +123,12 @@ def page(after: dict, before: dict | None) -> str:
     add("   after t_m, so range i errs by `u_i . a (dt_i^2 / 2 - age dt_i)` (`range_fix.range_cov`, `velocity_age`);")
     add("   the position model adds what its bridge leaves out, `(accel_sd age^2 / 2)^2` per axis (`accel_sd: 0.5`")
     add("   m/s^2 in the config, the vehicle's acceleration as the INS hold model's).")
-    add("3. **An opt-in second-order bridge from the IMU** (`position` model, `bridge: imu`): `p - v age + age^2/2")
-    add("   (C_b^n (f - b_a) + g_n)` and the lever arm turned back by the rate `w - b_w` (second order), with the")
-    add("   state's biases inside the sigma points. It reads the input samples (`fusion.api.UsesInput`), so the run")
-    add("   integrates the inputs up to every range message: more prediction steps, and every fix then has an age.")
+    add("3. **Opt-in: the IMU's acceleration** (\"bridge imu\" rows: the `position` model's `bridge: imu` with the")
+    add("   preprocessor's `input_acceleration: true`). The bridge becomes `p - v age + age^2/2 (C_b^n (f - b_a) + g_n)`")
+    add("   with the lever arm turned back by the rate `w - b_w` (second order; the state's biases inside the sigma")
+    add("   points), and the ranges are referred with the velocity of t_m (the belief's minus the acceleration over")
+    add("   the age) plus `a dt^2 / 2`. Both read the input samples (`fusion.api.UsesInput`), so the run integrates")
+    add("   the inputs up to every range message: more prediction steps, and every fix then has an age.")
     add("")
     sb, sa = (before or {}).get("shipped"), after["shipped"]
     add("## The shipped recording")
@@ -190,7 +193,7 @@ def page(after: dict, before: dict | None) -> str:
     add("")
     add("- The timing (1.) is what matters: the bridge's error with the true state shrinks with the square of the")
     add("  age, and the mean age on `abps_fast_l` fell from 0.14 s to 0.03 s (at 800 Hz from 0.27 s to 0.10 s;")
-    add("  `tests/systems/test_abps_fix_age.py` checks the timing and the bridge on a straight 12-beacon drift).")
+    add("  `tests/systems/test_abps_fast_drift.py` checks the timing and the bridge on a straight 12-beacon drift).")
     add("- The covariance terms (2.) change little at the config's 0.5 m/s^2: they make the fix honest about a")
     add("  moderate acceleration, not about 3 m/s^2 braking, which only a measured acceleration covers.")
     add("- The IMU bridge (3.) is exact to the jerk (tests/models/test_abps_fix_age.py: 2 mm at 0.3 s while braking")
