@@ -71,23 +71,34 @@ def site_config(scenario: Path) -> dict:
 
 
 def fix_stage(fixes: list, truth: Truth, arm: np.ndarray) -> dict:
-    """Every emitted fix against the true receiver position at the time its position is of."""
-    err, nees = [], []
+    """Every emitted fix against the true receiver position at the time its position is of (``fix_*``), and
+    as the position model's first-order bridge reads it at its stamp t with the true state there,
+    ``p + C_b^n r - v age`` (``stamp_*``: what the filter compares the fix with; the bridge's own error is
+    the difference), with the fixes' mean and largest age (s)."""
+    err, nees, stamp, ages = [], [], [], []
     for t, vals in fixes:
         pos, cov = unpack_fix(vals[:9])
-        t_pos = t - (vals[9] if len(vals) > 9 else 0.0)
-        tv = truth.at(t_pos)
-        if tv is None:
+        age = vals[9] if len(vals) > 9 else 0.0
+        tv, tv_t = truth.at(t - age), truth.at(t)
+        if tv is None or tv_t is None:
             continue
         q = np.array([tv["qw"], tv["qx"], tv["qy"], tv["qz"]])
         rec = np.array([tv["px"], tv["py"], tv["pz"]]) + quat.rotate(q, arm)
         e = pos[:2] - rec[:2]
         err.append(float(np.hypot(*e)))
         nees.append(float(e @ np.linalg.solve(cov[:2, :2], e)))
-    err_a = np.array(err)
+        q_t = np.array([tv_t["qw"], tv_t["qx"], tv_t["qy"], tv_t["qz"]])
+        bridged = (np.array([tv_t["px"], tv_t["py"], tv_t["pz"]]) + quat.rotate(q_t, arm)
+                   - age * np.array([tv_t["vx"], tv_t["vy"], tv_t["vz"]]))
+        stamp.append(float(np.hypot(*(pos[:2] - bridged[:2]))))
+        ages.append(float(age))
+    err_a, stamp_a = np.array(err), np.array(stamp)
     return {"fix_rmse": float(np.sqrt(np.mean(err_a ** 2))) if err else math.nan,
             "fix_max": float(err_a.max()) if err else math.nan,
-            "fix_nees": float(np.mean(nees)) if nees else math.nan, "fixes": len(err)}
+            "fix_nees": float(np.mean(nees)) if nees else math.nan, "fixes": len(err),
+            "stamp_rmse": float(np.sqrt(np.mean(stamp_a ** 2))) if stamp else math.nan,
+            "stamp_max": float(stamp_a.max()) if stamp else math.nan,
+            "age_mean": float(np.mean(ages)) if ages else math.nan, "age_max": float(max(ages)) if ages else math.nan}
 
 
 def one(scenario: str, seed: int, tmp: Path, noise: bool = True, changes: dict | None = None) -> dict:
