@@ -103,8 +103,10 @@ class OlsTrilateration(Solver):
     split. A second report of one pulse (emissions of one beacon closer than half a slot spacing: a repeated
     or retransmitted line, an echo stamped with the direct pulse's time) is no period while learning and
     in a cycle the shorter range is kept: counted ``duplicate_pulses``, an Event ``rejected``. A period that
-    cannot be learnt gives an Event ``warning`` saying so. A cycle closes when a range of a later cycle
-    arrives, when every expected beacon has reported, or at the end of the input (flush).
+    cannot be learnt gives an Event ``warning`` saying so. A cycle closes when the latest slot of the
+    beacons heard in the last cycles has reported (``close_at_last_slot``: a beacon back in reach in a later
+    slot then loses that range, counted ``late_ranges``, an Event ``rejected``), else when a range of a later
+    cycle arrives, when every configured beacon has reported, or at the end of the input (flush).
 
     **Motion compensation** (``motion_compensation``): the fix is of the receiver at the mean time t_m of
     the cycle's ranges; the filter's belief predicted to t_m (fusion.api.ReadsBelief) gives the velocity v
