@@ -39,7 +39,7 @@ from fusion_plugins.solvers.ols_trilateration import pack_fix, unpack_fix  # noq
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "abps_ins.yaml"
-SCENARIOS = ("abps_mine", "abps_room_eight", "abps_l_drift", "abps_long_legs")
+SCENARIOS = ("abps_mine", "abps_room_eight", "abps_l_drift", "abps_long_legs", "abps_fast_l")
 LEVER_Z = -0.4            # m: the receiver's lever arm z (configs/abps_ins.yaml model.lever_arm)
 
 
@@ -71,23 +71,34 @@ def site_config(scenario: Path) -> dict:
 
 
 def fix_stage(fixes: list, truth: Truth, arm: np.ndarray) -> dict:
-    """Every emitted fix against the true receiver position at the time its position is of."""
-    err, nees = [], []
+    """Every emitted fix against the true receiver position at the time its position is of (``fix_*``), and
+    as the position model's first-order bridge reads it at its stamp t with the true state there,
+    ``p + C_b^n r - v age`` (``stamp_*``: what the filter compares the fix with; the bridge's own error is
+    the difference), with the fixes' mean and largest age (s)."""
+    err, nees, stamp, ages = [], [], [], []
     for t, vals in fixes:
         pos, cov = unpack_fix(vals[:9])
-        t_pos = t - (vals[9] if len(vals) > 9 else 0.0)
-        tv = truth.at(t_pos)
-        if tv is None:
+        age = vals[9] if len(vals) > 9 else 0.0
+        tv, tv_t = truth.at(t - age), truth.at(t)
+        if tv is None or tv_t is None:
             continue
         q = np.array([tv["qw"], tv["qx"], tv["qy"], tv["qz"]])
         rec = np.array([tv["px"], tv["py"], tv["pz"]]) + quat.rotate(q, arm)
         e = pos[:2] - rec[:2]
         err.append(float(np.hypot(*e)))
         nees.append(float(e @ np.linalg.solve(cov[:2, :2], e)))
-    err_a = np.array(err)
+        q_t = np.array([tv_t["qw"], tv_t["qx"], tv_t["qy"], tv_t["qz"]])
+        bridged = (np.array([tv_t["px"], tv_t["py"], tv_t["pz"]]) + quat.rotate(q_t, arm)
+                   - age * np.array([tv_t["vx"], tv_t["vy"], tv_t["vz"]]))
+        stamp.append(float(np.hypot(*(pos[:2] - bridged[:2]))))
+        ages.append(float(age))
+    err_a, stamp_a = np.array(err), np.array(stamp)
     return {"fix_rmse": float(np.sqrt(np.mean(err_a ** 2))) if err else math.nan,
             "fix_max": float(err_a.max()) if err else math.nan,
-            "fix_nees": float(np.mean(nees)) if nees else math.nan, "fixes": len(err)}
+            "fix_nees": float(np.mean(nees)) if nees else math.nan, "fixes": len(err),
+            "stamp_rmse": float(np.sqrt(np.mean(stamp_a ** 2))) if stamp else math.nan,
+            "stamp_max": float(stamp_a.max()) if stamp else math.nan,
+            "age_mean": float(np.mean(ages)) if ages else math.nan, "age_max": float(max(ages)) if ages else math.nan}
 
 
 def one(scenario: str, seed: int, tmp: Path, noise: bool = True, changes: dict | None = None) -> dict:
@@ -141,13 +152,14 @@ def one(scenario: str, seed: int, tmp: Path, noise: bool = True, changes: dict |
             "max_gap_s": gap, "resets": s["health"]["resets"], "cpu_s": cpu, **fs}
 
 
-def study(seeds: int = 10, scenarios=SCENARIOS, noise_off: bool = True, progress: bool = True) -> list[dict]:
+def study(seeds: int = 10, scenarios=SCENARIOS, noise_off: bool = True, progress: bool = True,
+          changes: dict | None = None) -> list[dict]:
     rows = []
     with tempfile.TemporaryDirectory() as tmpd:
         tmp = Path(tmpd)
         for sc in scenarios:
             for seed in range(1, seeds + 1):
-                rows.append(one(sc, seed, tmp))
+                rows.append(one(sc, seed, tmp, changes=changes))
                 if progress:
                     r = rows[-1]
                     print(f"{sc} seed {seed}: h {r['h_rmse']:.3f} ({r['h_max']:.2f}) fix {r['fix_rmse']:.3f} ({r['fix_max']:.2f}) "
@@ -156,7 +168,7 @@ def study(seeds: int = 10, scenarios=SCENARIOS, noise_off: bool = True, progress
                 for f in tmp.glob("*.log"):
                     f.unlink()
             if noise_off:
-                rows.append(one(sc, 0, tmp, noise=False))
+                rows.append(one(sc, 0, tmp, noise=False, changes=changes))
                 if progress:
                     r = rows[-1]
                     print(f"{sc} noise off: h {r['h_rmse']:.4f} ({r['h_max']:.3f}) fix {r['fix_rmse']:.4f}", flush=True)
@@ -168,6 +180,7 @@ ROUTE_TEXT = {
     "abps_room_eight": "three figure-eights in a 24 x 18 m room, 9 roof beacons 2.2 m above the receiver",
     "abps_l_drift": "an L-shaped drift (90 degree bend), 11 beacons, forward, back, forward",
     "abps_long_legs": "four long legs of a 50 m drift at 1.5 m/s, 10 beacons, U-turns and stops",
+    "abps_fast_l": "the L-shaped drift driven hard: 13 beacons, 3 m/s, 3 m/s^2 braking into stops and U-turns",
 }
 
 
@@ -239,6 +252,10 @@ def routes_section(rows: list[dict]) -> str:
     add("   counts them on the routes above.")
     add("6. **End of input**: a measurement now integrates only the pending IMU samples up to its own time, so the")
     add("   last fix is applied at its time (no spurious `late`).")
+    add("7. **The age of a fix** (tester5 #3, docs/results/abps_fix_age.md): a cycle closes at its last heard slot,")
+    add("   not at a range of the next cycle, so the fix is applied no later than its last range; the acceleration")
+    add("   over the age is in the compensation's and the bridge's covariance; the IMU's acceleration in the bridge")
+    add("   and the compensation is opt-in. `abps_fast_l` (13 beacons, 3 m/s, 3 m/s^2 braking) was added for it.")
     add("")
     add("Remaining: in a drift the beacons of one wall are collinear, so a cycle of three ranges, or of a few with one")
     add("long (reflected) range, can fit a mirror image of the position across that wall; with one or two degrees of")
@@ -260,8 +277,16 @@ def main(argv=None) -> None:
     ap.add_argument("--scenario", action="append", help="only these scenarios (default: all ABPS ones)")
     ap.add_argument("--no-noise-off", action="store_true")
     ap.add_argument("--json", help="write the rows here")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=YAML",
+                    help="change the site config, e.g. sensors.abps.model.bridge=imu (a dotted path; the value is YAML)")
     args = ap.parse_args(argv)
-    rows = study(args.seeds, tuple(args.scenario or SCENARIOS), not args.no_noise_off)
+    changes = {}
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep:
+            ap.error(f"--set {item!r}: expected KEY=VALUE")
+        changes[key] = yaml.safe_load(value)
+    rows = study(args.seeds, tuple(args.scenario or SCENARIOS), not args.no_noise_off, changes=changes or None)
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
 

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import warnings
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 import numpy as np
 from pydantic import Field
@@ -39,6 +39,15 @@ class PositionParams(Params):
                                                 "block adds to, one per block element (default: the first ones)")
     use_fix_covariance: bool = Field(True, description="use the covariance a solver attaches to its fix as R "
                                      "(False: always the sensor's configured noise)")
+    bridge: Literal["first_order", "imu"] = Field(
+        "first_order", description="how a fix with an age (of the position age s before its stamp) is bridged to "
+        "the state: first_order p - v age, or imu: + age^2/2 the IMU's acceleration and the lever arm turned back "
+        "by its rate (the model then reads the input samples: fusion.api.UsesInput; state blocks q, v, ba, bw)")
+    accel_sd: float = Field(0.0, ge=0, le=1e6, description="m/s^2: the acceleration the bridge does not account "
+                            "for (first_order: the vehicle's own; imu: its change over the age); R += (accel_sd "
+                            "age^2 / 2)^2 per axis")
+    gravity: float = Field(9.80665, gt=0, description="m/s^2, down: g_n of the imu bridge's acceleration "
+                           "C_b^n (f - b_a) + g_n (only its vertical part; a 2-D fix barely sees it)")
 
 
 class Position(MeasurementModel[PositionParams]):
@@ -52,6 +61,11 @@ class Position(MeasurementModel[PositionParams]):
     ``observe``: a message of ``dim`` values (or 3 for a 2-D state) is the fix, with the sensor's
     configured R; a message of 9 values ``x y z cxx cxy cxz cyy cyz czz`` (as ``ols_trilateration``
     emits) carries its own covariance, used as R (leading dim x dim block).
+
+    A fix with an ``age`` (of the position that long before its stamp: ``ols_trilateration`` when the filter has
+    integrated inputs past the cycle's mean range time) is bridged by ``bridge``: ``first_order``
+    (:class:`AgedPosition`, ``p - v age``) or ``imu`` (:class:`ImuAgedPosition`, second order from the latest IMU
+    sample); ``accel_sd`` adds what the bridge leaves out to R.
 
     ``offset_block`` (with ``offset_axes``): a state block added to the fix's axes, ``z = p + C_b^n r + o``:
     a slowly varying error of the fix modelled as a state (e.g. the height error of a 2-D fix that assumes
@@ -94,6 +108,22 @@ class Position(MeasurementModel[PositionParams]):
                 warnings.warn(f"position: {self.note}", stacklevel=2)
         self.linear = self._q is None   # z = p (the first dim elements): affine; with a lever arm, not
         self._off, self._off_axes = self._offset(layout)
+        self._u: np.ndarray | None = None      # the latest input sample (imu bridge)
+        if p.bridge == "imu":
+            missing = [b for b in ("v", "q") if b not in layout]
+            if missing or self._v is None:
+                raise ConfigError(f"position: bridge 'imu' needs state blocks v and q (an ins process); this state "
+                                  f"has {[b.name for b in layout.blocks]}")
+            self._qi = layout["q"]
+            self._ba = layout["ba"] if "ba" in layout else None
+            self._bw = layout["bw"] if "bw" in layout else None
+            # fusion.api.UsesInput only in this mode: the scheduler then integrates the inputs up to each of the
+            # sensor's messages and hands over the latest sample
+            self.take_input = self._take_input
+
+    def _take_input(self, t: float | None, u: np.ndarray | None) -> None:
+        """fusion.api.UsesInput (bridge 'imu'): the latest IMU sample ``ax ay az gx gy gz`` (m/s^2, rad/s, FRD)."""
+        self._u = None if u is None else np.asarray(u, dtype=float)
 
     def _offset(self, layout) -> tuple[slice | None, np.ndarray]:
         """The offset block's slice and the fix axes it adds to (ConfigError when the block is missing or
@@ -180,7 +210,7 @@ class Position(MeasurementModel[PositionParams]):
             if z[9] < 0.0:
                 raise MalformedMessage(f"position: negative fix age {z[9]}")
             if z[9] > 0.0:
-                model = AgedPosition(self, float(z[9]))
+                model = self._aged(float(z[9]))
             z = z[:9]
         if z.size == 9:
             R = self._fix_R(z[_SYM3])           # the upper triangle x y z cxx cxy cxz cyy cyz czz, mirrored
@@ -188,7 +218,7 @@ class Position(MeasurementModel[PositionParams]):
         elif z.size not in (self.dim, 3) or z.size < self.dim:
             raise MalformedMessage(f"position expects {self.dim} coordinates (or 9 values: x y z and the "
                                    f"covariance upper triangle), got {z.size}")
-        return Observation(message.t, z[:self.dim], model, R)
+        return Observation(message.t, z[:self.dim], model, self._bridge_R(R, model))
 
     def _fix_R(self, cov: np.ndarray) -> np.ndarray | None:
         """R from a fix's covariance (3, 3) (its leading dim x dim block), or None with
@@ -219,9 +249,27 @@ class Position(MeasurementModel[PositionParams]):
         if fix.age > 0.0:
             if self._v is None:
                 raise MalformedMessage("position: a fix with an age needs a state with a velocity block 'v'")
-            model = AgedPosition(self, float(fix.age))
+            model = self._aged(float(fix.age))
         R = self._fix_R(np.asarray(fix.cov, dtype=float)) if fix.cov is not None else None
-        return Observation(fix.t, z[:self.dim], model, R)
+        return Observation(fix.t, z[:self.dim], model, self._bridge_R(R, model))
+
+    def _aged(self, age: float) -> "AgedPosition":
+        """The model of a fix ``age`` s old: bridged first order, or with the latest IMU sample (bridge imu;
+        first order until the first sample)."""
+        if self.params.bridge == "imu" and self._u is not None:
+            return ImuAgedPosition(self, age, self._u)
+        return AgedPosition(self, age)
+
+    def _bridge_R(self, R: np.ndarray | None, model: MeasurementModel) -> np.ndarray | None:
+        """R plus what the bridge of an aged fix leaves out: (accel_sd age^2 / 2)^2 on each axis (the
+        acceleration over the age, or its change with the imu bridge). Unchanged without an age or accel_sd,
+        or without a fix covariance (the sensor's configured R, which the run applies, is left as it is)."""
+        sd = self.params.accel_sd
+        if R is None or not sd or not isinstance(model, AgedPosition):
+            return R
+        R = R.copy()
+        R.flat[::self.dim + 1] += (0.5 * sd * model.age * model.age) ** 2
+        return R
 
 
 class AgedPosition(MeasurementModel):
@@ -252,3 +300,64 @@ class AgedPosition(MeasurementModel):
         """The position block value that makes ``h(x)`` equal z."""
         x = np.asarray(x, dtype=float)
         return self.base.position_from(z, x) + self.age * x[self._v.start:self._v.start + self.dim]
+
+
+class ImuAgedPosition(AgedPosition):
+    """A fix of the receiver ``age`` s before its stamp, bridged to the second order with the IMU sample u
+    (``ax ay az gx gy gz``, m/s^2 and rad/s, FRD) taken at the update: with the state's bias-corrected specific
+    force f = u_a - b_a and rate w = u_w - b_w,
+
+        z = p - v age + age^2/2 (C_b^n f + g_n) + C_b^n (r - age w x r + age^2/2 w x (w x r))   (+ offset)
+
+    the position p(t - age) = p - v age + a age^2 / 2 to the jerk term, and the lever arm r as it was age s
+    earlier (turned back by the rate, to the second order). Equivalently the lever arm is replaced by the body
+    vector ``r_e = r - age w x r + age^2/2 (f + w x (w x r))``; f and w depend on the state's biases (ba, bw blocks, when present),
+    so a sigma-point filter carries their uncertainty. Not a registry component."""
+
+    name: ClassVar[str] = "position (aged, imu)"
+
+    def __init__(self, base: Position, age: float, u: np.ndarray):
+        super().__init__(base, age)
+        self._f, self._w = u[:3], u[3:6]
+        self._qs, self._ba, self._bw = base._qi, base._ba, base._bw
+        self._g = np.array([0.0, 0.0, 0.5 * age * age * base.params.gravity])
+
+    def _body(self, x: np.ndarray) -> np.ndarray:
+        """r_e - r (..., 3): the body vector (m, FRD) the bridge adds to the lever arm."""
+        a = self.age
+        f = self._f - x[..., self._ba] if self._ba is not None else np.broadcast_to(self._f, x.shape[:-1] + (3,))
+        w = self._w - x[..., self._bw] if self._bw is not None else np.broadcast_to(self._w, x.shape[:-1] + (3,))
+        r = self.base.lever_arm
+        wr = np.cross(w, r)
+        return 0.5 * a * a * (f + np.cross(w, wr)) - a * wr      # C(t - age) r = C (r - age w x r + age^2/2 w x (w x r))
+
+    def h(self, x: np.ndarray) -> np.ndarray:
+        """Predicted fix (..., dim) (m) for states x (..., n)."""
+        x = np.asarray(x, dtype=float)
+        d = quat.rotate(x[..., self._qs], self._body(x)) + self._g
+        return super().h(x) + d[..., :self.dim]
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        """dh/dx (dim, n) at x (n,)."""
+        x = np.asarray(x, dtype=float)
+        H = super().jacobian(x)
+        q = x[self._qs]
+        H[:, self._qs] += quat.rotate_jacobian(q, self._body(x))[:self.dim]
+        C = quat.to_matrix(q)[:self.dim]
+        a = self.age
+        if self._ba is not None:
+            H[:, self._ba] -= 0.5 * a * a * C
+        if self._bw is not None:
+            # w = u_w - b_w: d(-a w x r)/dw = a [r]x; d(w x (w x r))/dw = (w.r) I + w r^T - 2 r w^T
+            r = self.base.lever_arm
+            w = self._w - x[self._bw]
+            rx = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+            dw = a * rx + 0.5 * a * a * (float(w @ r) * np.eye(3) + np.outer(w, r) - 2.0 * np.outer(r, w))
+            H[:, self._bw] -= C @ dw
+        return H
+
+    def position_from(self, z: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """The position block value that makes ``h(x)`` equal z."""
+        x = np.asarray(x, dtype=float)
+        d = quat.rotate(x[self._qs], self._body(x)) + self._g
+        return super().position_from(z, x) - d[:self.dim]

@@ -33,6 +33,17 @@ one) and :meth:`FiringSchedule.take_warnings` says why, so that ``firing_period`
 
 A cycle never spans more than its period and never holds a beacon twice: either would start a new
 cycle (a split), e.g. after a jump of the receiver clock.
+
+**Closing at the last heard slot** (``close_at_last_slot``): a cycle's data ends with the range of the last
+beacon in the firing order that the receiver hears. Waiting for a range of the next cycle to close it adds up
+to a period of delay (with a dozen beacons and only the nearer half in reach, 0.3-0.5 s), over which the
+filter may integrate inputs: the fix is then applied to a belief that much later than its data and bridged
+back with the belief's velocity (``age``), which an accelerating vehicle makes wrong. The beacons heard in the
+last ``EXPECT_CYCLES`` cycles are expected; a cycle closes as soon as the latest of their slots has reported.
+A beacon that comes into reach with a later slot reports after its cycle was closed: that range is returned
+by :meth:`FiringSchedule.take_late` (dropped; the next cycles expect the beacon). When the beacon of the last
+expected slot goes out of reach, the cycle closes by a range of the next one, as without the option, until
+it is forgotten (``EXPECT_CYCLES`` cycles).
 """
 from __future__ import annotations
 
@@ -43,6 +54,7 @@ import numpy as np
 Range = tuple[float, str, float, float]   # (arrival time s, beacon, range m, emission time s)
 LEARN_MAX = 3.0          # learning may go on over this many learn_s when the learnt period is refused
 MAX_SPREAD = 0.25        # largest circular sd of a beacon's emissions, in smallest slot spacings
+EXPECT_CYCLES = 3        # a beacon heard in the last this many cycles (this one included) is expected in a cycle
 
 
 class FiringSchedule:
@@ -53,10 +65,12 @@ class FiringSchedule:
     :param speed_of_sound: m/s, to refer the arrival time to the emission time (None: the arrival time).
     :param learn_s: seconds of emissions from which the period (if not given) and the slot phases are learnt
         (with the period given: one period, or until each of ``expected`` beacons has fired once).
+    :param close_at_last_slot: close a cycle as soon as the last slot of the beacons heard lately has
+        reported (module doc), not when a range of the next cycle arrives.
     """
 
     def __init__(self, period: float | None, speed_of_sound: float | None = None, learn_s: float = 2.0,
-                 expected: int | None = None):
+                 expected: int | None = None, close_at_last_slot: bool = False):
         self.period = period
         self.expected = expected
         self.c = speed_of_sound
@@ -71,6 +85,11 @@ class FiringSchedule:
         self._duplicates: list[tuple[Range, Range]] = []   # (dropped, kept) reports of one pulse
         self._warnings: list[tuple[float, str]] = []       # (time s, why) for the user
         self._refused: str | None = None        # why the last learnt period was refused
+        self.close_at_last_slot = close_at_last_slot
+        self._heard: dict[str, tuple[int, float]] = {}   # beacon -> (cycle index, slot offset s) when last heard
+        self._closed_k: int | None = None       # index of the last cycle closed before a later cycle's range
+        self._closed: list[Range] = []          # ... and its ranges (a second report of one of its pulses)
+        self._late: list[Range] = []            # ranges of a cycle already closed at its last heard slot
 
     # ------------------------------------------------------------------ public
     def add(self, t: float, beacon: str, rng: float) -> list[list[Range]]:
@@ -109,6 +128,12 @@ class FiringSchedule:
         d, self._duplicates = self._duplicates, []
         return d
 
+    def take_late(self) -> list[Range]:
+        """The ranges that came after their cycle was closed at its last heard slot (a beacon newly in reach
+        with a later slot), since the last call; dropped from the cycles."""
+        d, self._late = self._late, []
+        return d
+
     def take_warnings(self) -> list[tuple[float, str]]:
         """What the user should know about the schedule since the last call: (time s, message)."""
         w, self._warnings = self._warnings, []
@@ -141,7 +166,8 @@ class FiringSchedule:
 
     def close_open(self) -> list[Range]:
         """Close the open cycle now (every expected beacon has reported) and return it."""
-        cyc, self._open, self._open_k = self._open, [], None
+        cyc, self._closed_k, self._closed = self._open, self._open_k, self._open
+        self._open, self._open_k = [], None
         return cyc
 
     # ------------------------------------------------------------------ internals
@@ -150,6 +176,13 @@ class FiringSchedule:
         k = math.floor((item[3] - self.cut) / T)  # type: ignore[operator]
         out: list[list[Range]] = []
         if self._open and self._same_pulse(item):
+            return out
+        if not self._open and k == self._closed_k:
+            # a range of the cycle closed at its last heard slot: a second report of one of its pulses, or a
+            # beacon come into reach with a later slot (expected from now on)
+            if not self._same_pulse(item, self._closed):
+                self._late.append(item)
+                self._heard[item[1]] = (k, item[3] - self.cut - k * T)  # type: ignore[operator]
             return out
         if self._open and (k > self._open_k or any(o[1] == item[1] for o in self._open)  # type: ignore[operator]
                            or item[3] - self._open[0][3] >= T):
@@ -160,16 +193,25 @@ class FiringSchedule:
         if not self._open:
             self._open_k = k
         self._open.append(item)
+        if self.close_at_last_slot:
+            offset = item[3] - self.cut - k * T   # type: ignore[operator]
+            # the latest slot of the beacons heard in the previous cycles (none: the first cycle waits)
+            last = max((o for kb, o in self._heard.values() if k - EXPECT_CYCLES < kb < k), default=None)
+            self._heard[item[1]] = (k, offset)
+            if last is not None and offset >= last - 0.5 * self.slot:   # type: ignore[operator]
+                out.append(self.close_open())       # the latest slot expected has reported
         return out
 
-    def _same_pulse(self, item: Range) -> bool:
-        """Whether ``item`` is a second report of the pulse of a range of its beacon in the open cycle (emissions
-        closer than half the smallest slot spacing); if so the shorter range stays in the cycle (the direct
-        path) and the other is recorded as a duplicate."""
-        for j, o in enumerate(self._open):
+    def _same_pulse(self, item: Range, cycle: list[Range] | None = None) -> bool:
+        """Whether ``item`` is a second report of the pulse of a range of its beacon in the open cycle (or in
+        ``cycle``) (emissions closer than half the smallest slot spacing); if so the shorter range stays in the
+        open cycle (the direct path) and the other is recorded as a duplicate; in a closed ``cycle`` the
+        range already used is kept."""
+        cyc = self._open if cycle is None else cycle
+        for j, o in enumerate(cyc):
             if o[1] == item[1] and abs(item[3] - o[3]) < 0.5 * self.slot:   # type: ignore[operator]
-                keep, drop = (item, o) if item[2] < o[2] else (o, item)
-                self._open[j] = keep
+                keep, drop = (item, o) if item[2] < o[2] and cycle is None else (o, item)
+                cyc[j] = keep
                 self._duplicates.append((drop, keep))
                 return True
         return False

@@ -60,6 +60,9 @@ class OlsParams(Params):
     min_beacons: int | None = Field(None, ge=3, description="fewest beacons for a fix (default dim + 1)")
     beacons: list[str] | None = Field(None, description="beacons this receiver ranges (default: all); a cycle "
                                       "closes as soon as each has reported")
+    close_at_last_slot: bool = Field(True, description="close a cycle as soon as the latest slot of the beacons "
+                                     "heard in the last cycles has reported (plugins/solvers/firing_schedule.py), "
+                                     "not at a range of the next cycle: the fix is stamped no later than its data")
     reference: Literal["nearest", "first"] = "nearest"
     qr_condition: float = Field(1e6, gt=1, description="cond(A^T A) above which QR replaces eq. 32")
     degenerate_condition: float = Field(1e12, gt=1, description="cond(A^T A) above which there is no fix")
@@ -75,6 +78,12 @@ class OlsParams(Params):
     lever_arm: tuple[float, float, float] | None = Field(None, description="receiver in the body frame (m, FRD), "
                                                          "as the position model's: with compensation the "
                                                          "fix starts from the belief's receiver position")
+    input_acceleration: bool = Field(False, description="with compensation: refer the ranges with the velocity at "
+                                     "the cycle's mean time, the belief's minus the IMU's acceleration over the age "
+                                     "(C_b^n (f - b_a) + g_n from the latest input sample: fusion.api.UsesInput, "
+                                     "the run then integrates the inputs up to every range; state blocks q, ba), "
+                                     "plus a dt^2 / 2; pairs with the position model's bridge: imu")
+    gravity: float = Field(9.80665, gt=0, description="m/s^2, down: g_n of input_acceleration")
     prior_speed_sd: float = Field(1.0, gt=0, description="m/s: velocity sd while the filter has no belief yet "
                                   "(velocity 0 assumed)")
     solve_height: bool = Field(False, description="2-D with refine: estimate z with the prior N(z, z_sd^2) "
@@ -94,8 +103,10 @@ class OlsTrilateration(Solver):
     split. A second report of one pulse (emissions of one beacon closer than half a slot spacing: a repeated
     or retransmitted line, an echo stamped with the direct pulse's time) is no period while learning and
     in a cycle the shorter range is kept: counted ``duplicate_pulses``, an Event ``rejected``. A period that
-    cannot be learnt gives an Event ``warning`` saying so. A cycle closes when a range of a later cycle
-    arrives, when every expected beacon has reported, or at the end of the input (flush).
+    cannot be learnt gives an Event ``warning`` saying so. A cycle closes when the latest slot of the
+    beacons heard in the last cycles has reported (``close_at_last_slot``: a beacon back in reach in a later
+    slot then loses that range, counted ``late_ranges``, an Event ``rejected``), else when a range of a later
+    cycle arrives, when every configured beacon has reported, or at the end of the input (flush).
 
     **Motion compensation** (``motion_compensation``): the fix is of the receiver at the mean time t_m of
     the cycle's ranges; the filter's belief predicted to t_m (fusion.api.ReadsBelief) gives the velocity v
@@ -103,7 +114,11 @@ class OlsTrilateration(Solver):
     The uncertainty of that shift (P_v plus ``velocity_sd``^2, and ``accel_sd``) is part of the fix
     covariance. Every cycle is compensated, also right after a failed fix. The fix is stamped at the
     belief's time; when that is later than t_m (inputs past t_m already integrated), the message carries
-    the age ``t - t_m`` as a 10th value and the ``position`` model bridges it with the state's velocity.
+    the age ``t - t_m`` as a 10th value and the ``position`` model bridges it with the state's velocity
+    (first order, or with the IMU: its ``bridge``). The velocity is then the belief's, ``age`` after t_m:
+    its difference from the velocity at t_m (``accel_sd`` x age) is part of the compensation's uncertainty.
+    The cycle closes at its last heard slot (``close_at_last_slot``), so the belief is no later than the
+    cycle's last range and the age at most about half the cycle's span.
     Before the filter has a belief, v = 0 with sd ``prior_speed_sd``. Without compensation the fix is
     stamped at t_m, and its covariance takes the unknown motion over the cycle (velocity sd
     ``prior_speed_sd``) as correlated range errors.
@@ -158,11 +173,21 @@ class OlsTrilateration(Solver):
                 self._p = layout["p"] if "p" in layout else None
                 qs = [b.name for b in layout.blocks if b.kind == "quaternion"]
                 self._q = layout[qs[0]] if qs and np.any(self._arm) else None
+                if p.input_acceleration:
+                    if not qs:
+                        raise ConfigError("ols_trilateration: input_acceleration needs a state with an attitude "
+                                          "quaternion (an ins process)")
+                    self._qa = layout[qs[0]]
+                    self._ba = layout["ba"] if "ba" in layout else None
+                    # fusion.api.UsesInput only in this mode (the run integrates the inputs up to every range)
+                    self.take_input = self._take_input
+        self._u: np.ndarray | None = None     # the latest input sample (input_acceleration)
         self.counters: dict[str, int] = {"cycles": 0, "fixes": 0, "qr": 0, "outliers_removed": 0,
                                          "unknown_beacon": 0, "split_cycles": 0, "compensated": 0,
                                          **{r: 0 for r in REASONS}}
         self.events: list[Event] = []
-        self.schedule = FiringSchedule(p.firing_period, p.speed_of_sound, p.learn_s, len(self.beacon_positions))
+        self.schedule = FiringSchedule(p.firing_period, p.speed_of_sound, p.learn_s, len(self.beacon_positions),
+                                       close_at_last_slot=p.close_at_last_slot)
         self._belief_at: Callable[[float], Belief | None] | None = None
         self._sensor = self.context.sensor or "abps"
         self._line: int | None = None
@@ -174,6 +199,10 @@ class OlsTrilateration(Solver):
     def bind_belief(self, belief_at: Callable[[float], Belief | None]) -> None:
         """fusion.api.ReadsBelief: the run loop's ``belief_at(t)``, the filter's belief predicted to t."""
         self._belief_at = belief_at
+
+    def _take_input(self, t: float | None, u: np.ndarray | None) -> None:
+        """fusion.api.UsesInput (input_acceleration): the latest IMU sample ``ax ay az gx gy gz`` (FRD)."""
+        self._u = None if u is None else np.asarray(u, dtype=float)
 
     def feed(self, message: Message) -> list[Message]:
         """Take one ``beacon range`` message (or several pairs); return the fixes of the cycles it closes."""
@@ -227,6 +256,12 @@ class OlsTrilateration(Solver):
                                      f"of the pulse of {keep[2]:.3f} m (t={keep[0]:.6f} s), emitted "
                                      f"{1e3 * abs(drop[3] - keep[3]):.3g} ms apart; the shorter (the direct "
                                      f"path) is kept"))
+        for late in self.schedule.take_late():
+            self.counters["late_ranges"] = self.counters.get("late_ranges", 0) + 1
+            self.events.append(Event(late[0], "rejected", self._sensor,
+                                     f"range to {late[1]} ({late[2]:.3f} m, t={late[0]:.6f} s) came after its cycle "
+                                     f"was closed at the last slot heard before (the beacon came into reach); "
+                                     f"expected from the next cycle on"))
         for t, why in self.schedule.take_warnings():
             self.events.append(Event(t, "warning", self._sensor, f"ols_trilateration: {why}"))
 
@@ -242,22 +277,26 @@ class OlsTrilateration(Solver):
         t_end = float(max([c[0] for c in cycle]))     # the largest stamp (max of a list: no numpy reduction)
         t_m = float(times.sum()) / len(times)
         t_fix, age = t_m, 0.0
-        v, Pv, start = None, None, None
+        v, Pv, start, acc = None, None, None, None
         B0 = B
         compensated = len(names) >= self.min_beacons and p.motion_compensation
         if compensated:
-            v, Pv, t_fix, start = self._velocity(t_m)
+            v, Pv, t_fix, start, acc = self._velocity(t_m)
             age = t_fix - t_m
             dt = times - t_m
-            B = B - dt[:, None] * v
-            # the velocity at t_fix bridges the age too (the position model's p - v age), so it is exact there
+            if acc is None:
+                B = B - dt[:, None] * v
+            else:       # the velocity at t_m and the acceleration within the cycle, from the IMU
+                B = B - dt[:, None] * (v - age * acc) - (0.5 * dt * dt)[:, None] * acc
+            # v is the belief's at t_fix: off the velocity at t_m by the acceleration over the age, which the
+            # range covariance carries (velocity_age); the position model bridges the age itself
         elif len(names) >= self.min_beacons and len(names) > 1:
             Pv = self._prior_velocity_cov()
         try:
             if len(names) < self.min_beacons:
                 raise NoFix("too_few_beacons", f"{len(names)} beacon(s) {names}, need {self.min_beacons}")
             try:
-                pos, cov, info = self._trilaterate(B, ranges, times - t_m, Pv, start)
+                pos, cov, info = self._trilaterate(B, ranges, times - t_m, Pv, start, 0.0 if acc is not None else age)
             except NoFix as exc:
                 # Lost lock: after a gap the belief can be metres and m/s off, its velocity then spoils the
                 # compensation and every cycle is refused (the fix that would correct the belief refused
@@ -307,7 +346,7 @@ class OlsTrilateration(Solver):
         return np.diag([p.prior_speed_sd ** 2] * 2 + [p.prior_speed_sd ** 2 if p.dim == 3 else 0.0])
 
     def _trilaterate(self, B: np.ndarray, ranges: np.ndarray, offsets: np.ndarray, Pv: np.ndarray | None,
-                     start: np.ndarray | None):
+                     start: np.ndarray | None, age: float = 0.0):
         p: OlsParams = self.params  # type: ignore[assignment]
         with np.errstate(over="ignore", invalid="ignore"):    # overflowing ranges: caught by the caller
             return trilaterate(
@@ -317,18 +356,20 @@ class OlsTrilateration(Solver):
                 max_outliers=p.max_outliers, min_beacons=self.min_beacons,
                 offsets=None if Pv is None else offsets, velocity_cov=Pv,
                 accel_sd=p.accel_sd if Pv is not None else 0.0, solve_height=p.solve_height,
-                inflate_misfit=p.inflate_misfit, start=start if p.refine_iterations else None)
+                inflate_misfit=p.inflate_misfit, start=start if p.refine_iterations else None, velocity_age=age)
 
-    def _velocity(self, t: float) -> tuple[np.ndarray, np.ndarray, float, np.ndarray | None]:
+    def _velocity(self, t: float) -> tuple[np.ndarray, np.ndarray, float, np.ndarray | None, np.ndarray | None]:
         """From the filter's belief predicted to ``t``: the velocity (3,) (m/s, navigation frame), its
-        covariance (3, 3) with the unmodelled part, the belief's time (>= t) and the receiver position it
+        covariance (3, 3) with the unmodelled part, the belief's time (>= t), the receiver position it
         predicts at ``t`` (p + C_b^n r, m: where Gauss-Newton starts, in the basin of the filter's estimate
-        rather than a mirror image of the beacons' geometry); without a belief v = 0 and no start."""
+        rather than a mirror image of the beacons' geometry) and, with ``input_acceleration``, the
+        acceleration (3,) (m/s^2, navigation frame) of the latest input sample; without a belief v = 0, no
+        start and no acceleration."""
         p: OlsParams = self.params  # type: ignore[assignment]
         belief = self._belief_at(t) if self._belief_at is not None else None
         extra = np.diag([p.velocity_sd ** 2] * 3)
         if belief is None or self._v is None:
-            return np.zeros(3), np.diag([p.prior_speed_sd ** 2] * 3), t, None
+            return np.zeros(3), np.diag([p.prior_speed_sd ** 2] * 3), t, None, None
         sl = self._v
         n = sl.stop - sl.start
         x = belief.x
@@ -341,6 +382,10 @@ class OlsTrilateration(Solver):
         else:
             Pv[:n, :n] += belief.P[sl, sl]  # type: ignore[index]
         t_b = max(float(belief.t), t)
+        acc = None
+        if p.input_acceleration and self._u is not None:
+            f = self._u[:3] - (x[self._ba] if self._ba is not None else 0.0)
+            acc = _rotate(x[self._qa], f) + np.array([0.0, 0.0, p.gravity])
         start = None
         if self._p is not None:
             ps = self._p
@@ -349,7 +394,9 @@ class OlsTrilateration(Solver):
             if self._q is not None:
                 start = start + _rotate(x[self._q], self._arm)
             start = start - v * (t_b - t)                 # back to t (inputs past t already integrated)
+            if acc is not None:
+                start = start + 0.5 * (t_b - t) ** 2 * acc
             if p.dim == 2:
                 start[2] = p.z
         self.counters["compensated"] += 1
-        return v, Pv, t_b, start
+        return v, Pv, t_b, start, acc

@@ -9,8 +9,10 @@ fix is worth:
 * **compensation uncertainty**: range i was taken dt_i after the fix time and referred to it with a
   velocity v of covariance P_v (the filter's, plus unmodelled receiver velocity) and an unmodelled
   acceleration a ~ N(0, s_a^2 I): ``Sigma_r = s_r^2 I + G P_v G^T + (s_a^2 / 4) H H^T`` with rows
-  ``G_i = u_i^T dt_i`` and ``H_i = u_i^T dt_i^2`` (u_i the unit line of sight): the errors are shared
-  between the ranges, so they are correlated, not extra independent noise;
+  ``G_i = u_i^T dt_i`` and ``H_i = u_i^T (dt_i^2 - 2 age dt_i)`` (u_i the unit line of sight): the errors
+  are shared between the ranges, so they are correlated, not extra independent noise. ``age`` (s): the
+  velocity is the belief's ``age`` after the fix time, so it differs from the velocity at the fix time by
+  ``a age``; the receiver moved ``v dt_i + a (dt_i^2 / 2 - age dt_i)`` more than assumed;
 * **the known height** of the 2-D system (paper 000 sec. IV: z is not solved for): its error dz (sd z_sd)
   moves every range by ``u_z,i dz``, a range error shared by the cycle, so ``z_sd^2 u_z u_z^T`` joins
   Sigma_r and the fix covariance gets z_sd^2 on z and the cross terms; or (``solve_height``) z is
@@ -69,6 +71,7 @@ class Cycle:
     Pv: np.ndarray | None = None
     accel_sd: float = 0.0
     z_var: float = 0.0          # m^2: variance of an assumed (not solved-for) receiver height
+    age: float = 0.0            # s: the velocity used is of this long after the fix time
 
 
 @dataclass
@@ -94,7 +97,7 @@ def range_cov(U: np.ndarray, cyc: Cycle, idx: np.ndarray, sigma: float) -> np.nd
         S = G @ cyc.Pv @ G.T
         S.flat[::k + 1] += sigma * sigma
         if cyc.accel_sd:
-            H = U * (dt * dt)[:, None]
+            H = U * (dt * (dt - 2.0 * cyc.age))[:, None]
             S += (0.25 * cyc.accel_sd ** 2) * (H @ H.T)
     else:
         S = np.zeros((k, k))

@@ -19,7 +19,8 @@ def trilaterate(beacons: np.ndarray, ranges: np.ndarray, *, dim: int = 3, z: flo
                 degenerate_condition: float = 1e12, refine: int = 0, consistency_probability: float | None = None,
                 max_outliers: int = 1, min_beacons: int | None = None, offsets: np.ndarray | None = None,
                 velocity_cov: np.ndarray | None = None, accel_sd: float = 0.0, solve_height: bool = False,
-                inflate_misfit: bool = False, start: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+                inflate_misfit: bool = False, start: np.ndarray | None = None,
+                velocity_age: float = 0.0) -> tuple[np.ndarray, np.ndarray, dict]:
     """One position fix from ranges to known beacons (paper 000 eqs. 17-32), with outlier rejection.
 
     :param beacons: (k, 3) beacon positions (m, navigation frame; (k, 2) is padded with ``z``), already
@@ -39,6 +40,8 @@ def trilaterate(beacons: np.ndarray, ranges: np.ndarray, *, dim: int = 3, z: flo
     :param offsets: (k,) s, time of each range minus the fix time; with ``velocity_cov`` (3, 3) (m^2/s^2)
         and ``accel_sd`` (m/s^2) the uncertainty of referring the ranges to the fix time, as correlated
         range errors.
+    :param velocity_age: s, how long after the fix time the velocity that referred the ranges is (its
+        difference from the velocity at the fix time, ``accel_sd`` x age, joins the acceleration term).
     :param consistency_probability: if set, the chi-square test of the whitened residuals; a failed cycle
         gives the largest consistent subset (consensus, up to ``max_outliers`` dropped, at least
         ``min_beacons`` kept) or no fix (``inconsistent`` / ``ambiguous``).
@@ -65,7 +68,7 @@ def trilaterate(beacons: np.ndarray, ranges: np.ndarray, *, dim: int = 3, z: flo
         raise NoFix("too_few_beacons", f"{k} range(s), a {dim}-D fix needs at least {dim + 1}")
     dt = np.zeros(k) if offsets is None else np.asarray(offsets, dtype=float)
     cyc = Cycle(B, r, dt, None if velocity_cov is None else np.asarray(velocity_cov, dtype=float), accel_sd,
-                z_sd ** 2 if (dim == 2 and refine and not solve_height) else 0.0)
+                z_sd ** 2 if (dim == 2 and refine and not solve_height) else 0.0, float(velocity_age))
     lin = (dim, z, z_sd, sigma, reference, qr_condition, degenerate_condition)
 
     def solve(idx: np.ndarray) -> Fit:
