@@ -13,7 +13,8 @@ builtins = ["fusion_plugins" + name[len("plugins"):] for name in find_packages(i
 
 # name -> C source; add a kernel here and load it with fusion.kernels.load(name)
 KERNELS = {
-    "fusion_plugins.process._ins_batch_kernel": "plugins/process/_ins_batch_kernel.c",   # ins_batch.integrate_inputs
+    # ins_batch.integrate_inputs and interval_noise, the checks of Ins.input_from
+    "fusion_plugins.process._ins_batch_kernel": "plugins/process/_ins_batch_kernel.c",
 }
 
 setup(packages=core + builtins + ["fusion_configs"], package_dir={"fusion_plugins": "plugins", "fusion_configs": "configs"},
