@@ -13,7 +13,8 @@ builtins = ["fusion_plugins" + name[len("plugins"):] for name in find_packages(i
 
 # name -> C source; add a kernel here and load it with fusion.kernels.load(name)
 KERNELS = {
-    "fusion_plugins.process._ins_batch_kernel": "plugins/process/_ins_batch_kernel.c",   # ins_batch.integrate_inputs
+    # ins_batch.integrate_inputs and interval_noise, the checks of Ins.input_from
+    "fusion_plugins.process._ins_batch_kernel": "plugins/process/_ins_batch_kernel.c",
     "fusion_plugins.process._ins_run_kernel": "plugins/process/_ins_run_kernel.c",   # ins_linearise.linearise_run
     "fusion_plugins.filters._kalman_kernel": "plugins/filters/_kalman_kernel.c",        # ekf chain, linearised_update
     "fusion_plugins.measurement._magnetometer_kernel": "plugins/measurement/_magnetometer_kernel.c",  # h, jacobian
