@@ -1,7 +1,7 @@
 """Maps the folder plugins/ to the import package fusion_plugins and configs/ to fusion_configs (the shipped
 YAML, so that defaults are found from an installed package); metadata lives in pyproject.toml.
 
-Compiled kernels (``ext_modules``): a few hot loops of the built-in INS are also written in C (plain C API
+Compiled kernels (``ext_modules``): a few hot loops of the built-in plugins are also written in C (plain C API
 and the buffer protocol, no numpy headers, so building needs only a C compiler and Python's headers). Each
 is ``optional``: where it cannot be built (no compiler), the install still succeeds and the numpy code it
 mirrors runs instead, with the same results to rounding (fusion/kernels.py; ``FUSION_PURE_PYTHON=1``

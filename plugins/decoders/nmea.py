@@ -161,6 +161,7 @@ class NmeaDecoder(Decoder):
         self._avg: list[np.ndarray] = []      # ECEF of the fixes averaged into the origin
         self._window_t0: float | None = None  # the first GPS message's time: the static start's window opens
         self._origin_ecef: tuple | None = None  # (origin, its ECEF) for _ned
+        self._wgs84: Any = None                 # pymap3d's WGS-84 Ellipsoid, made with _origin_ecef
         self.counters: dict[str, int] = {"epochs": 0, "invalid": 0, "incomplete": 0, "origin_fixes": 0}
         self.events: list[Event] = []          # a moving start's warning, until take_events()
 
@@ -221,11 +222,13 @@ class NmeaDecoder(Decoder):
     def _ned(self, pymap3d, lat: float, lon: float, h: float) -> tuple[float, float, float]:
         """NED (m) of a fix (deg, deg, m ellipsoidal) from the origin: pymap3d.geodetic2ned's own steps
         (geodetic2ecef of both, uvw2enu of the difference), the origin's ECEF computed once (the same
-        numbers, ~40% of the call saved)."""
+        numbers, ~40% of the call saved), with the WGS-84 ellipsoid object made once."""
         if self._origin_ecef is None or self._origin_ecef[0] != self.origin:
-            self._origin_ecef = (self.origin, pymap3d.geodetic2ecef(*self.origin))  # type: ignore[misc]
+            # pymap3d's default ellipsoid, built once (geodetic2ecef builds it at every call without ell=)
+            self._wgs84 = pymap3d.Ellipsoid.from_name("wgs84")
+            self._origin_ecef = (self.origin, pymap3d.geodetic2ecef(*self.origin, ell=self._wgs84))  # type: ignore[misc]
         x2, y2, z2 = self._origin_ecef[1]
-        x1, y1, z1 = pymap3d.geodetic2ecef(lat, lon, h)
+        x1, y1, z1 = pymap3d.geodetic2ecef(lat, lon, h, ell=self._wgs84)
         east, north, up = pymap3d.uvw2enu(x1 - x2, y1 - y2, z1 - z2, self.origin[0], self.origin[1])  # type: ignore[index]
         return north, east, -up
 
@@ -234,7 +237,8 @@ class NmeaDecoder(Decoder):
 
         p: NmeaParams = self.params  # type: ignore[assignment]
         gga = epoch["GGA"]
-        quality = int(_num(gga.gps_qual)) if math.isfinite(_num(gga.gps_qual)) else 0
+        qual = _num(gga.gps_qual)          # a pynmea2 field costs a __getattr__ a read: read each once
+        quality = int(qual) if math.isfinite(qual) else 0
         sats = _num(gga.num_sats)
         rmc = epoch.get("RMC")
         why = None
@@ -261,8 +265,9 @@ class NmeaDecoder(Decoder):
         h = _num(gga.altitude) + (sep if math.isfinite(sep) else 0.0)   # ellipsoidal height
         vn = ve = math.nan
         vel = rmc if rmc is not None else None
-        if vel is not None and math.isfinite(_num(vel.spd_over_grnd)):
-            speed, course = _num(vel.spd_over_grnd) * KNOT, _num(vel.true_course)
+        knots = _num(vel.spd_over_grnd) if vel is not None else math.nan
+        if vel is not None and math.isfinite(knots):
+            speed, course = knots * KNOT, _num(vel.true_course)
         elif "VTG" in epoch and math.isfinite(_num(epoch["VTG"].spd_over_grnd_kmph)):
             speed, course = _num(epoch["VTG"].spd_over_grnd_kmph) / 3.6, _num(epoch["VTG"].true_track)
         else:
@@ -274,8 +279,9 @@ class NmeaDecoder(Decoder):
             vn, ve = speed * math.cos(c), speed * math.sin(c)
         hdop = _num(gga.horizontal_dil)
         vdop = _num(epoch["GSA"].vdop) if "GSA" in epoch else math.nan
-        if "GSA" in epoch and math.isfinite(_num(epoch["GSA"].hdop)):
-            hdop = _num(epoch["GSA"].hdop)
+        gsa_hdop = _num(epoch["GSA"].hdop) if "GSA" in epoch else math.nan
+        if math.isfinite(gsa_hdop):
+            hdop = gsa_hdop
         averaged = 1.0
         if self.origin is None and math.isfinite(speed) and speed > p.static_speed:
             return self._moving_start(pymap3d, message, (lat, lon, h), speed,

@@ -169,7 +169,8 @@ class InsStates(InsProcess):
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """The EKF's run of samples (capability LinearisesInputRuns): the normalised mean after ``us``
         (k, 6) held over ``dts`` (k,) s, and each sample's F and Q (k, n, n) at the mean before it, in one
-        vectorised pass (ins_linearise.py); the fast path's conditions only, else None."""
+        vectorised pass (ins_linearise.py), or in one call of its compiled kernel (_ins_run_kernel.c) when
+        built; the fast path's conditions only, else None."""
         if not self._fast or np.ndim(x) != 1:
             return None
         dts = np.asarray(dts, dtype=float)
