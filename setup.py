@@ -6,6 +6,8 @@ and the buffer protocol, no numpy headers, so building needs only a C compiler a
 is ``optional``: where it cannot be built (no compiler), the install still succeeds and the numpy code it
 mirrors runs instead, with the same results to rounding (fusion/kernels.py; ``FUSION_PURE_PYTHON=1``
 selects the numpy code at run time too)."""
+import sys
+
 from setuptools import Extension, find_packages, setup
 
 core = find_packages(include=["fusion", "fusion.*"])
@@ -20,7 +22,11 @@ KERNELS = {
     "fusion_plugins.measurement._magnetometer_kernel": "plugins/measurement/_magnetometer_kernel.c",  # h, jacobian
 }
 
+# -ffp-contract=off: no fused multiply-adds (gcc's default on aarch64), so that a kernel rounds as its numpy
+# reference does on every machine; MSVC (no such flags) contracts nothing by default.
+FLAGS = [] if sys.platform == "win32" else ["-O2", "-fno-fast-math", "-ffp-contract=off"]
+
 setup(packages=core + builtins + ["fusion_configs"], package_dir={"fusion_plugins": "plugins", "fusion_configs": "configs"},
       package_data={"fusion_configs": ["*.yaml"]},
-      ext_modules=[Extension(name, sources=[src], optional=True, extra_compile_args=["-O2", "-fno-fast-math"])
+      ext_modules=[Extension(name, sources=[src], optional=True, extra_compile_args=FLAGS)
                    for name, src in KERNELS.items()])
