@@ -11,7 +11,7 @@ from this checkout (abps_fast_l*.yaml are new), the config and the shipped recor
 
 Measured (experiments/abps_routes.py's ``one``: the shipped config with the site's beacons, receiver height and
 initial pose): every ABPS scenario x seeds 1-10 and noise off; 20 seeds of scenarios/abps_mine.yaml; seeds 1-5
-of the fast route with an 800 Hz IMU; the shipped recording (recordings/abps_mine.log). Variants (this checkout
+of the fast route with an 800 Hz IMU (scenarios/variants/abps_fast_l_800hz.yaml); the shipped recording (recordings/abps_mine.log). Variants (this checkout
 only): the IMU's acceleration in the bridge and the compensation (``sensors.abps.model.bridge: imu`` with
 ``sensors.abps.preprocessor.input_acceleration: true``).
 """
@@ -139,6 +139,9 @@ def page(after: dict, before: dict | None) -> str:
     add("   the inputs up to every range message: more prediction steps, and every fix then has an age.")
     add("")
     sb, sa = (before or {}).get("shipped"), after["shipped"]
+    add("`abps_fast_l` (scenarios/, 13 beacons, 3 m/s, 3 m/s^2 braking into stops and U-turns, IMU at 100 Hz) and")
+    add("`abps_fast_l_800hz` (scenarios/variants/: the same with the IMU logged at 800 Hz) were written for this.")
+    add("")
     add("## The shipped recording")
     add("")
     add("| | horizontal RMSE m | max m | NEES |")
