@@ -101,9 +101,15 @@ def fix_stage(fixes: list, truth: Truth, arm: np.ndarray) -> dict:
             "age_mean": float(np.mean(ages)) if ages else math.nan, "age_max": float(max(ages)) if ages else math.nan}
 
 
+def scenario_path(scenario: str) -> Path:
+    """scenarios/NAME.yaml, or scenarios/variants/NAME.yaml (variants without a shipped recording)."""
+    path = ROOT / "scenarios" / f"{scenario}.yaml"
+    return path if path.exists() else ROOT / "scenarios" / "variants" / f"{scenario}.yaml"
+
+
 def one(scenario: str, seed: int, tmp: Path, noise: bool = True, changes: dict | None = None) -> dict:
     """Simulate ``scenario`` with ``seed`` and replay it through the site's config; the scores."""
-    sc_path = ROOT / "scenarios" / f"{scenario}.yaml"
+    sc_path = scenario_path(scenario)
     log = tmp / f"{scenario}_{seed}_{'on' if noise else 'off'}.log"
     if not log.exists():
         log.write_text(simulate_file(str(sc_path), seed=seed, noise=noise))
