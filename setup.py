@@ -28,5 +28,6 @@ FLAGS = [] if sys.platform == "win32" else ["-O2", "-fno-fast-math", "-ffp-contr
 
 setup(packages=core + builtins + ["fusion_configs"], package_dir={"fusion_plugins": "plugins", "fusion_configs": "configs"},
       package_data={"fusion_configs": ["*.yaml"]},
-      ext_modules=[Extension(name, sources=[src], optional=True, extra_compile_args=FLAGS)
+      ext_modules=[Extension(name, sources=[src], depends=["plugins/kernel_arrays.h"], optional=True,
+                             extra_compile_args=FLAGS)
                    for name, src in KERNELS.items()])
