@@ -17,10 +17,11 @@ writes (every built-in output, and a plugin's sink that writes through it) fail 
 from __future__ import annotations
 
 import errno
+import math
 import os
 from typing import Any
 
-__all__ = ["FullAfter", "full_disk_after", "cut_recording"]
+__all__ = ["FullAfter", "full_disk_after", "cut_recording", "thin_truth"]
 
 
 class FullAfter:
@@ -82,3 +83,21 @@ def cut_recording(source: Any, drop: Any = None, end: float | None = None) -> li
         if drop is None or not drop(t, ln):
             out.append(ln)
     return out
+
+
+def thin_truth(source: Any, min_interval: float) -> list[str]:
+    """The lines of a recording (a path, or its lines) with its truth lines thinned to at most one per
+    ``min_interval`` s (the first kept, then each at least that long after the last kept); every other line
+    kept. Truth coarser than the estimates, e.g. ``thin_truth("recordings/uwb_route1.log", 0.999)`` for 1 Hz."""
+    state = {"last": -math.inf}
+
+    def drop(t: float, line: str) -> bool:
+        if ",truth," not in line:
+            return False
+        if t - state["last"] < min_interval:
+            return True
+        state["last"] = t
+        return False
+
+    return cut_recording(source, drop)
+

@@ -11,6 +11,7 @@ from fusion.api import Belief, Estimate, Message, StateLayout
 from fusion.metrics import ErrorTracker, Truth
 from fusion.truth import interpolate_row
 from fusion.truth_stream import TruthComparison, TruthWindow, _Rows
+from fusion.testing.faults import thin_truth
 
 NAMES = ["px", "py", "pz", "vx", "vy", "vz", "qw", "qx", "qy", "qz", "psi", "bax"]
 LAYOUT = "p:3 v:3 q:4 psi:1:angle ba:1"
@@ -142,14 +143,7 @@ def test_the_end_of_run_warning_counts_every_estimate_evaluated(tmp_path, monkey
     from fusion.config import load_system
 
     root = Path(__file__).resolve().parents[2]
-    out, last = [], -9.0
-    for ln in (root / "recordings" / "uwb_route1.log").read_text().splitlines():
-        if ",truth," in ln:
-            t = float(ln.split(",")[0])
-            if t - last < 0.999:
-                continue
-            last = t
-        out.append(ln)
+    out = thin_truth(root / "recordings" / "uwb_route1.log", 0.999)   # truth at 1 Hz
     coarse = tmp_path / "coarse.log"
     coarse.write_text("\n".join(out) + "\n")
 

@@ -9,6 +9,7 @@ from fusion import pipeline
 from fusion.api import MalformedMessage
 from fusion.logformat import ParsedStream, iter_messages, parse_values
 from fusion.truth_stream import TruthWindow, _median
+from fusion.testing.faults import thin_truth
 
 RAW = frozenset(("truth", "reference"))
 HEADER = ["# fields truth px py pz", "# fields reference px py pz", "# fields pos x y z"]
@@ -139,14 +140,7 @@ def test_truth_sparser_than_the_estimates_is_warned_about(tmp_path, capsys):
     from fusion.cli import main
 
     root = Path(__file__).resolve().parents[2]
-    lines, out, last = (root / "recordings" / "uwb_route1.log").read_text().splitlines(), [], -9.0
-    for ln in lines:
-        if ",truth," in ln:
-            t = float(ln.split(",")[0])
-            if t - last < 0.999:
-                continue
-            last = t
-        out.append(ln)
+    out = thin_truth(root / "recordings" / "uwb_route1.log", 0.999)   # truth at 1 Hz
     coarse = tmp_path / "coarse.log"
     coarse.write_text("\n".join(out) + "\n")
     assert main(["run", str(root / "configs" / "uwb_pv_ukf.yaml"), "--input", str(coarse)]) == 0
