@@ -190,7 +190,10 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         # final fix is not older than the belief.
         for sensor in self.sensors.values():
             if sensor.preprocessor is not None:
-                outs = sensor.preprocessor.flush()
+                outs = self._flushed(sensor)
+                if outs is None:                            # a plugin's flush failed: named, its held messages lost
+                    yield Event(math.nan, "warning", sensor.name, self._flush_failure)
+                    outs = ()
                 sensor.counters["absorbed"] -= len(outs)     # fixes of messages it held (counted absorbed)
                 if self._deferred:
                     deferred, self._deferred = self._deferred, []
@@ -208,6 +211,23 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                         "prediction(s) failed; the belief was held over each")
 
     # ------------------------------------------------------------------ internals
+
+    def _flushed(self, sensor: SensorRuntime) -> list | tuple | None:
+        """The preprocessor's ``flush()`` at the end of the input, checked as its ``feed`` is (a list or tuple
+        of Message or Fix); None, with the reason in ``_flush_failure``, when it raised or returned anything
+        else: the end of a run is no place for a plugin's error to lose the summary."""
+        pre = sensor.preprocessor
+        try:
+            outs = pre.flush()
+        except Exception as exc:  # a plugin's failure at the end must not stop the run's end
+            self._flush_failure = (f"{_who(pre, self.system.registry)} flush failed: {type(exc).__name__}: {exc}; "
+                                   "the messages it held are lost")
+            return None
+        if type(outs) not in (list, tuple) or not all(isinstance(o, (Message, Fix)) for o in outs):
+            self._flush_failure = (f"{_who(pre, self.system.registry)} flush returned {shown(outs)}, expected a "
+                                   "list of fusion.api.Message or Fix; the messages it held are lost")
+            return None
+        return outs
 
     def _input_silence(self, t: float, other: str) -> Iterator[Event]:
         """One ``gap`` event when the input sensor has been silent for more than its max_gap at ``t`` (s), the

@@ -104,3 +104,58 @@ def test_belief_at_predicts_to_the_asked_time_and_fixes_are_used_at_their_time()
     probe_s = sched_s.sensors["fix"].preprocessor
     list(sched_s.run(msgs))
     assert probe_s.asked and all(tb >= t for t, tb in probe_s.asked)
+
+
+class BadFlush(Probe):
+    """A probe whose flush fails in the way ``how`` names (tester6: a preprocessor's flush was not checked)."""
+
+    name: ClassVar[str] = "bad_flush_test"
+    how = "raise"
+
+    def flush(self):
+        if self.how == "raise":
+            raise RuntimeError("boom in flush")
+        if self.how == "not_a_list":
+            return "fix"
+        return [self._last, 3.0]                      # one good message and one that is not
+
+
+def test_a_failing_flush_is_named_and_the_run_still_ends(monkeypatch):
+    """A preprocessor whose flush raises or returns anything but Messages/Fixes: one warning naming it, its held
+    messages lost, every estimate before the end the same as a run whose flush emits nothing."""
+    msgs = sorted(stream() + [Message(9.995, "fix", (8.0,))], key=lambda m: m.t)
+
+    def run(how):
+        class P(BadFlush):
+            pass
+        P.how = how
+
+        class Plug:
+            from fusion import hookimpl
+
+            @hookimpl
+            def fusion_register_components(self, registry):
+                registry.add(Odometry)
+                registry.add(P)
+        _, reg = make_plugin_manager(extra_plugins=[Plug()])
+        spec = SystemSpec.model_validate({
+            "name": "odo", "process": "odo_test", "filter": "kf", "beacons": {"A": [0.0, 0.0]},
+            "initial": {"mean": {"p": 0.0, "b": 0.0}, "sd": {"p": 1.0, "b": 0.5}},
+            "sensors": {"odo": {"role": "input"}, "fix": {"model": {"type": "position"}, "noise": 0.1,
+                                                          "preprocessor": {"type": "bad_flush_test"}}}})
+        sched = Scheduler(wire(spec, registry=reg))
+        return sched, list(sched.run(msgs))
+
+    good_sched = Scheduler(_system())
+    good = [e for e in good_sched.run(msgs) if isinstance(e, Estimate) and e.reason == "update"][:-1]  # no flushed fix
+    for how, said in (("raise", "flush failed: RuntimeError: boom in flush"),
+                      ("not_a_list", "flush returned 'fix'"), ("bad_item", "flush returned")):
+        sched, out = run(how)
+        warnings = [e for e in out if not isinstance(e, Estimate) and e.kind == "warning" and "flush" in e.detail]
+        assert len(warnings) == 1 and said in warnings[0].detail and "bad_flush_test" in warnings[0].detail
+        assert "expected a list" in warnings[0].detail or how == "raise"
+        ups = [e for e in out if isinstance(e, Estimate) and e.reason == "update"]
+        assert [e.t for e in ups] == [e.t for e in good]
+        for a, b in zip(ups, good):
+            np.testing.assert_array_equal(a.belief.x, b.belief.x)
+        assert sched.sensors["fix"].counters["absorbed"] >= 0
