@@ -28,7 +28,7 @@ from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationE
                       field_validator, model_validator)
 
 from fusion.api import (Aligns, BuildContext, CapabilityWarning, Component, ConfigError, Decoder, Filter, Gate,
-                        MeasurementModel, ProcessModel, Solver, has, near_misses)
+                        KeepsGateState, MeasurementModel, ProcessModel, Solver, has, near_misses)
 from fusion.api.components import reject_bool_numbers
 from fusion.recovery import RecoverySpec
 from fusion.registry import Registry, default_registry
@@ -321,6 +321,18 @@ def build_component(registry: Registry, kind: str, spec: ComponentSpec, ctx: Bui
         raise _build_failed(registry, cls, kind, name, where, "failed to build", exc) from exc
 
 
+def _probe_gate_state(registry: Registry, gate: Gate, where: str) -> None:
+    """A gate that keeps state (fusion.api.KeepsGateState) gives its run's first state at wiring too, so that
+    an ``initial_state()`` that raises is one config error naming the gate, its package and the config line
+    (exit 2, also from ``fusion validate``), not an exception out of the run; each run still asks afresh."""
+    if not has(gate, KeepsGateState):
+        return
+    try:
+        gate.initial_state()  # type: ignore[attr-defined]
+    except Exception as exc:
+        raise _build_failed(registry, type(gate), "gate", gate.name, where, "failed in initial_state()", exc) from exc
+
+
 def _build_failed(registry: Registry, cls: type, kind: str, name: str, where: str, what: str,
                   exc: Exception) -> Exception:
     """The error for a component that raised while it was built: a ConfigError naming the config line, the
@@ -376,6 +388,8 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
                 raise ConfigError(f"{where}: a measurement sensor needs 'noise:' (sd or R): its model "
                                   f"{model.name!r} takes no covariance from its messages")
             gate = build_component(reg, "gate", s.gate, sctx, doc, [*loc, "gate"]) if s.gate else None
+            if gate is not None:
+                _probe_gate_state(reg, gate, doc.where([*loc, "gate"]) if doc else f"{where}.gate")
         elif process.input_dim == 0:
             raise ConfigError(f"{where}.role: 'input' but process {process.name!r} takes no control input")
         if s.recovery is not None:

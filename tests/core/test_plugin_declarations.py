@@ -91,6 +91,17 @@ def fusion_register_components(registry):
             name = "strict"
             Params = None
         registry.add(NoParams)
+    if FAULT == "state_raise":
+        class Stateful(Fussy):
+            """Keeps a state whose start cannot be made."""
+            name = "strict"
+
+            class Params(Params):
+                limit: float = 9.0
+
+            def initial_state(self):
+                raise RuntimeError("no state today")
+        registry.add(Stateful)
     if FAULT == "name":
         class Named(Fussy):
             """Named by the environment."""
@@ -235,3 +246,15 @@ def test_params_default_errors_reads_only_plain_defaults():
 
     why = params_default_errors(P)
     assert why.startswith("a = 'x': ") and ";" not in why     # only a: b, c and d are not checked
+
+
+def test_a_gate_whose_initial_state_raises_is_named_with_its_config_line(fusion):
+    """tester6 leftover: a stateful gate whose initial_state() raises was an exception out of the run (exit 1);
+    now one config error at wiring, as a component that fails while built, from validate and run alike."""
+    for cmd in ("validate", "run"):
+        proc = fusion("state_raise", cmd, "strict.yaml")
+        assert proc.returncode == 2, proc.stderr
+        assert ("strict.yaml:7: sensors.s.gate: component 'strict' (gate, from fusion-decl 0.2) failed in "
+                "initial_state(): RuntimeError: no state today") in proc.stderr, proc.stderr
+        assert "Traceback" not in proc.stderr
+
