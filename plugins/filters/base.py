@@ -216,6 +216,17 @@ def _eye(n: int) -> np.ndarray:
     return I
 
 
+def _predicted(model: MeasurementModel, x: np.ndarray, m: int, at: str, chk: bool) -> np.ndarray:
+    """h(x), checked (shape (m,), finite: one dot product) for a model that is not trusted."""
+    zh = model.h(x)
+    if chk:
+        zh = array_of(zh, (m,), "h", at)
+        s = zh.dot(zh)
+        if s - s != 0.0:
+            nonfinite(zh, "h", at, x)
+    return zh
+
+
 def linearised_update(flt: KalmanBase, belief: Belief, model: MeasurementModel, z: np.ndarray,
                       R: np.ndarray, gate: Gate | None, max_iterations: int = 1,
                       tolerance: float = 0.0) -> UpdateResult:
@@ -253,12 +264,7 @@ def _update_compiled(flt: KalmanBase, belief: Belief, model: MeasurementModel, z
         s = _vdot(H, H)
         if s - s != 0.0:
             nonfinite(H, "jacobian", MEAN, x0)
-    zh = model.h(x0)
-    if chk:
-        zh = array_of(zh, (m,), "h", MEAN)
-        s = zh.dot(zh)
-        if s - s != 0.0:
-            nonfinite(zh, "h", MEAN, x0)
+    zh = _predicted(model, x0, m, MEAN, chk)
     r = residual_of(model)(z, zh)
     S, x1, P1 = np.empty((m, m)), np.empty(n), np.empty((n, n))
     try:                                         # the arrays as they are (nearly always float64, C-ordered)
@@ -299,10 +305,8 @@ def linearised_update_numpy(flt: KalmanBase, belief: Belief, model: MeasurementM
     xi = x0
     events: tuple = ()
     for it in range(max_iterations):
-        if not chk:
-            xv = xi
-        else:
-            xv, at = (x0, MEAN) if it == 0 else (frozen(xi), ITERATE)
+        at = MEAN if it == 0 else ITERATE       # where a check of an untrusted model's value names it
+        xv = xi if not chk else (x0 if it == 0 else frozen(xi))
         H = measurement_jacobian(model, xv)
         if chk:
             if H.shape != (m, n):                # a numerical H of an h of the wrong shape: h is named
@@ -315,12 +319,7 @@ def linearised_update_numpy(flt: KalmanBase, belief: Belief, model: MeasurementM
         Ly, S, event = flt.factor(HP @ H.T + R, belief.t, "innovation covariance")
         if event is not None:
             events += (event,)
-        zh = model.h(xv)
-        if chk:
-            zh = array_of(zh, (m,), "h", at)
-            s = zh.dot(zh)
-            if s - s != 0.0:
-                nonfinite(zh, "h", at, xv)
+        zh = _predicted(model, xv, m, at, chk)
         r = model.residual(z, zh)
         W = solve_lower(Ly, HP)                  # L_y^-1 H P   (m, n)
         if it == 0:
