@@ -45,8 +45,13 @@ def test_iekf_reaches_map_where_ekf_stops_short():
     ce, ge = _cost_and_grad(xe, meas, prior, R, z)
     c0, g0 = _cost_and_grad(prior.x, meas, prior, R, z)
     assert np.linalg.norm(gi) < 1e-6 * np.linalg.norm(g0)          # a stationary point
-    np.testing.assert_allclose(xi, ref.x, atol=1e-7)                 # the one BFGS finds
-    assert ci == pytest.approx(ref.fun, rel=1e-9)
+    # The one BFGS finds, as far as its stopping rule places it: |x - x*| <= |grad| / lambda_min(Hessian), with
+    # the Gauss-Newton Hessian 2 (P^-1 + H^T R^-1 H) at the solution (a residual this small changes it little).
+    H = meas.jacobian(xi)
+    hess = 2 * (np.linalg.inv(prior.P) + H.T @ np.linalg.inv(R) @ H)
+    reach = np.linalg.norm(ref.jac) / np.linalg.eigvalsh(hess).min()
+    assert np.linalg.norm(xi - ref.x) <= 2 * reach + 1e-12
+    assert ci <= ref.fun * (1 + 1e-12)                               # no worse than the reference's point
     assert np.linalg.norm(ge) > 1e-2 * np.linalg.norm(g0)           # the EKF stops short
     assert ce > 10 * ci
     assert 2 < ri.iterations < 50

@@ -116,7 +116,10 @@ def test_iekf_update_is_the_map_point_of_a_nonlinear_firing(seed):
     # also from the prior (a second, independent start of the reference)
     ref2 = least_squares(whitened, x_prior, xtol=1e-15, ftol=1e-15, gtol=1e-15).x
     best = ref if cost(ref) <= cost(ref2) else ref2
-    assert cost(res.belief.x) <= cost(best) * (1 + 1e-8) + 1e-12
-    assert np.abs(res.belief.x[:3] - best[:3]).max() < 1e-6
+    assert cost(res.belief.x) <= cost(best) * (1 + 1e-8) + 1e-12      # the reference's ftol, with margin
+    # Two solvers agree as far as the conditioning and the reference's stopping rule allow: far below the
+    # posterior sd (1e-4 of it is the same answer), whatever the reference's last digits.
+    sd = np.sqrt(np.diag(res.belief.P)[:3])
+    assert np.all(np.abs(res.belief.x[:3] - best[:3]) < 1e-4 * sd)
     e = ekf.update(belief, obs.model, obs.z, R).belief.x
     assert np.abs(e[:3] - best[:3]).max() > 0.01           # the single linearisation is off the MAP point

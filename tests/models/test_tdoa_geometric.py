@@ -349,9 +349,18 @@ def test_period_fix_is_least_squares_of_arrivals_against_firing_numbers():
     a = 1000.137 + k * true_T + np.linalg.norm(FAR - Bk, axis=1) / C + rng.normal(0.0, 2e-4, k.size)
     pos, t0, Tf, cov = period_fix(Bk, a, T, C, 2e-4, FAR + 0.3)
     fun = lambda x: x[4] + k * x[3] + np.linalg.norm(x[:3] - Bk, axis=1) / C - (a - 1000.0)  # noqa: E731
-    ref = least_squares(fun, np.r_[FAR, T, 0.137], x_scale=[1, 1, 1, 1e-5, 1e-4], xtol=1e-15, ftol=1e-15,
-                        gtol=1e-15).x
-    assert np.abs(pos - ref[:3]).max() < 1e-6 and abs(Tf - ref[3]) < 1e-9 and abs(t0 - 1000.0 - ref[4]) < 1e-8
+    fit = least_squares(fun, np.r_[FAR, T, 0.137], x_scale=[1, 1, 1, 1e-5, 1e-4], xtol=1e-15, ftol=1e-15,
+                        gtol=1e-15)
+    ours = np.r_[pos, Tf, t0 - 1000.0]
+    # Two solvers agree only as far as the conditioning (cond(J) ~ 2e4 here) and the reference's stopping rule
+    # allow, which is far below the estimate's own standard deviation: 1e-4 sd is the same answer (the
+    # differences seen are ~3e-6 sd). cov is ordered [x y z t0 T], ours [x y z T t0].
+    sd = np.sqrt(np.diag(cov))[[0, 1, 2, 4, 3]]
+    assert np.all(np.abs(ours - fit.x) < 1e-4 * sd)
+    # Optimality without the reference's digits: the cost is not above the reference's (to its ftol), and
+    # the normal equations J^T r = 0 hold to far below double rounding times the conditioning (~1e-11).
+    assert 0.5 * np.sum(fun(ours) ** 2) <= fit.cost * (1 + 1e-9)
+    assert np.linalg.norm(fit.jac.T @ fun(ours)) < 1e-8 * np.linalg.norm(fit.jac) * np.linalg.norm(fun(ours))
     bound = stationary_bound(Bk, pos, k, C, 2e-4)           # order [x y z T t0]
     assert np.allclose(cov[:3, :3], bound[:3, :3], rtol=1e-6)
     assert cov[4, 4] == pytest.approx(bound[3, 3], rel=1e-6) and cov[3, 3] == pytest.approx(bound[4, 4], rel=1e-6)
