@@ -30,6 +30,7 @@ from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationE
 from fusion.api import (Aligns, BuildContext, CapabilityWarning, Component, ConfigError, Decoder, Filter, Gate,
                         KeepsGateState, MeasurementModel, ProcessModel, Solver, has, near_misses)
 from fusion.api.components import reject_bool_numbers
+from fusion.health.spec import HealthSpec
 from fusion.recovery import RecoverySpec
 from fusion.registry import Registry, default_registry
 from fusion.yamlsource import LocatedYAML, load_yaml, pydantic_errors
@@ -206,6 +207,7 @@ class SystemSpec(_Strict):
     output: OutputSpec = Field(default_factory=OutputSpec)
     evaluation: EvaluationSpec = Field(default_factory=EvaluationSpec)
     smoother: SmootherSpec | None = None
+    health: HealthSpec = Field(default_factory=HealthSpec)
 
     @field_validator("beacons")
     @classmethod
