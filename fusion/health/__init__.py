@@ -19,10 +19,11 @@ def spec_of(system: Any) -> HealthSpec:
     return getattr(system.spec, "health", None) or HealthSpec()
 
 
-def assess(system: Any, summary: dict[str, Any], watch: HealthWatch | None, header: Any = None) -> Verdict:
-    """The Verdict of a run of ``system``; also written into ``summary["health"]`` (``degraded``,
-    ``findings``)."""
+def assess(system: Any, summary: dict[str, Any], watch: HealthWatch | None, header: Any = None,
+           recording: Any = None) -> Verdict:
+    """The Verdict of a run of ``system`` (its recording's parsed ``header`` and file path ``recording``, for
+    the causes); also written into ``summary["health"]`` (``degraded``, ``findings``)."""
     verdict = judge(summary, watch.report() if watch is not None else None, spec_of(system),
-                    context_of(system, header))
+                    context_of(system, header, recording))
     summary.setdefault("health", {}).update(verdict.as_dict())
     return verdict

@@ -18,7 +18,7 @@ class SensorContext:
     time_offset: float = 0.0          # s
     gate: str = ""                    # "chi2 probability=0.999", "" without a gate
     recovery: str = ""                # "after_s=5", "" without one
-    header: tuple[str, ...] = ()      # the header's "NAME key: value" lines
+    header: tuple[str, ...] = ()      # the recording's "# NAME key: value" lines
 
 
 @dataclass(frozen=True)
@@ -30,6 +30,7 @@ class RunContext:
     sensors: dict[str, SensorContext] = field(default_factory=dict)
     header_beacons: int = 0           # beacons the recording's header declares
     config_beacons: int = 0
+    header_receivers: int = 0         # "# receiver N: x y z" lines (a receiver array)
 
     def sensor(self, name: str | None) -> SensorContext:
         return self.sensors.get(name or "", SensorContext(name or ""))
@@ -52,11 +53,37 @@ def _short(v: Any, most: int = 60) -> str:
     return text if len(text) <= most else text[: most - 3] + "..."
 
 
-def context_of(system: Any, header: Any = None) -> RunContext:
-    """The RunContext of a wired ``system`` (fusion.config.System) and a recording's ``header``
-    (fusion.logformat.Header, or None)."""
+#: Header lines read for the causes: a header is at the top of a recording, and a few hundred lines long.
+_HEADER_LINES = 5000
+
+
+def header_lines(path: Any) -> list[str]:
+    """The ``#`` lines at the top of a recording file (without the ``#``), or [] for anything but a regular
+    file that can be read (stdin, a port, a plugin's source)."""
+    import os
+    import stat
+
+    try:
+        if path is None or not stat.S_ISREG(os.stat(path).st_mode):
+            return []
+        out = []
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            for _, line in zip(range(_HEADER_LINES), fh):
+                if line.startswith("#"):
+                    out.append(line[1:].strip())
+                elif line.strip():
+                    break
+        return out
+    except (OSError, ValueError):
+        return []
+
+
+def context_of(system: Any, header: Any = None, recording: Any = None) -> RunContext:
+    """The RunContext of a wired ``system`` (fusion.config.System), a recording's parsed ``header``
+    (fusion.logformat.Header, or None) and its file (``recording``: a path, for the ``# SENSOR key: value``
+    lines the parsed header does not keep; None: not read)."""
     spec = system.spec
-    meta = dict(getattr(header, "meta", {}) or {})
+    lines = header_lines(recording)
     sensors = {}
     for name, s in spec.sensors.items():
         if s.role != "measurement" or not s.enabled:
@@ -65,27 +92,29 @@ def context_of(system: Any, header: Any = None) -> RunContext:
         sensors[name] = SensorContext(
             name=name, model=_component(s.model), time_offset=float(s.time_offset), gate=_component(s.gate),
             recovery="" if rec is None else f"after_s={rec.after_s:g} action={rec.action}",
-            header=tuple(f"{k}: {v}" for k, v in meta.items() if k.startswith(name + " ")))
+            header=tuple(line for line in lines if line.startswith(name + " ")))
+    beacons = len(getattr(header, "beacons", {}) or {}) or sum(line.startswith("beacon ") for line in lines)
     return RunContext(max_latency=float(spec.scheduler.max_latency), late_policy=spec.scheduler.late_policy,
-                      sensors=sensors, header_beacons=len(getattr(header, "beacons", {}) or {}),
-                      config_beacons=len(spec.beacons))
+                      sensors=sensors, header_beacons=beacons, config_beacons=len(spec.beacons),
+                      header_receivers=sum(line.startswith("receiver ") for line in lines))
 
 
 def constants(ctx: RunContext, sensor: str | None) -> str:
     s = ctx.sensor(sensor)
     said = "; ".join(s.header) if s.header else f"nothing of {sensor}" if sensor else "nothing"
     mine = f"sensors.{sensor}.model {s.model}" if sensor and s.model else "the config's models"
-    beacons = ""
+    geometry = ""
     if ctx.header_beacons or ctx.config_beacons:
-        beacons = f"; beacons: {ctx.config_beacons} in the config, {ctx.header_beacons} in the header"
-    return f"the config's constants against the recording's header ({mine}; the header says {said}{beacons})"
+        geometry = f"; beacons: {ctx.config_beacons} in the config, {ctx.header_beacons} in the header"
+    if ctx.header_receivers:
+        geometry += f"; a receiver array of {ctx.header_receivers} in the header (its numbering)"
+    return f"the config's constants against the recording's header ({mine}; the header: {said}{geometry})"
 
 
 def latency(ctx: RunContext, sensor: str | None) -> str:
     s = ctx.sensor(sensor)
-    where = f"sensors.{sensor}.time_offset {s.time_offset:g} s, " if sensor else ""
-    return (f"a latency ({where}scheduler.max_latency {ctx.max_latency:g} s, late_policy {ctx.late_policy}: a "
-            "measurement stamped later than the buffer releases is dropped, one stamped off its time disagrees)")
+    where = f"sensors.{sensor}.time_offset {s.time_offset:g} s against " if sensor else ""
+    return f"a latency ({where}scheduler.max_latency {ctx.max_latency:g} s, late_policy {ctx.late_policy})"
 
 
 def gate(ctx: RunContext, sensor: str | None) -> str:
