@@ -192,7 +192,7 @@ def _agreement(kind: str, errors: dict[str, Any], consistency: dict[str, Any], l
     over = []
     for key, label, unit in _LIMITS:
         limit, value = getattr(limits, key), errors.get(key)
-        if limit is not None and isinstance(value, (int, float)) and (value > limit or value != value):
+        if limit is not None and isinstance(value, (int, float)) and math.isfinite(value) and value > limit:
             over.append(f"{label} {value:.3g} {unit} > {limit:g} (health.{kind}.{key})")
     nees, dof = consistency.get("nees_mean"), consistency.get("nees_dof")
     if kind == "truth" and limits.nees_per_dof is not None and nees is not None and dof:

@@ -24,7 +24,7 @@ from fusion.api import Estimate, KeepsGateState, has
 
 from . import batchstats
 from .lockstep import NotLockstep, from_simulation
-from .trial import Trial, row_of, system_of, with_initial
+from .trial import Trial, health_columns, row_of, system_of, with_initial
 
 __all__ = ["unsupported", "run_batch", "NotLockstep"]
 
@@ -145,6 +145,7 @@ def run_batch(trials: list[Trial], timings: dict[str, float] | None = None) -> l
                "not_positive_definite": int(bf.counters.get("not_positive_definite", np.zeros(N, int))[i])}
         for s in sensors:
             row[f"nis_mean_{s}"] = columns[i][f"nis_mean_{s}"]
+        row.update(_health(systems[i], counts, i, row, getattr(stats, "dof", None)))
         row.update(status="ok", error="", engine="batch", wall_s=share + math_s / N)
         rows.append(row)
     if timings is not None:
@@ -153,6 +154,18 @@ def run_batch(trials: list[Trial], timings: dict[str, float] | None = None) -> l
                        ("statistics", t4 - t3 - math_s)):
             timings[key] = timings.get(key, 0.0) + v
     return rows
+
+
+def _health(system: Any, counts: dict, i: int, row: dict[str, Any], nees_dof: int | None) -> dict[str, Any]:
+    """Trial ``i``'s health columns (fusion.sweep.trial.health_columns) from its counters and errors: the
+    batch keeps no per-trial update stream, so the rule's shares and truth limits apply, not its NIS windows
+    or lock-outs (the pipeline engines judge those too)."""
+    sensors = {n: {"received": c["received"], "used": int(c["used"][i]), "rejected": int(c["rejected"][i]),
+                   "late": c["late"], "malformed": 0} for n, c in counts.items()}
+    errors = {k: row[k] for k in ("position_rmse_m", "position_max_m", "velocity_rmse_mps") if k in row}
+    summary = {"sensors": sensors, "errors": errors,
+               "consistency": {"nees_mean": row.get("nees_mean"), "nees_dof": nees_dof}}
+    return health_columns(system, summary)
 
 
 class _PerEstimate:
