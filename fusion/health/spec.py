@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field
 
-__all__ = ["HealthSpec", "AgreementLimits", "DEGRADED_EXIT"]
+__all__ = ["HealthSpec", "AgreementLimits", "TruthLimits", "ReferenceLimits", "DEGRADED_EXIT"]
 
 #: The exit code of a run whose estimate cannot be trusted (after 3, a non-finite estimate).
 DEGRADED_EXIT = 4
@@ -35,14 +35,18 @@ class AgreementLimits(BaseModel):
     nees_per_dof: float | None = Field(None, gt=1.0)
 
 
-def _truth_default() -> AgreementLimits:
-    # an order of magnitude over a consistent filter's 1: the covariance understates the error ~3x in sd
-    return AgreementLimits(nees_per_dof=10.0)
+class TruthLimits(AgreementLimits):
+    """``health.truth``: by default the NEES mean at most 10 per dof, an order of magnitude over a consistent
+    filter's 1 (the covariance understating the error ~3x in sd)."""
+
+    nees_per_dof: float | None = Field(10.0, gt=1.0)
 
 
-def _reference_default() -> AgreementLimits:
-    # another estimator is no truth and has no covariance here: only a gross attitude disagreement by default
-    return AgreementLimits(attitude_rmse_deg=30.0)
+class ReferenceLimits(AgreementLimits):
+    """``health.reference``: another estimator is no truth and comes without a covariance here, so by
+    default only a gross attitude disagreement (RMSE over 30 deg) counts."""
+
+    attitude_rmse_deg: float | None = Field(30.0, gt=0.0)
 
 
 class HealthSpec(BaseModel):
@@ -63,5 +67,5 @@ class HealthSpec(BaseModel):
                                 "accepted updates add up to this")
     min_messages: int = Field(5, ge=1, description="a sensor with fewer decided messages is not judged by its "
                               "shares")
-    truth: AgreementLimits = Field(default_factory=_truth_default)
-    reference: AgreementLimits = Field(default_factory=_reference_default)
+    truth: TruthLimits = Field(default_factory=TruthLimits)
+    reference: ReferenceLimits = Field(default_factory=ReferenceLimits)
