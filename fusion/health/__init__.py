@@ -19,11 +19,13 @@ def spec_of(system: Any) -> HealthSpec:
     return getattr(system.spec, "health", None) or HealthSpec()
 
 
-def assess(system: Any, summary: dict[str, Any], watch: HealthWatch | None, header: Any = None,
+def assess(system: Any, summary: dict[str, Any], watch: HealthWatch | dict | None, header: Any = None,
            recording: Any = None) -> Verdict:
-    """The Verdict of a run of ``system`` (its recording's parsed ``header`` and file path ``recording``, for
-    the causes); also written into ``summary["health"]`` (``degraded``, ``findings``)."""
-    verdict = judge(summary, watch.report() if watch is not None else None, spec_of(system),
-                    context_of(system, header, recording))
+    """The Verdict of a run of ``system`` from its ``summary`` and ``watch`` (a HealthWatch that saw its
+    estimates, or such a watch's report; None: the summary alone), its recording's parsed ``header`` and
+    file path ``recording`` (for the causes); also written into ``summary["health"]`` (``degraded``,
+    ``findings``)."""
+    report = watch.report() if isinstance(watch, HealthWatch) else watch
+    verdict = judge(summary, report, spec_of(system), context_of(system, header, recording))
     summary.setdefault("health", {}).update(verdict.as_dict())
     return verdict

@@ -257,8 +257,8 @@ def row_of(summary: dict, sensors: list[str]) -> dict[str, Any]:
 
 def health_columns(system: Any, summary: dict, watch: Any = None) -> dict[str, Any]:
     """The HEALTH columns of a trial: the rule of ``fusion run`` (fusion.health) on its ``summary`` and its
-    ``watch`` (a fusion.health.HealthWatch that saw the run's estimates; None: from the summary alone, the
-    shares and the errors against truth), written into the summary's ``health`` too. ``health`` is each
+    ``watch`` (a fusion.health.HealthWatch that saw the run's estimates, or a watch's report; None: from the
+    summary alone, the shares and the errors against truth), written into the summary's ``health`` too. ``health`` is each
     finding's sensor and figures, ``; ``-joined (the causes are ``fusion run``'s)."""
     from fusion.health import assess
 
