@@ -11,7 +11,6 @@ two consecutive windows over its chi-square quantile, the NEES per dof over trut
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 

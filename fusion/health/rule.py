@@ -161,8 +161,11 @@ def nis_windows_beyond(windows: list[tuple[float, float, float, int]], alpha: fl
     c = min(2, k)
     q = (alpha / k) ** (1.0 / c)
     best, best_at, run = 0, 0, 0
+    cut: dict[int, float] = {}   # the quantile per dof (windows mostly share one)
     for i, (_, _, total, dof) in enumerate(windows):
-        run = run + 1 if total > chi2.isf(q, dof) else 0
+        if dof not in cut:
+            cut[dof] = chi2.isf(q, dof)
+        run = run + 1 if total > cut[dof] else 0
         if run > best:
             best, best_at = run, i - run + 1
     return best_at, best, q

@@ -29,7 +29,7 @@ def test_broken_run_is_degraded_with_one_line_naming_the_cause(make, sensor, fig
     err = capsys.readouterr().err.strip().splitlines()
     assert code == DEGRADED_EXIT == 4
     last = err[-1]
-    assert last.startswith(f"fusion run: degraded: the estimate cannot be trusted (exit 4;")
+    assert last.startswith("fusion run: degraded: the estimate cannot be trusted (exit 4;")
     assert f": {sensor}: " in last and figures in last
     causes = last.split("likely causes, in order: ", 1)[1]
     assert causes.startswith("(1) ") and cause in causes.split("; (2)")[0]

@@ -3,7 +3,6 @@ item 2), on both the pipeline engines and the batch engine."""
 from __future__ import annotations
 
 import csv
-import io
 from pathlib import Path
 
 import pytest
