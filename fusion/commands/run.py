@@ -141,7 +141,8 @@ def _run(args: argparse.Namespace) -> int:
         notes = EventNotes(sys.stderr, enabled=not args.quiet)
         smoothing = _smoothing(args, system)
         if smoothing is None:
-            result = pipeline.run(system, src, [*guarded, watch], on_event=notes, progress=tick, plot=plot, label=str(source))
+            result = pipeline.run(system, src, [*guarded, watch], on_event=notes, progress=tick, plot=plot,
+                                  label=str(source))
         else:
             from fusion.smoothing import run_smoothed
 

@@ -19,8 +19,8 @@ from typing import Any
 
 from fusion.api import ConfigError
 
-__all__ = ["Trial", "row_of", "health_columns", "run_trial", "system_of", "scenario_of", "recording_of", "drawn_mean", "drawn_from_truth",
-           "with_initial", "METRICS"]
+__all__ = ["Trial", "row_of", "health_columns", "run_trial", "system_of", "scenario_of", "recording_of", "drawn_mean",
+           "drawn_from_truth", "with_initial", "METRICS", "HEALTH"]
 
 #: The metric columns of a row, in order (``nis_mean_<sensor>`` columns follow, one per sensor).
 METRICS = ("position_rmse_m", "position_max_m", "velocity_rmse_mps", "attitude_rmse_deg", "nees_mean",
@@ -258,8 +258,8 @@ def row_of(summary: dict, sensors: list[str]) -> dict[str, Any]:
 def health_columns(system: Any, summary: dict, watch: Any = None) -> dict[str, Any]:
     """The HEALTH columns of a trial: the rule of ``fusion run`` (fusion.health) on its ``summary`` and its
     ``watch`` (a fusion.health.HealthWatch that saw the run's estimates, or a watch's report; None: from the
-    summary alone, the shares and the errors against truth), written into the summary's ``health`` too. ``health`` is each
-    finding's sensor and figures, ``; ``-joined (the causes are ``fusion run``'s)."""
+    summary alone, the shares and the errors against truth), written into the summary's ``health`` too.
+    ``health`` is each finding's sensor and figures, ``; ``-joined (the causes are ``fusion run``'s)."""
     from fusion.health import assess
 
     verdict = assess(system, summary, watch)
