@@ -23,7 +23,7 @@ def assess(system: Any, summary: dict[str, Any], watch: HealthWatch | dict | Non
            recording: Any = None) -> Verdict:
     """The Verdict of a run of ``system`` from its ``summary`` and ``watch`` (a HealthWatch that saw its
     estimates, or such a watch's report; None: the summary alone), its recording's parsed ``header`` and
-    file path ``recording`` (for the causes); also written into ``summary["health"]`` (``degraded``,
+    file path or lines ``recording`` (for the causes); also written into ``summary["health"]`` (``degraded``,
     ``findings``)."""
     report = watch.report() if isinstance(watch, HealthWatch) else watch
     verdict = judge(summary, report, spec_of(system), context_of(system, header, recording))

@@ -31,6 +31,8 @@ class RunContext:
     header_beacons: int = 0           # beacons the recording's header declares
     config_beacons: int = 0
     header_receivers: int = 0         # "# receiver N: x y z" lines (a receiver array)
+    header_read: bool = False         # the header's lines were read (a file; not stdin, a port, lines in memory)
+    beacons_known: bool = False       # the header's beacons are known (read, or parsed by the run)
 
     def sensor(self, name: str | None) -> SensorContext:
         return self.sensors.get(name or "", SensorContext(name or ""))
@@ -58,11 +60,13 @@ _HEADER_LINES = 5000
 
 
 def header_lines(path: Any) -> list[str]:
-    """The ``#`` lines at the top of a recording file (without the ``#``), or [] for anything but a regular
-    file that can be read (stdin, a port, a plugin's source)."""
+    """The ``#`` lines at the top of a recording (without the ``#``): a file's, or those of a list of lines
+    (a sweep's recording in memory); [] for anything else (stdin, a port, a plugin's source)."""
     import os
     import stat
 
+    if isinstance(path, (list, tuple)):
+        return [line[1:].strip() for line in _top(path)]
     try:
         if path is None or not stat.S_ISREG(os.stat(path).st_mode):
             return []
@@ -76,6 +80,16 @@ def header_lines(path: Any) -> list[str]:
         return out
     except (OSError, ValueError):
         return []
+
+
+def _top(lines: Any) -> list[str]:
+    out = []
+    for _, line in zip(range(_HEADER_LINES), lines):
+        if line.startswith("#"):
+            out.append(line)
+        elif line.strip():
+            break
+    return out
 
 
 def context_of(system: Any, header: Any = None, recording: Any = None) -> RunContext:
@@ -96,19 +110,21 @@ def context_of(system: Any, header: Any = None, recording: Any = None) -> RunCon
     beacons = len(getattr(header, "beacons", {}) or {}) or sum(line.startswith("beacon ") for line in lines)
     return RunContext(max_latency=float(spec.scheduler.max_latency), late_policy=spec.scheduler.late_policy,
                       sensors=sensors, header_beacons=beacons, config_beacons=len(spec.beacons),
-                      header_receivers=sum(line.startswith("receiver ") for line in lines))
+                      header_receivers=sum(line.startswith("receiver ") for line in lines),
+                      header_read=bool(lines), beacons_known=bool(lines) or header is not None)
 
 
 def constants(ctx: RunContext, sensor: str | None) -> str:
     s = ctx.sensor(sensor)
-    said = "; ".join(s.header) if s.header else f"nothing of {sensor}" if sensor else "nothing"
     mine = f"sensors.{sensor}.model {s.model}" if sensor and s.model else "the config's models"
-    geometry = ""
-    if ctx.header_beacons or ctx.config_beacons:
-        geometry = f"; beacons: {ctx.config_beacons} in the config, {ctx.header_beacons} in the header"
+    parts = [mine]
+    if ctx.header_read:
+        parts.append("the header: " + ("; ".join(s.header) if s.header else f"nothing of {sensor or 'it'}"))
+    if ctx.beacons_known and (ctx.header_beacons or ctx.config_beacons):
+        parts.append(f"beacons: {ctx.config_beacons} in the config, {ctx.header_beacons} in the header")
     if ctx.header_receivers:
-        geometry += f"; a receiver array of {ctx.header_receivers} in the header (its numbering)"
-    return f"the config's constants against the recording's header ({mine}; the header: {said}{geometry})"
+        parts.append(f"a receiver array of {ctx.header_receivers} in the header (its numbering)")
+    return f"the config's constants against the recording's header ({'; '.join(parts)})"
 
 
 def latency(ctx: RunContext, sensor: str | None) -> str:

@@ -255,14 +255,16 @@ def row_of(summary: dict, sensors: list[str]) -> dict[str, Any]:
     return row
 
 
-def health_columns(system: Any, summary: dict, watch: Any = None) -> dict[str, Any]:
+def health_columns(system: Any, summary: dict, watch: Any = None, header: Any = None,
+                   recording: Any = None) -> dict[str, Any]:
     """The HEALTH columns of a trial: the rule of ``fusion run`` (fusion.health) on its ``summary`` and its
     ``watch`` (a fusion.health.HealthWatch that saw the run's estimates, or a watch's report; None: from the
     summary alone, the shares and the errors against truth), written into the summary's ``health`` too.
-    ``health`` is each finding's sensor and figures, ``; ``-joined (the causes are ``fusion run``'s)."""
+    ``health`` is each finding's sensor and figures, ``; ``-joined (the causes, from the recording's parsed
+    ``header`` and its ``recording`` lines, go to the summary's health)."""
     from fusion.health import assess
 
-    verdict = assess(system, summary, watch)
+    verdict = assess(system, summary, watch, header, recording)
     text = "; ".join((f"{f.sensor}: " if f.sensor else "") + f.figures for f in verdict.findings)
     return {"degraded": int(verdict.degraded), "health": text}
 
@@ -289,7 +291,7 @@ def run_trial(trial: Trial) -> dict[str, Any]:
         # row that says why, so the summary counts it, rather than "ok" with nothing in it
         not_started = result.summary.get("not_started")
         if not not_started:
-            row.update(health_columns(system, result.summary, watch))
+            row.update(health_columns(system, result.summary, watch, result.parsed.header, lines))
         row.update(status="error" if not_started else "ok", error=not_started or "", engine="pipeline",
                    wall_s=time.perf_counter() - t0)
         return row

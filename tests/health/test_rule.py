@@ -11,8 +11,9 @@ from fusion.health import HealthSpec, HealthWatch, judge
 from fusion.health.causes import RunContext, SensorContext
 from fusion.recovery import RecoverySpec
 
-CTX = RunContext(max_latency=0.1, sensors={"gps": SensorContext("gps", model="gps", time_offset=-0.3, gate="chi2"),
-                                          "mag": SensorContext("mag", header=("mag earth_field_ned: 1 2 3",))})
+CTX = RunContext(max_latency=0.1, header_read=True,
+                 sensors={"gps": SensorContext("gps", model="gps", time_offset=-0.3, gate="chi2"),
+                          "mag": SensorContext("mag", header=("mag earth_field_ned: 1 2 3",))})
 
 
 def _counts(**kw):
@@ -40,6 +41,9 @@ def test_late_drops_put_the_latency_first_and_rejections_the_constants():
     assert rej.causes[0].startswith("the config's constants against the recording's header")
     assert "mag earth_field_ned: 1 2 3" in rej.causes[0]
     assert [c.split(" (")[0] for c in rej.causes[1:]] == ["a latency", "a gate too tight", "a missing recovery"]
+    unread = RunContext(sensors=CTX.sensors)   # stdin or a port: the header's lines were not read
+    first = judge({"sensors": {"mag": _counts(received=100, used=10, rejected=90)}}, ctx=unread).findings[0].causes[0]
+    assert "the header:" not in first and "beacons" not in first
 
 
 def test_absorbed_messages_are_not_unused_and_few_messages_are_not_judged():
