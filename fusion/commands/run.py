@@ -36,7 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="fixed-lag smoother: each estimate SECONDS late, smoothed over that window")
     p.add_argument("--force", action="store_true", help="replace output files that exist")
     p.add_argument("--quiet", "-q", action="store_true",
-                   help="no table on stdout (on stderr when an output is '-', so stdout holds only that output)")
+                   help="no table on stdout (on stderr when an output is '-', so stdout holds only that output) and no "
+                        "progress bar; warnings still go to stderr")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -133,7 +134,7 @@ def _run(args: argparse.Namespace) -> int:
 
     show_progress = not args.no_progress and not args.quiet and data_stdout().isatty()
     with report.progress(_duration_hint(source), enabled=show_progress) as tick:
-        notes = EventNotes(sys.stderr, enabled=not args.quiet)
+        notes = EventNotes(sys.stderr)   # -q hides the table and progress only, never a warning
         smoothing = _smoothing(args, system)
         if smoothing is None:
             result = pipeline.run(system, src, sinks, on_event=notes, progress=tick, plot=plot, label=str(source))
