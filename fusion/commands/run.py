@@ -267,6 +267,11 @@ class _KeepSinkError:
                     raise
                 self.error = exc
 
+    def discard(self) -> None:
+        """Drop what the sink wrote, when it can (an incomplete smoothed output: fusion.smoothing.run)."""
+        if self.error is None:
+            getattr(self.sink, "discard", self.sink.close)()
+
 
 class _KeepSinkErrorEvents(_KeepSinkError):
     """``_KeepSinkError`` of a sink that takes events too (fusion.api.ReceivesEvents)."""
