@@ -27,7 +27,8 @@ def describe(snap: FeedSnapshot, paused: bool, filter_name: str, now: float | No
     label = f"RECONNECTING (attempt {snap.attempt})" if state == "reconnecting" else state.upper()
     out.append(f" {label} ", style="reverse " + _STATE_STYLE.get(state, "bold"))
     health = snap.health
-    silent = now - snap.data_wall if snap.live and snap.state == "running" and now is not None else 0.0
+    listening = snap.live and snap.state in ("running", "waiting") and now is not None
+    silent = now - snap.data_wall if listening else 0.0   # since the last byte, or since opening: none yet
     if health is not None:
         overall, reason = health.state, health.reason
         if silent > SILENT_S and overall != "LOST":  # the feed posts nothing while the port is silent
@@ -40,7 +41,7 @@ def describe(snap: FeedSnapshot, paused: bool, filter_name: str, now: float | No
     if snap.speed_ratio == snap.speed_ratio and not paused:
         parts.append(f"{snap.speed_ratio:.1f}x real time")
     parts += [f"filter {filter_name}", f"{snap.lines} lines"]
-    if snap.live and snap.state == "running" and now is not None and now - snap.data_wall > 2.0:
+    if listening and now - snap.data_wall > 2.0:
         parts.append(f"no data for {now - snap.data_wall:.0f} s")
     out.append(" | " + " | ".join(parts))
     if snap.live and snap.lag_s >= BEHIND_S and snap.state == "running":   # NaN: not compared
