@@ -240,9 +240,9 @@ def read_yaml_text(path: str | Path, what: str = "file") -> str:
         size = os.fstat(fh.fileno()).st_size
         data = fh.read(MAX_YAML_BYTES + 1)
     if len(data) > MAX_YAML_BYTES:
-        raise ConfigError(f"{p}: the file ({_bytes(max(size, len(data)))}) is larger than {_bytes(MAX_YAML_BYTES)}, "
-                          f"the most a YAML {what} may be (a config is a few kB; a recording, a table or a binary "
-                          "file given in its place?)")
+        raise ConfigError(f"{p}: larger than {_bytes(MAX_YAML_BYTES)} ({_bytes(max(size, len(data)))}), the most a "
+                          f"YAML {what} may be (a config is a few kB; a recording, a table or a binary file given "
+                          "in its place?)")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:

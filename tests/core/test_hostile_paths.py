@@ -89,7 +89,7 @@ def test_a_large_yaml_of_numbers_is_refused_by_its_size(tmp_path, capsys):
     big.write_text("\n".join(f"- {i}.5" for i in range(120_000)))   # ~1 MB: parsed for seconds before
     assert main(["validate", str(big)]) == 2
     err = one_error_line(capsys, big)
-    assert f"the file ({big.stat().st_size / 1024 ** 2:.3g} MiB) is larger than 256 KiB, the most a YAML file may be" in err, err
+    assert f"larger than 256 KiB ({big.stat().st_size / 1024 ** 2:.3g} MiB), the most a YAML file may be" in err, err
 
 
 def test_many_values_under_the_size_limit_are_refused_while_reading(capsys):
@@ -166,3 +166,13 @@ def test_quiet_hides_the_table_but_not_the_warnings(tmp_path, capsys):
     out, err = capsys.readouterr()
     assert out == ""
     assert "sensor 'uwbx' is not in the config; its messages are ignored" in err   # was hidden by -q
+
+
+@pytest.mark.parametrize("make, said", [(lambda d: "/tmp/" + "a" * 5000, "File name too long"),
+                                        (lambda d: str(d / "a.log"), "Too many levels of symbolic links")])
+def test_an_input_path_the_system_refuses_is_one_line(tmp_path, capsys, make, said):
+    (tmp_path / "a.log").symlink_to(tmp_path / "b.log")
+    (tmp_path / "b.log").symlink_to(tmp_path / "a.log")
+    assert main(["run", str(CONFIG), "--input", make(tmp_path), "-q"]) == 2   # was 1 (OSError) for the long one
+    err = capsys.readouterr().err
+    assert "cannot open the recording: " + said in err and len(err.strip().splitlines()) == 1, err
