@@ -30,8 +30,11 @@ from typing import Any
 import numpy as np
 
 from fusion.api import ImportedLog, Importer, ImportRequest, InputError, Stream
+from fusion.importers import px4_legacy
 from fusion.importers.common import (F32, GAUSS_TO_UT, LATLON_E7, LATLON_F, earth_field_ned, in_span, make_stream,
                                      silenced, slerp_to)
+from fusion.importers.coverage import imu_coverage, to_header
+from fusion.importers.flight_events import px4_events
 
 TOPICS = {
     "imu": ("sensor_combined",),
@@ -106,6 +109,9 @@ class UlogImporter(Importer):
             log.meta["vehicle"] = vehicle + _software(info)
         log.meta["time_zero"] = (f"{t0 / 1e6:.6f} s on the autopilot's boot clock (t = boot time - "
                                  f"{t0 / 1e6:.6f})")
+        if ulog.fusion_partial:
+            log.meta["partial"] = ulog.fusion_partial
+            log.notes.append(ulog.fusion_partial)
 
         def tcol(d) -> np.ndarray:
             ts = d.data.get("timestamp_sample", d.data["timestamp"])
@@ -119,16 +125,24 @@ class UlogImporter(Importer):
             if d is None:
                 missing.append("imu (sensor_combined)")
             else:
-                v = _cols(d, [f"accelerometer_m_s2[{i}]" for i in range(3)] + [f"gyro_rad[{i}]" for i in range(3)])
+                gyro = px4_legacy.gyro_field(d.data) or "gyro_rad"
+                v = _cols(d, [f"accelerometer_m_s2[{i}]" for i in range(3)] + [f"{gyro}[{i}]" for i in range(3)])
                 t_imu = tcol(d)
+                integral = (np.asarray(d.data["gyro_integral_dt"], float) * 1e-6
+                            if "gyro_integral_dt" in d.data else None)
                 rel = d.data.get("accelerometer_timestamp_relative")
                 if rel is not None and np.any(np.asarray(rel) == 0x7FFFFFFF):   # RELATIVE_TIMESTAMP_INVALID
                     stale = np.asarray(rel) == 0x7FFFFFFF
                     notes.append(f"imu: {int(stale.sum())} sample(s) without a new accelerometer sample dropped")
                     v, t_imu = v[~stale], t_imu[~stale]
-                streams.append(make_stream("imu", ("ax", "ay", "az", "gx", "gy", "gz"), t_imu, v, request,
-                                           meta={"units": "m/s^2 (specific force) rad/s, body FRD",
-                                                 "topic": "sensor_combined"}, notes=notes))
+                    integral = None if integral is None else integral[~stale]
+                s = make_stream("imu", ("ax", "ay", "az", "gx", "gy", "gz"), t_imu, v, request,
+                                meta={"units": "m/s^2 (specific force) rad/s, body FRD",
+                                      "topic": "sensor_combined"}, notes=notes)
+                keep = in_span(t_imu, request) & np.all(np.isfinite(v), axis=1)
+                s.meta.update(imu_coverage(s.t, s.values[:, 3:], None if integral is None else integral[keep],
+                                           "gyro_integral_dt"))
+                streams.append(s)
         if request.wants("gps"):
             d = _first(ulog, TOPICS["gps"])
             if d is None:
@@ -145,9 +159,15 @@ class UlogImporter(Importer):
                         start = utc[i] / 1e6 - (int(d.data["timestamp"][i]) - t0) / 1e6
                         log.meta["start_utc"] = _dt.datetime.fromtimestamp(start, _dt.timezone.utc).strftime(
                             "%Y-%m-%dT%H:%M:%S.%fZ")
+        combined = _first(ulog, ("sensor_combined",))
         if request.wants("mag"):
             d = _first(ulog, TOPICS["mag"])
-            if d is None:
+            if d is None and px4_legacy.has_mag(combined):
+                t_m, v_m = px4_legacy.combined_mag(combined, t0)
+                streams.append(make_stream("mag", ("mx", "my", "mz"), t_m, v_m * GAUSS_TO_UT, request,
+                                           meta={"units": "uT, body FRD, calibrated", "topic":
+                                                 "sensor_combined (magnetometer_ga, an older layout)"}, notes=notes))
+            elif d is None:
                 missing.append("mag (vehicle_magnetometer or sensor_mag)")
             else:
                 if d.name == "vehicle_magnetometer":
@@ -161,7 +181,11 @@ class UlogImporter(Importer):
                                            meta={"units": f"uT, {frame}", "topic": d.name}, notes=notes))
         if request.wants("baro"):
             d = _first(ulog, TOPICS["baro"])
-            if d is None:
+            if d is None and px4_legacy.has_baro(combined):
+                t_b, v_b, f_b, u_b = px4_legacy.combined_baro(combined, t0)
+                streams.append(make_stream("baro", f_b, t_b, v_b, request, meta={"units": u_b, "topic":
+                                           "sensor_combined (baro_alt_meter, an older layout)"}, notes=notes))
+            elif d is None:
                 missing.append("baro (vehicle_air_data or sensor_baro)")
             else:
                 streams.append(_baro(d, tcol(d), request, notes))
@@ -182,11 +206,12 @@ class UlogImporter(Importer):
                                           {"source": "the first valid vehicle_attitude (body FRD to NED), for a "
                                            "config that starts in flight"}))
         _field_from_reference(streams, _first(ulog, ("vehicle_attitude",)) if request.wants("mag") else None, tcol)
-        for m in ulog.logged_messages:
-            t = (int(m.timestamp) - t0) / 1e6
+        texts = [((int(m.timestamp) - t0) / 1e6, m.message) for m in ulog.logged_messages]
+        for t, text in sorted(texts + px4_events(_first(ulog, ("vehicle_status",)), tcol), key=lambda m: m[0]):
             if (request.start is None or t >= request.start) and (request.end is None or t <= request.end):
-                log.messages.append((t, m.message))
+                log.messages.append((t, text))
         _check_requested(path, request, missing, notes)
+        to_header(streams, log.meta)
         log.streams = streams
         return log
 
@@ -227,7 +252,9 @@ def _parse(path: str, request: ImportRequest):
     from pyulog.core import ULogException
 
     topics = sorted({t for s, ts in TOPICS.items() if request.wants(s) for t in ts}
-                    | ({"vehicle_attitude"} if request.wants("mag") else set()))   # the field in NED (mag header)
+                    | ({"vehicle_attitude"} if request.wants("mag") else set())    # the field in NED (mag header)
+                    | ({"sensor_combined"} if request.wants("mag") or request.wants("baro") else set())  # older layout
+                    | {"vehicle_status"})   # arming, mode, failsafe (fusion.importers.flight_events)
     try:
         with open(path, "rb") as raw:
             fh = _Reader(raw)
@@ -247,6 +274,15 @@ def _parse(path: str, request: ImportRequest):
         said = " ".join(chatter.getvalue().split())[:200]
         raise InputError(f"{path}: corrupt ULog data ({said or 'pyulog found invalid messages'}); pass --partial "
                          "to import the messages pyulog could read")
+    said = []
+    if fh.cut_at is not None:
+        said.append(f"truncated: the last message is cut short by the end of the file at byte {size}; the "
+                    "messages before it imported (--partial)")
+    if ulog.file_corruption:
+        chatter_text = " ".join(chatter.getvalue().split())[:200]
+        said.append(f"corrupt ULog data ({chatter_text or 'pyulog found invalid messages'}): the messages pyulog "
+                    "could read imported (--partial)")
+    ulog.fusion_partial = "; ".join(said)
     if not any(len(d.data.get("timestamp", ())) for d in ulog.data_list):
         raise InputError(f"{path}: no data messages of {', '.join(topics)} (is the log empty or cut in its header?)")
     return ulog
