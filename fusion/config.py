@@ -375,6 +375,11 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
                               f"{', '.join(RESERVED_SENSORS)}); name the sensor otherwise")
         if not s.enabled:
             continue
+        if -s.time_offset > spec.scheduler.max_latency:   # each message would arrive older than the horizon
+            at = doc.where([*loc, "time_offset"]) if doc else f"{where}.time_offset"
+            raise ConfigError(f"{at}: {s.time_offset:g} s moves every {sname} message {-s.time_offset:g} s into "
+                              f"the past, beyond scheduler.max_latency ({spec.scheduler.max_latency:g} s): all of "
+                              f"them would be dropped as late; set scheduler.max_latency >= {-s.time_offset:g}")
         sctx = BuildContext(layout, beacons, sname, base_dir)
         decoder = build_component(reg, "decoder", s.decoder, sctx, doc, [*loc, "decoder"])
         pre = build_component(reg, "solver", s.preprocessor, sctx, doc, [*loc, "preprocessor"]) if s.preprocessor else None

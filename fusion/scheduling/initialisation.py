@@ -112,6 +112,8 @@ class Initialisation:
                 elif has(self.process, Aligns):   # wiring refuses align_s for a process without it
                     self._x0, self._P0 = self.process.align(self._x0, self._P0, u_mean)
                 for name, observations in self._aligners.items():
+                    if self._still is not True:   # not a static window (in flight): only its last align_s s
+                        observations = [o for o in observations if o.t >= t - self._align_s] or observations[-1:]
                     # called with no observations too (no sample of the sensor in the window): the model
                     # then knows the static start is over and can refuse its later messages with the reason
                     s = self.sensors[name]

@@ -155,3 +155,37 @@ def test_imu_coverage_in_the_header(tmp_path):
     # 4 ms integrated of every 100 ms; 0.5 rad/s held over 0.1 s is 2.86 deg a sample
     assert float(meta["imu_coverage_fraction"]) == np.float64(0.04).round(4)
     assert abs(float(meta["imu_rotation_per_sample_deg"]) - np.degrees(0.05)) <= 0.005   # 3 digits written
+
+
+def test_initial_attitude_is_the_reference_at_the_first_accepted_fix(tmp_path):
+    """The filter of a config with initial.from_sensor: gps starts at the first accepted fix: the attitude to
+    start from is the reference's then, not at the log's first sample (here 3 fixes and 40 deg of yaw earlier)."""
+    from scipy.spatial.transform import Rotation
+    from test_dataflash import _flight
+
+    w, v = _flight()
+    w.save(tmp_path / "f.bin")
+    assert fusion_import(tmp_path / "f.bin", "-o", tmp_path / "f.log") == 0
+    rec = Recording(tmp_path / "f.log")
+    k = int(np.flatnonzero(v["status"] >= 3)[0])            # the first fix the gps_fields decoder accepts
+    np.testing.assert_allclose(rec.times("initial_attitude"), [v["t"][k] - 1e-6], atol=1e-9)
+    rpy = np.round(v["rpy"][k], 2)                          # ATT in centidegrees, at the fix's own time
+    want = Rotation.from_euler("ZYX", np.radians(rpy[::-1])).as_quat()[[3, 0, 1, 2]]
+    got = rec.values("initial_attitude")[0]
+    assert abs(abs(float(np.dot(got, want))) - 1.0) < 1e-9
+
+
+def test_validate_refuses_a_latency_beyond_max_latency(tmp_path, capsys):
+    from import_helpers import ROOT
+    from fusion.cli import main
+
+    text = (ROOT / "configs" / "ardupilot_ins_gps_mag.yaml").read_text()
+    text = text.replace("recording: ../recordings", f"recording: {ROOT}/recordings")
+    bad = text.replace("  gps:\n    role: measurement\n", "  gps:\n    role: measurement\n    time_offset: -0.2\n")
+    (tmp_path / "bad.yaml").write_text(bad)
+    assert main(["validate", str(tmp_path / "bad.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert "bad.yaml" in err and "time_offset" in err and "scheduler.max_latency (0 s)" in err, err
+    good = bad.replace("  max_latency: 0.0", "  max_latency: 0.2")
+    (tmp_path / "good.yaml").write_text(good)
+    assert main(["validate", str(tmp_path / "good.yaml")]) == 0
