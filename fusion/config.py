@@ -109,6 +109,10 @@ class SensorSpec(_Strict):
     max_gap: float | None = Field(None, gt=0.0, description="input sensors: report a gap between samples "
                                   "longer than this (s)")
     recovery: RecoverySpec | None = Field(None, description="recover from a lock-out (fusion.recovery); off by default")
+    min_coverage: float = Field(0.5, ge=0.0, le=1.0, description="input sensors: warn when the recording's "
+                                "header says its samples integrate less of the time (fusion.imu_coverage)")
+    max_rotation_deg: float = Field(5.0, gt=0.0, description="input sensors: warn when the header says it turns "
+                                    "more between two samples (deg, fusion.imu_coverage)")
     enabled: bool = True
 
 

@@ -118,6 +118,7 @@ class Run:
         self.label = label
         self.parsed = ParsedStream(on_fields=self._check_fields)
         self._fields_told: set[str] = set()
+        self.imu_coverage: dict[str, dict] = {}   # input sensor -> fusion.imu_coverage facts (summary health)
         self.stats: RunStats
         self.scheduler = Scheduler(system)
         self.stats = RunStats(system, self.scheduler, self.parsed)
@@ -223,6 +224,8 @@ class Run:
         runtime = self.system.sensors.get(sensor)
         if runtime is None or not names:
             return
+        if runtime.role == "input" and sensor not in self.imu_coverage:
+            self._check_coverage(sensor)
         expected, who = expected_fields(runtime, self.system.process)
         if expected is None or tuple(names) == tuple(expected):
             return
@@ -235,6 +238,18 @@ class Run:
             self._fields_told.add(sensor)
             self._dispatch(Event(math.nan, "warning", sensor, f"{line}: {who} reads {' '.join(expected)}; the "
                                  "values are read in that order, by position"))
+
+    def _check_coverage(self, sensor: str) -> None:
+        """The header's IMU coverage against the sensor's limits (fusion.imu_coverage): one warning, and the
+        figures for the summary's health."""
+        from fusion.imu_coverage import assess
+
+        spec = self.system.spec.sensors[sensor]
+        facts, warning = assess(sensor, self.parsed.header.meta, spec.min_coverage, spec.max_rotation_deg)
+        if facts is not None:
+            self.imu_coverage[sensor] = facts
+        if warning is not None:
+            self._dispatch(Event(math.nan, "warning", sensor, warning))
 
     def _on_nis(self, sensor: str, t: float, nis: float, dim: int, accepted: bool = True) -> None:
         self.stats.add_nis(sensor, t, nis, dim, accepted)
@@ -337,6 +352,8 @@ class Run:
         self.stats.finish()
         wall = time.perf_counter() - self.wall0
         summary = self.stats.summary(self.label, wall)
+        if self.imu_coverage and isinstance(summary.get("health"), dict):
+            summary["health"]["imu_coverage"] = self.imu_coverage
         if interrupted:
             summary["interrupted"] = True
         if source_error is not None:
