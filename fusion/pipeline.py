@@ -23,6 +23,7 @@ Modules: this one is the loop (``Run``, ``run``, ``RunResult``, the ``Collect`` 
 from __future__ import annotations
 
 import copy
+import itertools
 import math
 import time
 from dataclasses import dataclass, field
@@ -119,6 +120,7 @@ class Run:
         self.parsed = ParsedStream(on_fields=self._check_fields)
         self._fields_told: set[str] = set()
         self.imu_coverage: dict[str, dict] = {}   # input sensor -> fusion.imu_coverage facts (summary health)
+        self._header_open = True                   # until the first message: the '# fields' lines are all read
         self.stats: RunStats
         self.scheduler = Scheduler(system)
         self.stats = RunStats(system, self.scheduler, self.parsed)
@@ -152,6 +154,9 @@ class Run:
     def push(self, item: Message | MalformedMessage) -> list[Estimate | Event]:
         """Feed one message (or a malformed-line marker from ``iter_messages``); returns what it released,
         after the sinks, hooks and statistics have seen it."""
+        if self._header_open and item.__class__ is Message:
+            self._header_open = False
+            self._fix_sensor_absent()
         if item.__class__ is Message and (item.sensor == "truth" or item.sensor == "reference"):
             self._compare(item)
             return []
@@ -167,6 +172,14 @@ class Run:
         """Feed every message of ``items`` (the fast loop of ``run()``)."""
         push = self.scheduler.push
         dispatch = self._dispatch
+        if self._header_open:   # the header is read once the first message is: checks of it, once
+            items = iter(items)
+            first = next(items, None)
+            if first is None:
+                return
+            self._header_open = False
+            self._fix_sensor_absent()
+            items = itertools.chain((first,), items)
         for item in items:
             if item.__class__ is Message and (item.sensor == "truth" or item.sensor == "reference"):
                 self._compare(item)
@@ -238,6 +251,21 @@ class Run:
             self._fields_told.add(sensor)
             self._dispatch(Event(math.nan, "warning", sensor, f"{line}: {who} reads {' '.join(expected)}; the "
                                  "values are read in that order, by position"))
+
+    def _fix_sensor_absent(self) -> None:
+        """A recording whose header names its streams (``# fields``) without ``initial.from_sensor`` (a flight
+        log without GPS): the filter starts without waiting for a fix that never comes, and says so."""
+        fs = self.system.spec.initial.from_sensor
+        fields = self.parsed.header.fields
+        inputs = [n for n, s in self.system.sensors.items() if s.role == "input"]
+        if fs is None or fs in fields or not any(n in fields for n in inputs):
+            return
+        self.scheduler.start_without_fix()
+        self._dispatch(Event(math.nan, "warning", fs, (
+            f"the recording has no {fs!r} stream (no '# fields {fs}' line): the filter starts without its fix "
+            f"(initial.from_sensor), from the configured prior position and velocity and the aligned attitude"
+            + (" (initial_attitude: the reference's)" if "initial_attitude" in fields else "")
+            + "; position and velocity are dead reckoning only, the attitude is the estimate to read")))
 
     def _check_coverage(self, sensor: str) -> None:
         """The header's IMU coverage against the sensor's limits (fusion.imu_coverage): one warning, and the

@@ -133,6 +133,12 @@ class Initialisation:
         self._filter_events.append(Event(t, "warning", sensor, f"alignment: the static start (initial.align_s "
                                          f"{self._align_s:g} s) is not static: {why}{fixes}"))
 
+    def start_without_fix(self) -> None:
+        """Start without waiting for ``initial.from_sensor`` (the recording has no such stream): the position
+        and velocity from the configured prior, the rest aligned as usual."""
+        self._from_sensor = None
+        self._have_fix = True
+
     def _take_fix(self, obs) -> None:
         """Remember a fix of ``initial.from_sensor`` for the initial position (module doc: combined when the
         window was static, else the latest)."""
