@@ -93,6 +93,11 @@ class RunResult:
     plugin_exceptions: tuple[BaseException, ...] = field(default=(), repr=False)
 
 
+#: Estimates a second of a run started without its fix when the config sets no output.rate_hz (an
+#: attitude-only run may have no update to emit an estimate at).
+ATTITUDE_ONLY_HZ = 10.0
+
+
 class Run:
     """One run of a system, fed one message at a time (``run()`` is the loop over a whole source).
 
@@ -260,12 +265,14 @@ class Run:
         inputs = [n for n, s in self.system.sensors.items() if s.role == "input"]
         if fs is None or fs in fields or not any(n in fields for n in inputs):
             return
-        self.scheduler.start_without_fix()
+        rate = None if self.system.spec.output.rate_hz else ATTITUDE_ONLY_HZ
+        self.scheduler.start_without_fix(rate)
         self._dispatch(Event(math.nan, "warning", fs, (
             f"the recording has no {fs!r} stream (no '# fields {fs}' line): the filter starts without its fix "
             f"(initial.from_sensor), from the configured prior position and velocity and the aligned attitude"
             + (" (initial_attitude: the reference's)" if "initial_attitude" in fields else "")
-            + "; position and velocity are dead reckoning only, the attitude is the estimate to read")))
+            + "; position and velocity are dead reckoning only, the attitude is the estimate to read"
+            + (f" (estimates also at {rate:g} Hz, output.rate_hz)" if rate else ""))))
 
     def _check_coverage(self, sensor: str) -> None:
         """The header's IMU coverage against the sensor's limits (fusion.imu_coverage): one warning, and the

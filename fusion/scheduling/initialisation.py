@@ -133,11 +133,14 @@ class Initialisation:
         self._filter_events.append(Event(t, "warning", sensor, f"alignment: the static start (initial.align_s "
                                          f"{self._align_s:g} s) is not static: {why}{fixes}"))
 
-    def start_without_fix(self) -> None:
+    def start_without_fix(self, output_hz: float | None = None) -> None:
         """Start without waiting for ``initial.from_sensor`` (the recording has no such stream): the position
-        and velocity from the configured prior, the rest aligned as usual."""
+        and velocity from the configured prior, the rest aligned as usual; ``output_hz``: estimates by
+        prediction at that rate when the config has none (a recording that may have no update to emit at)."""
         self._from_sensor = None
         self._have_fix = True
+        if output_hz and not self.output_dt:
+            self.output_dt = 1.0 / output_hz
 
     def _take_fix(self, obs) -> None:
         """Remember a fix of ``initial.from_sensor`` for the initial position (module doc: combined when the
