@@ -29,6 +29,9 @@ from dataflash_builder import DataflashWriter  # noqa: E402
 from ulog_builder import UlogWriter  # noqa: E402
 
 LAYOUTS = ("dataflash_new", "dataflash_old", "ulog_new", "ulog_old", "ulog_low_rate")
+#: s from the instant a fix measures to its log stamp: the autopilots' default GPS lag (ArduPilot's driver
+#: 0.2 s, PX4 EKF2_GPS_DELAY 0.11 s), which the vehicle configs' time_offset models
+GPS_LAG = {"dataflash": 0.2, "ulog": 0.11}
 KNOT = 1852.0 / 3600.0
 
 
@@ -105,7 +108,8 @@ def _dataflash(f: dict, path: Path, old: bool) -> None:
         ev.append((t, 2, "MAG", dict(TimeUS=us(t), I=0, MagX=m[0], MagY=m[1], MagZ=m[2])))
     for t, lat, lon, alt, vn, ve, vd, nsat, hdop in f["gps"].tolist():
         spd, crs = float(np.hypot(vn, ve)), float(np.degrees(np.arctan2(ve, vn)) % 360.0)
-        wk, tow = _gps_time(t)
+        wk, tow = _gps_time(t)                                     # the instant measured ...
+        t = t + GPS_LAG["dataflash"]                               # ... logged later
         common = dict(Status=3, NSats=int(nsat), HDop=hdop, Lat=lat, Lng=lon, Alt=alt, Spd=spd, GCrs=crs, VZ=vd)
         if old:
             ev.append((t, 1, "GPS", dict(TimeMS=tow, Week=wk, RelAlt=alt - ORIGIN[2], T=us(t) // 1000, **common)))
@@ -189,13 +193,15 @@ def _ulog(f: dict, path: Path, old: bool, every: int = 1, integral_us: int = 10_
             ev.append((t, "vehicle_magnetometer", dict(timestamp=us(t), magnetometer_ga=[x / 100.0 for x in m])))
     start = dt.datetime.fromisoformat(SCENARIO["start_utc"]).replace(tzinfo=dt.timezone.utc).timestamp()
     for t, lat, lon, alt, vn, ve, vd, nsat, hdop in f["gps"].tolist():
+        utc = int((start + t) * 1e6)                               # the instant measured, logged later
+        t = t + GPS_LAG["ulog"]
         common = dict(timestamp=us(t), eph=GPS_SD["horizontal_sd"], epv=GPS_SD["vertical_sd"], vel_n_m_s=vn,
                       vel_e_m_s=ve, vel_d_m_s=vd, vel_ned_valid=True, fix_type=3, satellites_used=int(nsat))
         if old:
             ev.append((t, gps_topic, dict(lat=int(round(lat * 1e7)), lon=int(round(lon * 1e7)),
                                           alt=int(round(alt * 1e3)), hdop=hdop, **common)))
         else:
-            ev.append((t, gps_topic, dict(time_utc_usec=int((start + t) * 1e6), latitude_deg=lat, longitude_deg=lon,
+            ev.append((t, gps_topic, dict(time_utc_usec=utc, latitude_deg=lat, longitude_deg=lon,
                                           altitude_msl_m=alt, hdop=hdop, **common)))
     for t, p, v, q, _ in _ekf_rows(f):
         ev.append((t, "vehicle_attitude", dict(timestamp=us(t), q=list(q))))

@@ -155,7 +155,11 @@ horizontal position; real-time factor = log seconds per wall second of the run.
 The synthetic logs (experiments/flight_layouts.py) are one simulated 40 s flight written in each layout,
 their "onboard estimator" the simulator's truth: their agreement is the error. The PX4 log is the shared
 real one (a 6.5 s ground run of a Cube Orange; its EKF2 never flags a horizontal position or velocity
-valid, hence the dashes; its yaw is EKF2's own heading still converging).
+valid, hence the dashes; its yaw is EKF2's own heading still converging). The GPS of the synthetic logs
+lags as the configs assume (0.2 s ArduPilot, 0.11 s PX4: `sensors.gps.time_offset`). The ArduPilot 3.3 log
+has no `ORGN` record: its reference is referred to the recording's origin by its own position at the first
+fix's stamp, which the GPS lag puts 0.2 s after the instant the fix measures, an offset its horizontal
+position carries.
 
 {head}{chr(10).join(rows)}
 
