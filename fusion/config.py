@@ -129,6 +129,10 @@ class SensorSpec(_Strict):
     max_gap: float | None = Field(None, gt=0.0, description="input sensors: report a gap between samples "
                                   "longer than this (s)")
     recovery: RecoverySpec | None = Field(None, description="recover from a lock-out (fusion.recovery); off by default")
+    min_coverage: float = Field(0.5, ge=0.0, le=1.0, description="input sensors: warn when the recording's "
+                                "header says its samples integrate less of the time (fusion.imu_coverage)")
+    max_rotation_deg: float = Field(5.0, gt=0.0, description="input sensors: warn when the header says it turns "
+                                    "more between two samples (deg, fusion.imu_coverage)")
     enabled: bool = True
 
 
@@ -404,6 +408,13 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
                               f"{', '.join(RESERVED_SENSORS)}); name the sensor otherwise")
         if not s.enabled:
             continue
+        if -s.time_offset > spec.scheduler.max_latency and process.input_dim and s.role == "measurement":
+            # the input (an IMU at 100s of Hz) moves the released horizon to each sample: a message moved
+            # further into the past than the reorder buffer holds is always behind it
+            at = doc.where([*loc, "time_offset"]) if doc else f"{where}.time_offset"
+            raise ConfigError(f"{at}: {s.time_offset:g} s moves every {sname} message {-s.time_offset:g} s into "
+                              f"the past, beyond scheduler.max_latency ({spec.scheduler.max_latency:g} s): all of "
+                              f"them would be dropped as late; set scheduler.max_latency >= {-s.time_offset:g}")
         sctx = BuildContext(layout, beacons, sname, base_dir)
         decoder = build_component(reg, "decoder", s.decoder, sctx, doc, [*loc, "decoder"])
         pre = build_component(reg, "solver", s.preprocessor, sctx, doc, [*loc, "preprocessor"]) if s.preprocessor else None

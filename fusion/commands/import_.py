@@ -85,6 +85,7 @@ def _sensors(values: list[str] | None) -> frozenset[str] | None:
 
 def run(args: argparse.Namespace) -> int:
     from fusion.api import ImportRequest
+    from fusion.importers.clock_check import check_one_clock
     from fusion.importers.flight import prepare
     from fusion.importers.writer import write_log
     from fusion.outputs import check_outputs
@@ -149,6 +150,7 @@ def run(args: argparse.Namespace) -> int:
             span = f" between --start {args.start} and --end {args.end}"
         raise InputError(f"{src}: no samples to write{span}" + (f" ({'; '.join(log.notes)})" if log.notes else ""))
     log.streams = streams
+    check_one_clock(str(src), streams)   # every sensor overlaps the IMU's span, else exit 2 naming it
     prepare(log)          # one origin for the GPS and the reference; the onboard attitude to start in flight
     streams = [s for s in log.streams if len(s)]
     if args.gps == "nmea":
@@ -159,6 +161,8 @@ def run(args: argparse.Namespace) -> int:
     t0 = min(float(s.t.min()) for s in streams)
     t1 = max(float(s.t.max()) for s in streams)
     log.meta.setdefault("duration", f"{t1 - t0:.3f}")
+    if "partial" in log.meta:
+        log.meta["partial"] += f"; the imported data end at t {t1:.3f} s"
     if args.start is not None or args.end is not None:
         log.meta["span"] = f"--start {args.start} --end {args.end} (s)"
     inputs = [str(src)] + ([args.map] if args.map else []) + list(log.inputs)
