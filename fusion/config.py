@@ -258,6 +258,7 @@ class System:
     P0: np.ndarray
     beacons: dict[str, np.ndarray]
     registry: Registry
+    world: Any = None     # fusion.world.RecordingWorld the components were wired with, or None
 
     @property
     def layout(self):
@@ -349,16 +350,20 @@ from fusion.config_values import initial_belief_values, noise_matrix  # noqa: E4
 
 
 def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = None,
-         registry: Registry | None = None, filter_override: ComponentSpec | None = None) -> System:
-    """Build every component of a validated SystemSpec and check dimensions."""
+         registry: Registry | None = None, filter_override: ComponentSpec | None = None,
+         world: Any = None) -> System:
+    """Build every component of a validated SystemSpec and check dimensions. ``world``: what the recording
+    to be replayed declares (fusion.world.RecordingWorld), given to every component as
+    ``context.extra["world"]``."""
     reg = registry or default_registry()
     base_dir = str(path.parent) if path else "."
     beacons = {k: np.asarray(v, float) for k, v in spec.beacons.items()}
-    ctx = BuildContext(layout=None, beacons=beacons, base_dir=base_dir)
+    extra = {"world": world} if world is not None else {}
+    ctx = BuildContext(layout=None, beacons=beacons, base_dir=base_dir, extra=dict(extra))
     process = build_component(reg, "process", spec.process, ctx, doc, ["process"])
     assert isinstance(process, ProcessModel)
     layout = process.layout
-    fctx = BuildContext(layout, beacons, None, base_dir)
+    fctx = BuildContext(layout, beacons, None, base_dir, dict(extra))
     if filter_override is not None:  # from the command line: no file line to name
         filt = build_component(reg, "filter", filter_override, fctx, None, ["filter (--filter/--filter-param)"])
     else:
@@ -375,7 +380,7 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
                               f"{', '.join(RESERVED_SENSORS)}); name the sensor otherwise")
         if not s.enabled:
             continue
-        sctx = BuildContext(layout, beacons, sname, base_dir)
+        sctx = BuildContext(layout, beacons, sname, base_dir, dict(extra))
         decoder = build_component(reg, "decoder", s.decoder, sctx, doc, [*loc, "decoder"])
         pre = build_component(reg, "solver", s.preprocessor, sctx, doc, [*loc, "preprocessor"]) if s.preprocessor else None
         model = gate = R = None
@@ -427,7 +432,7 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
             raise ConfigError(f"{doc.where(['evaluation', 'position', i]) if doc else 'evaluation.position'}: "
                               f"state has no element {name!r}; elements are {list(layout.names)}")
     x0, P0 = initial_belief_values(spec, process, doc)
-    return System(spec, path, process, filt, sensors, x0, P0, beacons, reg)  # type: ignore[arg-type]
+    return System(spec, path, process, filt, sensors, x0, P0, beacons, reg, world)  # type: ignore[arg-type]
 
 
 def _check_linear(filt, process: ProcessModel, sensors: dict[str, SensorRuntime], where: str) -> None:
@@ -443,12 +448,23 @@ def _check_linear(filt, process: ProcessModel, sensors: dict[str, SensorRuntime]
                               f"uses {sr.model.name!r}, which is not linear (linear = False): {others}")
 
 
+#: load_system's default ``recording``: the config's own
+OWN_RECORDING: Any = object()
+
+
 def load_system(path: str | Path, registry: Registry | None = None,
-                filter_override: ComponentSpec | None = None) -> System:
-    """Load, validate and wire a system YAML. Raises ConfigError naming file, line and field."""
+                filter_override: ComponentSpec | None = None, recording: Any = OWN_RECORDING) -> System:
+    """Load, validate and wire a system YAML. Raises ConfigError naming file, line and field.
+    ``recording``: the input the system will replay, whose header declares its world (fusion.world): a
+    path, None (a stream: no header known ahead), or OWN_RECORDING (the config's own ``recording:``)."""
+    from fusion.world import read_world
+
     doc = load_yaml(path)
     try:
         spec = SystemSpec.model_validate(doc.data)
     except ValidationError as exc:
         raise pydantic_errors(doc, exc) from None
-    return wire(spec, doc, Path(path), registry, filter_override)
+    if recording is OWN_RECORDING:
+        recording = (Path(path).parent / spec.recording) if spec.recording else None
+    world = read_world(recording) if recording is not None else None
+    return wire(spec, doc, Path(path), registry, filter_override, world)
