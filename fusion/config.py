@@ -206,6 +206,10 @@ class SystemSpec(_Strict):
     output: OutputSpec = Field(default_factory=OutputSpec)
     evaluation: EvaluationSpec = Field(default_factory=EvaluationSpec)
     smoother: SmootherSpec | None = None
+    prefer: Literal["config"] | dict[Literal["magnetic_field", "beacons", "receivers", "gravity", "origin"],
+                                     Literal["config"]] = Field(
+        default_factory=dict, description="where the config and the recording's header disagree on a value "
+        "(fusion.header_checks), use the config's instead of refusing the run: `config` for all, or per quantity")
 
     @field_validator("beacons")
     @classmethod

@@ -45,6 +45,7 @@ class RecordingWorld:
     gravity: Declared[float] | None = None
     origin: Declared[tuple[float, float, float]] | None = None
     date: Declared[_dt.datetime] | None = None
+    origin_declared: bool = False     # the origin is the header's '# origin' (not the first NMEA fix)
     problems: list[str] = field(default_factory=list)
 
 
@@ -126,6 +127,7 @@ def _comment(world: RecordingWorld, body: str, where: str, receivers: dict) -> N
         v = _floats(value, 3) or _floats(value, 2)
         if v is not None:
             world.origin = Declared((v[0], v[1], v[2] if len(v) > 2 else 0.0), where)
+            world.origin_declared = True
     elif key == "start_utc":
         try:
             world.date = Declared(_dt.datetime.fromisoformat(value.replace("Z", "+00:00")), where)

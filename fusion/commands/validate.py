@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 import traceback
+from pathlib import Path
 
 from fusion.errors import FusionError
 
@@ -17,6 +18,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "and Q is symmetric positive semi-definite) "
                                    "and that its recording exists. Exit code 2 if any is invalid.")
     p.add_argument("files", nargs="+", metavar="FILE", help="system YAML files")
+    p.add_argument("--input", "-i", metavar="LOG", default=None,
+                   help="check the configs against this recording instead of their own: its header's field, "
+                        "beacons, receivers, gravity and origin must not contradict the config's (exit 2)")
     p.set_defaults(func=run)
 
 
@@ -149,14 +153,19 @@ def run(args: argparse.Namespace) -> int:
     from fusion.yamlsource import load_yaml
 
     bad = 0
+    from fusion.config import OWN_RECORDING
+    from fusion.header_checks import check as check_header
+
+    given = getattr(args, "input", None)
     for path in args.files:
         try:
-            system = load_system(path)
-            rec = system.recording
+            system = load_system(path, recording=OWN_RECORDING if given is None else given)
+            rec = system.recording if given is None else Path(given)
             if rec is not None and not rec.exists():
                 raise FusionError(f"{load_yaml(path).where(['recording'])}: {rec} does not exist")
             if rec is not None:
                 _check_recording(path, system, rec)
+            check_header(system, system.world, str(path))
             _check_models(path, system)
         except FusionError as exc:
             bad += 1
