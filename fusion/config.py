@@ -436,6 +436,11 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
             raise ConfigError(f"{doc.where(['evaluation', 'position', i]) if doc else 'evaluation.position'}: "
                               f"state has no element {name!r}; elements are {list(layout.names)}")
     x0, P0 = initial_belief_values(spec, process, doc)
+    if spec.initial.from_sensor:
+        from fusion.initial_checks import check_from_sensor
+
+        check_from_sensor(spec.initial.from_sensor, sensors[spec.initial.from_sensor], layout, x0,
+                          doc.where(["initial", "from_sensor"]) if doc else "initial.from_sensor")
     return System(spec, path, process, filt, sensors, x0, P0, beacons, reg, world)  # type: ignore[arg-type]
 
 
