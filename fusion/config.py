@@ -358,9 +358,13 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
          world: Any = None) -> System:
     """Build every component of a validated SystemSpec and check dimensions. ``world``: what the recording
     to be replayed declares (fusion.world.RecordingWorld), given to every component as
-    ``context.extra["world"]``."""
+    ``context.extra["world"]``; None: the world of the spec's own ``recording:`` when it is a file."""
     reg = registry or default_registry()
     base_dir = str(path.parent) if path else "."
+    if world is None and spec.recording:
+        from fusion.world import read_world
+
+        world = read_world(Path(base_dir) / spec.recording)
     beacons = {k: np.asarray(v, float) for k, v in spec.beacons.items()}
     extra = {"world": world} if world is not None else {}
     ctx = BuildContext(layout=None, beacons=beacons, base_dir=base_dir, extra=dict(extra))
@@ -476,4 +480,8 @@ def load_system(path: str | Path, registry: Registry | None = None,
     if recording is OWN_RECORDING:
         recording = (Path(path).parent / spec.recording) if spec.recording else None
     world = read_world(recording) if recording is not None else None
+    if world is None:     # a stream: no header known ahead (not the config's own recording's)
+        from fusion.world import RecordingWorld
+
+        world = RecordingWorld(str(recording) if recording is not None else "-", streamed=True)
     return wire(spec, doc, Path(path), registry, filter_override, world)

@@ -46,6 +46,7 @@ class RecordingWorld:
     origin: Declared[tuple[float, float, float]] | None = None
     date: Declared[_dt.datetime] | None = None
     origin_declared: bool = False     # the origin is the header's '# origin' (not the first NMEA fix)
+    streamed: bool = False            # a stream (stdin, a serial port): its header is not known ahead
     problems: list[str] = field(default_factory=list)
 
 
@@ -177,4 +178,5 @@ def _scan_nmea(world: RecordingWorld, fh: Any, start: int) -> None:
 def of_context(context: Any) -> RecordingWorld | None:
     """The recording's world a component was wired with (``BuildContext.extra["world"]``), or None."""
     extra = getattr(context, "extra", None) or {}
-    return extra.get("world")
+    world = extra.get("world")
+    return None if world is None or world.streamed else world

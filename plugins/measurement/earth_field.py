@@ -47,7 +47,7 @@ def resolve_field(params: Any, context: Any) -> tuple[np.ndarray, dict[str, Any]
     have = "no recording header known ahead (a stream)" if world is None else (
         f"the recording {world.path} declares no '# {sensor} earth_field_ned' and "
         + ("no origin" if world.origin is None else "no date") + " (no '# origin' / '# start_utc' line, no NMEA RMC fix)")
-    raise ConfigError(f"sensors.{sensor}.model: the reference magnetic field is unknown: {have}; give field_ned, "
+    raise ConfigError(f"magnetometer ({sensor}): the reference magnetic field is unknown: {have}; give field_ned, "
                       "or declination_deg, inclination_deg and intensity (a World Magnetic Model / IGRF value "
                       "for the place and date)")
 
