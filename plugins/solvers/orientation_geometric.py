@@ -147,7 +147,12 @@ class OrientationGeometric(Solver):
 
     def info(self) -> dict:
         """The summary's ``info`` (fusion.api.ReportsInfo): the receiver array used and where it came from."""
-        return {"receiver_array": dict(self._receivers_info)}
+        out: dict = {"receiver_array": dict(self._receivers_info)}
+        if self._initialised:
+            out["start"] = (f"pose from the geometric fixes: position, firing time and period of the first "
+                            f"{self.params.initialise_agree} agreeing cycles (eqs. 1-8), attitude by the geometric "  # type: ignore[attr-defined]
+                            "orientation algorithm (eqs. 12-17) of the last")
+        return out
 
     def feed(self, message: Message) -> list[Message | Fix]:
         if self._initialised:

@@ -40,6 +40,7 @@ def test_pose_config_reads_the_array_from_the_header(renumbered, tmp_path):
     assert s["errors"]["attitude_rmse_deg"] <= TABLE_III_MEAN_DEG
     assert s["errors"]["attitude_max_deg"] <= TABLE_III_MAX_DEG
     assert s["info"]["us"]["measurement"]["receiver_array"]["source"] == "recording header"
+    assert s["info"]["us"]["solver"]["start"].startswith("pose from the geometric fixes")   # how it started
 
 
 def test_config_array_contradicting_the_header_is_refused(renumbered, tmp_path, capsys):
