@@ -227,8 +227,8 @@ def page002(r: dict, seeds: list[int], minutes: float) -> str:
     L += ["", f"From a 70 deg start the shipped EKF finds the heading from the GPS velocity in {a} of {n} seeds, "
           f"the paper's variant in {b}; from 150 deg in {c} and {d}. Where it fails, the linearised update could "
           "not bridge the heading error (the gps recovery resets the position, not the heading). An explicit "
-          "heading from the GPS course once moving is not implemented (issue 31's fallback): with no magnetometer, "
-          "`--filter ukf` or a known starting heading in the config are the remedies today.\n"]
+          "heading from the GPS course once moving (a reset of the heading rather than its slow correction) is "
+          "not implemented yet (issue 31's fallback).\n"]
     return "\n".join(L)
 
 
