@@ -366,7 +366,12 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
 
         world = read_world(Path(base_dir) / spec.recording)
     beacons = {k: np.asarray(v, float) for k, v in spec.beacons.items()}
-    extra = {"world": world} if world is not None else {}
+    extra: dict[str, Any] = {"world": world} if world is not None else {}
+    if world is not None and not world.streamed:      # what the config leaves out, the recording declares
+        if not beacons:
+            beacons = {k: np.asarray(d.value, float) for k, d in world.beacons.items() if len(d.value) in (2, 3)}
+        if world.gravity is not None:
+            extra["gravity"] = world.gravity.value
     ctx = BuildContext(layout=None, beacons=beacons, base_dir=base_dir, extra=dict(extra))
     process = build_component(reg, "process", spec.process, ctx, doc, ["process"])
     assert isinstance(process, ProcessModel)

@@ -61,3 +61,17 @@ def test_run_refuses_before_any_output(tmp_path, capsys):
     code, summary = run(cfg, None, tmp_path / "s.json")
     assert code == 2 and summary is None
     assert "contradicts the recording's [17.8079, -6.65811, -13.813]" in capsys.readouterr().err
+
+
+def test_what_the_config_leaves_out_the_recording_declares(tmp_path):
+    from fusion.config import load_system
+
+    text = CAR.read_text().replace("# gravity: 9.80665", "# gravity: 9.7925", 1)
+    log = tmp_path / "equator.log"
+    log.write_text(text)
+    system = load_system(MAG, recording=log)          # the shipped config names no gravity
+    assert system.process.g == 9.7925
+    assert load_system(MAG).process.g == 9.80665        # its own recording's
+    cfg = edited(POSE, tmp_path / "c.yaml", recording=str(WALK), beacons=None)
+    system = load_system(cfg)                           # no beacons: the header's
+    assert sorted(system.beacons) == ["B1", "B2", "B3", "B4"] and list(system.beacons["B4"]) == [0.0, 0.0, 2.6]
