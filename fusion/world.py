@@ -13,7 +13,7 @@ import datetime as _dt
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Generic, TypeVar
+from typing import Any, Generic, Iterable, TypeVar
 
 import numpy as np
 
@@ -73,19 +73,26 @@ def read_world(path: str | Path) -> RecordingWorld | None:
         fh = open(p, encoding="utf-8", errors="replace")
     except OSError:
         return None
-    world = RecordingWorld(str(path))
-    receivers: dict[int, tuple[tuple[float, ...], int]] = {}
     with fh:
-        n = 0
-        for n, raw in enumerate(fh, 1):
-            text = raw.strip().lstrip("\ufeff")
-            if not text:
-                continue
-            if not text.startswith("#"):
-                break
-            _comment(world, text[1:].strip(), f"{path}:{n}", receivers)
-        if world.origin is None or world.date is None:
-            _scan_nmea(world, fh, n)
+        return read_world_lines(fh, str(path))
+
+
+def read_world_lines(lines: Iterable[str], label: str) -> RecordingWorld:
+    """The world declared by a recording's ``lines`` (its header, and its first NMEA fix when the header
+    names no origin or date); ``label`` names it in ``where`` (``label:line``)."""
+    world = RecordingWorld(label)
+    receivers: dict[int, tuple[tuple[float, ...], int]] = {}
+    it = iter(lines)
+    n = 0
+    for n, raw in enumerate(it, 1):
+        text = raw.strip().lstrip("\ufeff")
+        if not text:
+            continue
+        if not text.startswith("#"):
+            break
+        _comment(world, text[1:].strip(), f"{label}:{n}", receivers)
+    if world.origin is None or world.date is None:
+        _scan_nmea(world, it, n)
     if receivers:
         _set_receivers(world, receivers)
     return world
