@@ -231,6 +231,10 @@ class SystemSpec(_Strict):
     evaluation: EvaluationSpec = Field(default_factory=EvaluationSpec)
     smoother: SmootherSpec | None = None
     health: HealthSpec = Field(default_factory=HealthSpec)
+    prefer: Literal["config"] | dict[Literal["magnetic_field", "beacons", "receivers", "gravity", "origin"],
+                                     Literal["config"]] = Field(
+        default_factory=dict, description="where the config and the recording's header disagree on a value "
+        "(fusion.header_checks), use the config's instead of refusing the run: `config` for all, or per quantity")
 
     @field_validator("recording")
     @classmethod
@@ -288,6 +292,7 @@ class System:
     P0: np.ndarray
     beacons: dict[str, np.ndarray]
     registry: Registry
+    world: Any = None     # fusion.world.RecordingWorld the components were wired with, or None
 
     @property
     def layout(self):
@@ -382,16 +387,29 @@ from fusion.config_values import initial_belief_values, noise_matrix  # noqa: E4
 
 
 def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = None,
-         registry: Registry | None = None, filter_override: ComponentSpec | None = None) -> System:
-    """Build every component of a validated SystemSpec and check dimensions."""
+         registry: Registry | None = None, filter_override: ComponentSpec | None = None,
+         world: Any = None) -> System:
+    """Build every component of a validated SystemSpec and check dimensions. ``world``: what the recording
+    to be replayed declares (fusion.world.RecordingWorld), given to every component as
+    ``context.extra["world"]``; None: the world of the spec's own ``recording:`` when it is a file."""
     reg = registry or default_registry()
     base_dir = str(path.parent) if path else "."
+    if world is None and spec.recording:
+        from fusion.world import read_world
+
+        world = read_world(Path(base_dir) / spec.recording)
     beacons = {k: np.asarray(v, float) for k, v in spec.beacons.items()}
-    ctx = BuildContext(layout=None, beacons=beacons, base_dir=base_dir)
+    extra: dict[str, Any] = {"world": world} if world is not None else {}
+    if world is not None and not world.streamed:      # what the config leaves out, the recording declares
+        if not beacons:
+            beacons = {k: np.asarray(d.value, float) for k, d in world.beacons.items() if len(d.value) in (2, 3)}
+        if world.gravity is not None:
+            extra["gravity"] = world.gravity.value
+    ctx = BuildContext(layout=None, beacons=beacons, base_dir=base_dir, extra=dict(extra))
     process = build_component(reg, "process", spec.process, ctx, doc, ["process"])
     assert isinstance(process, ProcessModel)
     layout = process.layout
-    fctx = BuildContext(layout, beacons, None, base_dir)
+    fctx = BuildContext(layout, beacons, None, base_dir, dict(extra))
     if filter_override is not None:  # from the command line: no file line to name
         filt = build_component(reg, "filter", filter_override, fctx, None, ["filter (--filter/--filter-param)"])
     else:
@@ -408,14 +426,7 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
                               f"{', '.join(RESERVED_SENSORS)}); name the sensor otherwise")
         if not s.enabled:
             continue
-        if -s.time_offset > spec.scheduler.max_latency and process.input_dim and s.role == "measurement":
-            # the input (an IMU at 100s of Hz) moves the released horizon to each sample: a message moved
-            # further into the past than the reorder buffer holds is always behind it
-            at = doc.where([*loc, "time_offset"]) if doc else f"{where}.time_offset"
-            raise ConfigError(f"{at}: {s.time_offset:g} s moves every {sname} message {-s.time_offset:g} s into "
-                              f"the past, beyond scheduler.max_latency ({spec.scheduler.max_latency:g} s): all of "
-                              f"them would be dropped as late; set scheduler.max_latency >= {-s.time_offset:g}")
-        sctx = BuildContext(layout, beacons, sname, base_dir)
+        sctx = BuildContext(layout, beacons, sname, base_dir, dict(extra))
         decoder = build_component(reg, "decoder", s.decoder, sctx, doc, [*loc, "decoder"])
         pre = build_component(reg, "solver", s.preprocessor, sctx, doc, [*loc, "preprocessor"]) if s.preprocessor else None
         model = gate = R = None
@@ -468,7 +479,12 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
             raise ConfigError(f"{doc.where(['evaluation', 'position', i]) if doc else 'evaluation.position'}: "
                               f"state has no element {name!r}; elements are {list(layout.names)}")
     x0, P0 = initial_belief_values(spec, process, doc)
-    return System(spec, path, process, filt, sensors, x0, P0, beacons, reg)  # type: ignore[arg-type]
+    if spec.initial.from_sensor:
+        from fusion.initial_checks import check_from_sensor
+
+        check_from_sensor(spec.initial.from_sensor, sensors[spec.initial.from_sensor], layout, x0,
+                          doc.where(["initial", "from_sensor"]) if doc else "initial.from_sensor")
+    return System(spec, path, process, filt, sensors, x0, P0, beacons, reg, world)  # type: ignore[arg-type]
 
 
 def check_offsets_fit_latency(spec: SystemSpec, doc: LocatedYAML | None = None) -> None:
@@ -507,12 +523,27 @@ def _check_linear(filt, process: ProcessModel, sensors: dict[str, SensorRuntime]
                               f"uses {sr.model.name!r}, which is not linear (linear = False): {others}")
 
 
+#: load_system's default ``recording``: the config's own
+OWN_RECORDING: Any = object()
+
+
 def load_system(path: str | Path, registry: Registry | None = None,
-                filter_override: ComponentSpec | None = None) -> System:
-    """Load, validate and wire a system YAML. Raises ConfigError naming file, line and field."""
+                filter_override: ComponentSpec | None = None, recording: Any = OWN_RECORDING) -> System:
+    """Load, validate and wire a system YAML. Raises ConfigError naming file, line and field.
+    ``recording``: the input the system will replay, whose header declares its world (fusion.world): a
+    path, None (a stream: no header known ahead), or OWN_RECORDING (the config's own ``recording:``)."""
+    from fusion.world import read_world
+
     doc = load_yaml(path)
     try:
         spec = SystemSpec.model_validate(doc.data)
     except ValidationError as exc:
         raise pydantic_errors(doc, exc) from None
-    return wire(spec, doc, Path(path), registry, filter_override)
+    if recording is OWN_RECORDING:
+        recording = (Path(path).parent / spec.recording) if spec.recording else None
+    world = read_world(recording) if recording is not None else None
+    if world is None:     # a stream: no header known ahead (not the config's own recording's)
+        from fusion.world import RecordingWorld
+
+        world = RecordingWorld(str(recording) if recording is not None else "-", streamed=True)
+    return wire(spec, doc, Path(path), registry, filter_override, world)

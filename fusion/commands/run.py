@@ -108,10 +108,15 @@ def _run(args: argparse.Namespace) -> int:
 
     refuse_empty(args, "--input", "--output", "--summary-json", "--plot")
     override = filter_override(args.config, args.filter, args.filter_param)
-    system = load_system(args.config, filter_override=override)
+    from fusion.config import OWN_RECORDING
+    from fusion.header_checks import check as check_header
+
+    system = load_system(args.config, filter_override=override,
+                         recording=OWN_RECORDING if args.input is None else args.input)
     source = system.recording if args.input is None else args.input
     if source is None:
         raise ConfigError(f"{args.config}: no 'recording:' in the config; give one with --input LOG")
+    check_header(system, system.world, str(args.config))   # a config that contradicts its recording: exit 2
     from fusion.outputs import check_outputs
 
     src = open_source(str(source), system.registry)

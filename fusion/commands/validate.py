@@ -19,6 +19,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "and Q is symmetric positive semi-definite) "
                                    "and that its recording exists. Exit code 2 if any is invalid.")
     p.add_argument("files", nargs="+", metavar="FILE", help="system YAML files")
+    p.add_argument("--input", "-i", metavar="LOG", default=None,
+                   help="check the configs against this recording instead of their own: its header's field, "
+                        "beacons, receivers, gravity and origin must not contradict the config's (exit 2)")
     p.set_defaults(func=run)
 
 
@@ -176,11 +179,16 @@ def run(args: argparse.Namespace) -> int:
     from fusion.config import load_system
 
     bad = 0
+    from fusion.config import OWN_RECORDING
+    from fusion.header_checks import check as check_header
+
+    given = getattr(args, "input", None)
     for path in args.files:
         try:
-            system = load_system(path)
-            rec = system.recording
+            system = load_system(path, recording=OWN_RECORDING if given is None else given)
+            rec = system.recording if given is None else Path(given)
             note = _check_recording(path, system, rec) if rec is not None else None
+            check_header(system, system.world, str(path))
             _check_models(path, system)
         except FusionError as exc:
             bad += 1

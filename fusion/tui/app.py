@@ -345,7 +345,13 @@ def make_app(config_path_or_system: str | Path | System, source: Any = None, *, 
     if isinstance(config_path_or_system, System):
         system = config_path_or_system
     else:
-        system = load_system(config_path_or_system, filter_override=filter_override)
+        from fusion.config import OWN_RECORDING
+        from fusion.header_checks import check as check_header
+
+        # the world (magnetic field, receivers...) of what is replayed, not the config's own recording's
+        given = OWN_RECORDING if source is None else str(source) if isinstance(source, (str, Path)) else None
+        system = load_system(config_path_or_system, filter_override=filter_override, recording=given)
+        check_header(system, system.world, str(config_path_or_system))
     if source is None:
         source = system.recording
         if source is None:
