@@ -152,7 +152,8 @@ def run(args: argparse.Namespace) -> int:
             span = f" between --start {args.start} and --end {args.end}"
         raise InputError(f"{src}: no samples to write{span}" + (f" ({'; '.join(log.notes)})" if log.notes else ""))
     log.streams = streams
-    prepare(log)          # one origin for the GPS and the reference; the onboard attitude to start in flight
+    if getattr(cls, "flight_log", True):
+        prepare(log)      # one origin for the GPS and the reference; the onboard attitude to start in flight
     streams = [s for s in log.streams if len(s)]
     if args.gps == "nmea":
         from fusion.importers.nmea import as_nmea

@@ -99,6 +99,7 @@ class RosbagImporter(Importer):
     suffixes = (".bag", ".db3", ".mcap")
     sensors = ()            # named after the topics (or the mapping)
     takes_map = True        # --map MAP.yaml (fusion.importers.rosbag_map)
+    flight_log = False      # its own origin (the first NavSatFix): no fusion.importers.flight.prepare
 
     def read(self, path: str, request: ImportRequest) -> ImportedLog:
         mapping = load_bag_mapping(request.mapping)

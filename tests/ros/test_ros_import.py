@@ -45,8 +45,7 @@ def test_ros1_sqlite3_and_mcap_bags_import_to_the_same_recording(imported):
     assert _body(imported["sqlite3"][2]) == ros1
     assert _body(imported["mcap"][2]) == ros1
     rec = imported["ros1"][0]
-    # initial_attitude: the first reference attitude, added to every import (fusion.importers.flight)
-    assert set(rec.header.fields) == {"imu_data", "wheel", "gps_fix", "reference", "initial_attitude"}
+    assert set(rec.header.fields) == {"imu_data", "wheel", "gps_fix", "reference"}
 
 
 def test_a_ros2_bag_folder_is_read_as_its_storage_file(bags, tmp_path):
