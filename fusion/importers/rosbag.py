@@ -129,8 +129,9 @@ def _open(path: str):
     try:
         reader.open()
     except (AnyReaderError, Exception) as exc:   # rosbags raises its own errors and, on junk, struct/sqlite ones
-        raise InputError(f"{path}: not a readable ROS bag ({type(exc).__name__}: {' '.join(str(exc).split())}); "
-                         "a truncated ROS 1 bag can be reindexed with `rosbag reindex`") from None
+        hint = "; a truncated ROS 1 bag can be reindexed with `rosbag reindex`" if p.suffix == ".bag" else ""
+        raise InputError(f"{path}: not a readable ROS bag ({type(exc).__name__}: {' '.join(str(exc).split())})"
+                         f"{hint}") from None
     return reader
 
 
