@@ -223,3 +223,11 @@ def storage_file(path: Path, storage: str) -> Path:
     if storage == "ros1":
         return Path(path)
     return next(Path(path).glob("*.mcap" if storage == "mcap" else "*.db3"))
+
+
+if __name__ == "__main__":   # python tests/ros/bagmaker.py OUT [ros1|sqlite3|mcap] [DURATION_S]: the docs' example bag
+    import sys
+
+    storage = sys.argv[2] if len(sys.argv) > 2 else "ros1"
+    write_bag(Path(sys.argv[1]), storage, duration=float(sys.argv[3]) if len(sys.argv) > 3 else 60.0)
+    print(f"wrote {sys.argv[1]} ({storage})")
