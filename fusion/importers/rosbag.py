@@ -129,7 +129,11 @@ def _open(path: str):
     try:
         reader.open()
     except (AnyReaderError, Exception) as exc:   # rosbags raises its own errors and, on junk, struct/sqlite ones
-        hint = "; a truncated ROS 1 bag can be reindexed with `rosbag reindex`" if p.suffix == ".bag" else ""
+        # rosbags reads a bag through its index (ROS 1), summary (MCAP) or database: a cut one cannot be read
+        # in part, --partial or not; the format's own tool rebuilds it
+        hint = {".bag": "; a cut ROS 1 bag is reindexed by `rosbag reindex`",
+                ".mcap": "; a cut MCAP file is rebuilt by the mcap CLI's `mcap recover`",
+                ".db3": "; a damaged SQLite bag may be rebuilt by sqlite3's `.recover`"}.get(p.suffix, "")
         raise InputError(f"{path}: not a readable ROS bag ({type(exc).__name__}: {' '.join(str(exc).split())})"
                          f"{hint}") from None
     return reader
@@ -224,10 +228,9 @@ def _stream(tp: _Topic, request: ImportRequest, log: ImportedLog) -> Stream | No
     units = tp.spec.units if tp.spec is not None and tp.spec.units else (tp.kind.units if tp.kind and not tp.special else "")
     if units:
         meta["units"] = units
-    offset = tp.spec.time_offset if tp.spec is not None else 0.0
-    s = Stream(tp.sensor, fields, t_ns, rows, None, meta)
-    s.meta["_offset"] = str(offset)
-    return s
+    if tp.spec is not None and tp.spec.time_offset:
+        meta["time_offset_s"] = f"{tp.spec.time_offset:g} (added to the header stamps)"
+    return Stream(tp.sensor, fields, t_ns, rows, None, meta)
 
 
 def _notes(tp: _Topic, notes: list[str]) -> None:
@@ -268,9 +271,9 @@ def _mounts(streams: list[Stream], topics: dict[str, _Topic], tfs: dict[str, Tra
         log.meta[f"tf {tr.parent} {tr.child}"] = tr.as_args() + " (x y z m, roll pitch yaw rad; ROS FLU, static)"
     by_sensor = {tp.sensor: tp for tp in topics.values()}
     for s in streams:
-        offset = float(s.meta.pop("_offset", "0"))
-        t = (np.asarray(s.t, np.int64) - t0) / 1e9 + offset
         tp = by_sensor[s.sensor]
+        offset = tp.spec.time_offset if tp.spec is not None else 0.0
+        t = (np.asarray(s.t, np.int64) - t0) / 1e9 + offset
         m = mount(tfs, base, tp.frame)
         if m is not None:
             arm, q = m

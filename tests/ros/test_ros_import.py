@@ -161,6 +161,20 @@ def test_truncated_bag_is_one_error_line_or_partial(tmp_path, capsys, storage):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("fusion import: error: ") and str(cut) in err[0], err
     assert not (tmp_path / "o.log").exists()
+    # rosbags reads through the index / summary / database: --partial cannot read a cut one, and says how to
+    # rebuild it
+    assert fusion("import", cut, "-o", tmp_path / "o.log", "--partial") == 2
+    err = capsys.readouterr().err
+    assert {"ros1": "rosbag reindex", "mcap": "mcap recover", "sqlite3": ".recover"}[storage] in err
+
+
+def test_time_span_and_sensors(bags, tmp_path):
+    path, _ = bags["ros1"]
+    assert fusion("import", path, "-o", tmp_path / "o.log", "--start", "10", "--end", "20", "--sensors", "imu_data") == 0
+    rec = Recording(tmp_path / "o.log")
+    assert set(rec.header.fields) == {"imu_data"}
+    t = rec.times("imu_data")
+    assert t.min() == 10.0 and t.max() == 20.0 and len(t) == 501
 
 
 def test_junk_with_a_bag_suffix_is_one_error_line(tmp_path, capsys):
