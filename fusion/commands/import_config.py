@@ -20,6 +20,7 @@ examples:
   fusion import-config ekf.yaml -o robot.yaml --recording robot.log
   fusion import-config ekf.yaml -o robot.yaml --recording robot.log --tf base_link imu_link 0 -0.3 0.52 -1.5708 0 1.5708
   fusion run robot.yaml
+  fusion import-config test_ekf_localization_node_bag1.test --recording test1.bag -o bag1.yaml   # ROS 1 launch
 
 --tf PARENT CHILD X Y Z ROLL PITCH YAW (m, rad; repeatable) mounts a sensor frame on the body frame, as a
 launch file's static_transform_publisher does (note the order: ROLL PITCH YAW; ROS 1's positional
@@ -31,10 +32,11 @@ carries the bag's /tf_static mounts; --tf overrides them.
 def register(subparsers) -> None:
     p = subparsers.add_parser("import-config", help=HELP, description=DESCRIPTION, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("params", metavar="EKF.yaml", help="robot_localization parameter file")
+    p.add_argument("params", metavar="EKF.yaml", help="robot_localization parameter file (YAML), or a ROS 1 launch "
+                   "file (.launch, .test, .xml) whose ekf/ukf node and static_transform_publisher nodes are read")
     p.add_argument("-o", "--output", metavar="OUT.yaml", required=True, help="system YAML to write ('-': stdout)")
-    p.add_argument("--recording", metavar="LOG", help="a recording `fusion import` made of the bag: its sensors' "
-                   "names, frames and mounts are used, and the config replays it")
+    p.add_argument("--recording", metavar="LOG", help="the bag (.bag, .db3, .mcap) or a recording `fusion import` "
+                   "made of it: its sensors' names, frames and mounts are used, and the config replays it")
     p.add_argument("--tf", nargs=8, action="append", default=[], metavar=("PARENT", "CHILD", "X", "Y", "Z", "ROLL",
                    "PITCH", "YAW"), help="a static transform (m, rad), repeatable")
     p.add_argument("--filter", choices=("ekf", "ukf"), help="default: ukf for a file with alpha/kappa/beta, else ekf")
@@ -58,6 +60,17 @@ def _tfs(values: list[list[str]]):
     return out
 
 
+LAUNCH_SUFFIXES = (".launch", ".test", ".xml")
+
+
+def _expected(e: dict[str, float]) -> str:
+    """The launch file's test expectation, said in both frames."""
+    x, y, z = e.get("final_x", 0.0), e.get("final_y", 0.0), e.get("final_z", 0.0)
+    tol = f" within {e['tolerance']:g} m" if "tolerance" in e else ""
+    return (f"the launch file's test expects the final position x {x:g} y {y:g} z {z:g} m (ROS ENU){tol}: "
+            f"px {y:g} py {x:g} pz {-z:g} m in this config's NED")
+
+
 def run(args: argparse.Namespace) -> int:
     import yaml
 
@@ -68,8 +81,18 @@ def run(args: argparse.Namespace) -> int:
     src = Path(args.params)
     if not src.is_file():
         raise InputError(f"{src}: no such parameter file")
+    if args.recording and not Path(args.recording).exists():
+        raise InputError(f"--recording {args.recording}: no such recording or bag")
     check_outputs({"-o": args.output}, [str(src)] + ([args.recording] if args.recording else []), force=args.force)
-    params, layout = parameters(load_yaml(str(src)).data, str(src))
+    tfs, expected, notes, kind = _tfs(args.tf), {}, [], None
+    if src.suffix.lower() in LAUNCH_SUFFIXES:
+        from fusion.importers.rosbag_launch import read_launch
+
+        params, kind, launch_tfs, expected, notes = read_launch(str(src))
+        layout = "ROS 1 launch file"
+        tfs += launch_tfs              # --tf first: it overrides the launch file's
+    else:
+        params, layout = parameters(load_yaml(str(src)).data, str(src))
     rec = RecordingInfo.read(args.recording) if args.recording else None
     if rec is not None and args.output != "-":
         rel = Path(args.recording).resolve()
@@ -77,8 +100,13 @@ def run(args: argparse.Namespace) -> int:
             rec.path = str(rel.relative_to(Path(args.output).resolve().parent))
         except ValueError:
             rec.path = str(rel)
-    result = translate(params, layout, rec, _tfs(args.tf), args.filter, args.name or src.stem)
+    result = translate(params, layout, rec, tfs, args.filter or kind, args.name or src.stem)
+    result.untranslated[:0] = notes
     head = [f"# {src.name} ({layout}) translated by fusion import-config (docs/ros.md)."]
+    if expected:
+        said = _expected(expected)
+        head.append(f"# {said}")
+        print(f"fusion import-config: {said}", file=sys.stderr)
     head += ["# Not translated:"] + [f"#   {line}" for line in result.untranslated] if result.untranslated else []
     text = "\n".join(head) + "\n" + yaml.safe_dump(result.config, sort_keys=False, default_flow_style=None, width=110)
     out = OutputFile(args.output, "w", what="config")

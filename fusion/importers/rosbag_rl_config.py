@@ -138,27 +138,45 @@ class RecordingInfo:
 
     @classmethod
     def read(cls, path: str) -> "RecordingInfo":
-        info = cls(path)
+        """From a recording's header, or from a bag (``.bag``, ``.db3``, ``.mcap``, a ROS 2 bag folder) read by
+        the rosbag importer as ``fusion import`` would."""
+        from pathlib import Path
+
+        p = Path(path)
+        if p.suffix in (".bag", ".db3", ".mcap") or p.is_dir():
+            from fusion.api import ImportRequest
+
+            from .rosbag import RosbagImporter
+            from .writer import render
+
+            log = RosbagImporter().read(path, ImportRequest())
+            log.streams = [s for s in log.streams if len(s)]
+            return cls._parse(path, render(log))
         with open(path, encoding="utf-8", errors="replace") as fh:
-            for line in fh:
-                if not line.startswith("#"):
-                    break
-                m = re.match(r"# (\S+) (topic|frame_id|mount): (.*)", line.rstrip("\n"))
-                if m:
-                    sensor, key, text = m.groups()
-                    if key == "topic":
-                        topic, _, typ = text.partition(" (")
-                        info.topics[sensor], info.types[sensor] = topic, typ.rstrip(")")
-                    elif key == "frame_id":
-                        info.frames[sensor] = text
-                    else:
-                        w = text.split()
-                        info.mounts[sensor] = ([float(v) for v in w[1:4]], [float(v) for v in w[8:12]])
-                    continue
-                m = re.match(r"# tf (\S+) (\S+): (.*)", line)
-                if m:
-                    v = [float(x) for x in m.group(3).split()[:6]]
-                    info.tfs.append(Tf(m.group(1), m.group(2), tuple(v[:3]), tuple(v[3:6])))  # type: ignore[arg-type]
+            return cls._parse(path, fh)
+
+    @classmethod
+    def _parse(cls, path: str, lines) -> "RecordingInfo":
+        info = cls(path)
+        for line in lines:
+            if not line.startswith("#"):
+                break
+            m = re.match(r"# (\S+) (topic|frame_id|mount): (.*)", line.rstrip("\n"))
+            if m:
+                sensor, key, text = m.groups()
+                if key == "topic":
+                    topic, _, typ = text.partition(" (")
+                    info.topics[sensor], info.types[sensor] = topic, typ.rstrip(")")
+                elif key == "frame_id":
+                    info.frames[sensor] = text
+                else:
+                    w = text.split()
+                    info.mounts[sensor] = ([float(v) for v in w[1:4]], [float(v) for v in w[8:12]])
+                continue
+            m = re.match(r"# tf (\S+) (\S+): (.*)", line)
+            if m:
+                v = [float(x) for x in m.group(3).split()[:6]]
+                info.tfs.append(Tf(m.group(1), m.group(2), tuple(v[:3]), tuple(v[3:6])))  # type: ignore[arg-type]
         if not info.topics:
             raise ConfigError(f"--recording {path}: no ROS topics in its header (a recording `fusion import` made "
                               "of a bag says '# SENSOR topic: ...')")

@@ -56,6 +56,7 @@ class Spec:
     odom_r_sd: float = 0.02
     gps_sd: float = 0.5
     imu_arm: tuple[float, float, float] = (0.1, 0.0, 0.2)
+    imu_mount: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)   # imu_link in base_link, [w x y z] FLU
     zero_stamps: int = 0           # the first N IMU messages stamped 0
     backwards: bool = False        # one odometry stamp earlier than the one before
     zero_cov: bool = False         # wheel odometry with all-zero covariances
@@ -113,13 +114,20 @@ def messages(store, spec: Spec, tr: Truth):
         return spec.start_ns + int(round(tr.t[i] * 1e9))
 
     delay = int(spec.receive_delay_s * 1e9)
+    from scipy.spatial.transform import Rotation
+
+    wm, xm, ym, zm = spec.imu_mount
+    Cm = Rotation.from_quat([xm, ym, zm, wm])          # the IMU's axes in the body: its data is Cm^-1 of the body's
+    M_T = Cm.inv().as_matrix()                         # body-axis covariances into the IMU's axes
     for k, i in enumerate(at(spec.imu_hz)):
-        f = np.array([tr.a[i], tr.v[i] * tr.r[i], G]) + rng.normal(0, spec.accel_sd, 3)
-        w = np.array([0.0, 0.0, tr.r[i]]) + rng.normal(0, spec.gyro_sd, 3)
+        f = Cm.inv().apply(np.array([tr.a[i], tr.v[i] * tr.r[i], G])) + rng.normal(0, spec.accel_sd, 3)
+        w = Cm.inv().apply(np.array([0.0, 0.0, tr.r[i]])) + rng.normal(0, spec.gyro_sd, 3)
         yaw = tr.yaw[i] + rng.normal(0, spec.yaw_sd)
+        x, y, z, qw = (Rotation.from_euler("z", yaw) * Cm).as_quat()     # the IMU frame's attitude in ENU
         stamp = 0 if k < spec.zero_stamps else ns(i)
-        msg = M.T["sensor_msgs/msg/Imu"](header=M.header(stamp, "imu_link"), orientation=M.quat(*_quat_yaw(yaw)),
-                                         orientation_covariance=np.diag([1e-4, 1e-4, spec.yaw_sd ** 2]).ravel(),
+        msg = M.T["sensor_msgs/msg/Imu"](header=M.header(stamp, "imu_link"), orientation=M.quat(qw, x, y, z),
+                                         orientation_covariance=(M_T @ np.diag([1e-4, 1e-4, spec.yaw_sd ** 2]) @
+                                                                 M_T.T).ravel(),
                                          angular_velocity=M.vec(*w),
                                          angular_velocity_covariance=np.diag([spec.gyro_sd ** 2] * 3).ravel(),
                                          linear_acceleration=M.vec(*f),
@@ -170,7 +178,7 @@ def tf_static(store, spec: Spec, extra=()):
     """The /tf_static message: base_link -> imu_link (spec.imu_arm, no rotation), base_link -> gps_link, and
     ``extra`` (parent, child, (x y z), (w x y z))."""
     M = _Msgs(store)
-    items = [("base_link", "imu_link", spec.imu_arm, (1.0, 0.0, 0.0, 0.0)),
+    items = [("base_link", "imu_link", spec.imu_arm, spec.imu_mount),
              ("base_link", "gps_link", (0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0)), *extra]
     ts = []
     for parent, child, t, q in items:

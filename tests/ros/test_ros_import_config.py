@@ -116,3 +116,72 @@ def test_translated_config_runs_and_agrees_with_the_reference(robot, flt):
     # slack for the turns' lag)
     assert agree["element_rmse"]["yaw"] < 0.02
     assert agree["element_rmse"]["vbx"] < 0.05
+
+
+HUSKY_LAUNCH = """<launch>
+  <param name="/use_sim_time" value="true" />
+  <node pkg="tf2_ros" type="static_transform_publisher" name="bl_imu"
+        args="0 -0.3 0.52 -1.570796327 0 1.570796327 base_link imu_link" />
+  <node pkg="rosbag" type="play" name="rosbagplay" args="$(find robot_localization)/test/test1.bag --clock -d 5" />
+  <node name="test_ekf" pkg="robot_localization" type="ekf_localization_node" clear_params="true">
+    <param name="frequency" value="30"/>
+    <param name="sensor_timeout" value="0.1"/>
+    <param name="two_d_mode" value="true"/>
+    <param name="odom0" value="/wheel/odometry"/>
+    <param name="imu0" value="/imu/data"/>
+    <rosparam param="odom0_config">[false, false, false, false, false, false, true, true, false,
+                                    false, false, true, false, false, false]</rosparam>
+    <rosparam param="imu0_config">[false, false, false, false, false, true, false, false, false,
+                                   false, false, true, true, true, false]</rosparam>
+    <param name="imu0_remove_gravitational_acceleration" value="true"/>
+    <rosparam param="initial_estimate_covariance">[1e-9, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+      0, 1e-9, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,  0, 0, 1e-9, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+      0, 0, 0, 1e-9, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,  0, 0, 0, 0, 1e-9, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+      0, 0, 0, 0, 0, 4.0, 0, 0, 0, 0, 0, 0, 0, 0, 0,  0, 0, 0, 0, 0, 0, 1e-2, 0, 0, 0, 0, 0, 0, 0, 0,
+      0, 0, 0, 0, 0, 0, 0, 1e-2, 0, 0, 0, 0, 0, 0, 0,  0, 0, 0, 0, 0, 0, 0, 0, 1e-9, 0, 0, 0, 0, 0, 0,
+      0, 0, 0, 0, 0, 0, 0, 0, 0, 1e-9, 0, 0, 0, 0, 0,  0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1e-9, 0, 0, 0, 0,
+      0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1e-2, 0, 0, 0,  0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1e-2, 0, 0,
+      0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1e-2, 0,  0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1e-9]</rosparam>
+  </node>
+  <test test-name="bag_pose" pkg="robot_localization" type="test_ekf_localization_node_bag1">
+    <param name="final_x" value="{x}"/>
+    <param name="final_y" value="{y}"/>
+    <param name="final_z" value="0.0"/>
+    <param name="tolerance" value="1.0"/>
+  </test>
+</launch>
+"""
+
+
+def test_ros1_launch_with_a_mounted_imu_runs_on_the_bag(tmp_path, capsys):
+    """robot_localization's bag-test layout: a launch file with the Husky's IMU mount (x y z yaw pitch roll:
+    yaw -90 deg, roll +90 deg), run on the bag directly; the bag's IMU data is in that rotated frame, and its
+    /tf_static has it too, so only a right mount gives the right heading."""
+    s = math.sqrt(0.5)
+    mount = (0.5, 0.5, -0.5, -0.5)        # Rz(-90 deg) Rx(+90 deg), [w x y z]
+    from bagmaker import Spec, truth
+
+    write_bag(tmp_path / "husky.bag", "ros1", Spec(imu_mount=mount, imu_arm=(0.0, -0.3, 0.52)), duration=20.0)
+    tr = truth(20.0)
+    launch = tmp_path / "bag1.test"
+    launch.write_text(HUSKY_LAUNCH.format(x=tr.x[-1], y=tr.y[-1]))
+    out = tmp_path / "bag1.yaml"
+    assert fusion("import-config", launch, "--recording", tmp_path / "husky.bag", "-o", out) == 0
+    err = capsys.readouterr().err
+    assert "expects the final position" in err
+    cfg = yaml.safe_load(out.read_text())
+    q = cfg["sensors"]["imu_data"]["model"]["mount_rotation"]
+    from scipy.spatial.transform import Rotation
+
+    D = np.diag([1.0, -1.0, -1.0])
+    C = Rotation.from_quat([q[1], q[2], q[3], q[0]]).as_matrix()
+    C_flu = Rotation.from_quat([mount[1], mount[2], mount[3], mount[0]]).as_matrix()
+    np.testing.assert_allclose(C, D @ C_flu @ D, atol=1e-9)
+    assert cfg["recording"] == "husky.bag"
+    csv_out = tmp_path / "run.csv"
+    assert fusion("run", out, "-o", csv_out, "--quiet", "--no-progress") == 0
+    last = list(__import__("csv").DictReader(open(csv_out)))[-1]
+    # no GPS: the position is dead reckoning on wheel speed (0.05 m/s white) and the IMU's heading (0.02 rad):
+    # over ~25 m, a few decimetres; the launch file's own tolerance is 1 m (NED north = ENU y)
+    assert math.hypot(float(last["px"]) - tr.y[-1], float(last["py"]) - tr.x[-1]) < 1.0
+    assert s > 0
