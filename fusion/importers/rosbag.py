@@ -7,7 +7,8 @@ types by attribute path, and any topic as ``reference`` (another estimator: robo
 ``/odometry/filtered``) or ``truth`` (motion capture). Frames: REP-103/105 ENU world and FLU body into NED and
 FRD (fusion.importers.rosbag_frames), said in the header. Times: the messages' header stamps (not the
 receive times), in s from the earliest stamp; the receive-minus-stamp delay of each topic is written to the
-header. Static transforms (``/tf_static``) give each sensor's mounting on ``base_link`` (lever arm, rotation).
+header. Static transforms (``/tf_static``, and the ``/tf`` transforms that never change: ROS 1's
+static_transform_publisher repeats on /tf) give each sensor's mounting on ``base_link`` (lever arm, rotation).
 
 Bad bags: unreadable, truncated or corrupt (InputError, or with ``--partial`` what reads, noted); a topic of
 an unknown type or without messages, stamps at zero (the receive time used instead), stamps going backwards
@@ -31,7 +32,7 @@ from .rosbag_tf import Transform, from_message, mount
 
 FRAME_NOTE = ("NED world from ROS ENU (REP-103: north = y, east = x, down = -z), body FRD from FLU (y and z "
               "negated), quaternions [w x y z] body FRD to NED; covariances re-expressed the same way")
-TF_TYPES = ("tf2_msgs/msg/TFMessage",)
+TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
 STATE_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseWithCovarianceStamped", "geometry_msgs/msg/PoseStamped")
 LATLON = ".9f"
 
@@ -151,9 +152,8 @@ def _choose(reader, mapping: BagMapping, request: ImportRequest, notes: list[str
     for c in reader.connections:
         if c.topic in mapping.skip:
             continue
-        if c.msgtype in TF_TYPES:
-            if c.topic.endswith("tf_static"):
-                tf_conns.append(c)
+        if c.msgtype in TF_TYPES:   # /tf_static, and /tf (ROS 1's static_transform_publisher repeats on /tf)
+            tf_conns.append(c)
             continue
         name, spec = by_topic.get(c.topic, (None, None))
         special = name in ("reference", "truth")
@@ -185,14 +185,17 @@ def _read_bag(path: str, mapping: BagMapping, request: ImportRequest,
               notes: list[str]) -> tuple[dict[str, _Topic], dict[str, Transform]]:
     reader = _open(path)
     tfs: dict[str, Transform] = {}
+    moving = _Moving()
     try:
         chosen, conns = _choose(reader, mapping, request, notes)
         n = 0
         try:
             for conn, recv, raw in reader.messages(connections=conns):
                 msg = reader.deserialize(raw, conn.msgtype)
-                if conn.msgtype in TF_TYPES:
+                if conn.msgtype in TF_TYPES and conn.topic.endswith("tf_static"):
                     tfs.update({tr.child: tr for tr in from_message(msg)})
+                elif conn.msgtype in TF_TYPES:
+                    moving.add(from_message(msg))
                 else:
                     chosen[conn.topic].add(msg, int(recv))
                 n += 1
@@ -206,7 +209,27 @@ def _read_bag(path: str, mapping: BagMapping, request: ImportRequest,
     for tp in chosen.values():
         if not tp.t and not tp.dropped:
             notes.append(f"topic {tp.topic} ({tp.msgtype}): no messages")
-    return chosen, tfs
+    return chosen, {**moving.fixed(), **tfs}
+
+
+class _Moving:
+    """The transforms of /tf: those that never change (a ROS 1 static_transform_publisher repeating itself) are
+    mounts; the others (odom -> base_link) are motion, not used."""
+
+    def __init__(self):
+        self.first: dict[tuple[str, str], Transform] = {}
+        self.varies: set[tuple[str, str]] = set()
+
+    def add(self, transforms: list[Transform]) -> None:
+        for tr in transforms:
+            key = (tr.parent, tr.child)
+            was = self.first.setdefault(key, tr)
+            if key not in self.varies and not (np.allclose(was.t, tr.t, atol=1e-9) and
+                                               np.allclose(was.q, tr.q, atol=1e-9)):
+                self.varies.add(key)
+
+    def fixed(self) -> dict[str, Transform]:
+        return {tr.child: tr for key, tr in self.first.items() if key not in self.varies}
 
 
 def _stream(tp: _Topic, request: ImportRequest, log: ImportedLog) -> Stream | None:
@@ -279,7 +302,7 @@ def _mounts(streams: list[Stream], topics: dict[str, _Topic], tfs: dict[str, Tra
             arm, q = m
             s.meta["mount"] = (f"lever_arm {' '.join(f'{v:.6g}' for v in arm)} m (body FRD), rotation "
                                f"{' '.join(f'{v:.9g}' for v in q)} (sensor FRD to body FRD, [w x y z]), from "
-                               f"/tf_static {base} -> {tp.frame}")
+                               f"the static transforms {base} -> {tp.frame}")
         s.t = t
     log.meta["base_frame"] = base
 

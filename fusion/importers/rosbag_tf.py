@@ -27,7 +27,7 @@ class Transform:
         """``X Y Z ROLL PITCH YAW`` (m, rad; ZYX Euler angles of the rotation, ROS FLU frames): the order of
         ``fusion import-config --tf PARENT CHILD X Y Z ROLL PITCH YAW``."""
         r, p, y = euler_zyx(self.q)
-        return " ".join(f"{v:.9g}" for v in (*self.t, r, p, y))
+        return " ".join(f"{v + 0.0:.9g}" for v in (*self.t, r, p, y))   # + 0.0: no "-0"
 
 
 def from_message(msg) -> list[Transform]:

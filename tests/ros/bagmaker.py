@@ -62,6 +62,7 @@ class Spec:
     zero_cov: bool = False         # wheel odometry with all-zero covariances
     empty_topic: bool = False      # a /unused topic without messages
     unknown_topic: bool = False    # a std_msgs/Float64 topic
+    tf_on_tf: bool = False         # ROS 1 style: the mounts repeated on /tf each second, with odom -> base_link
     seed: int = 1
     extra: dict = field(default_factory=dict)
 
@@ -174,12 +175,12 @@ def messages(store, spec: Spec, tr: Truth):
     return out
 
 
-def tf_static(store, spec: Spec, extra=()):
-    """The /tf_static message: base_link -> imu_link (spec.imu_arm, no rotation), base_link -> gps_link, and
-    ``extra`` (parent, child, (x y z), (w x y z))."""
+def tf_static(store, spec: Spec, extra=(), moving=(), mounts: bool = True):
+    """The /tf_static message: base_link -> imu_link (spec.imu_arm, spec.imu_mount), base_link -> gps_link, and
+    ``extra`` (parent, child, (x y z), (w x y z)); ``moving`` transforms first, the mounts only with ``mounts``."""
     M = _Msgs(store)
-    items = [("base_link", "imu_link", spec.imu_arm, spec.imu_mount),
-             ("base_link", "gps_link", (0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0)), *extra]
+    items = [*moving] + ([("base_link", "imu_link", spec.imu_arm, spec.imu_mount),
+                          ("base_link", "gps_link", (0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0)), *extra] if mounts else [])
     ts = []
     for parent, child, t, q in items:
         tr = M.T["geometry_msgs/msg/Transform"](translation=M.vec(*t), rotation=M.quat(*q))
@@ -216,11 +217,21 @@ def write_bag(path: Path, storage: str = "ros1", spec: Spec | None = None, durat
     msgs = messages(store, spec, tr)
     with writer:
         conns = {}
-        for topic, typ in [("/tf_static", "tf2_msgs/msg/TFMessage")] + sorted({(m[0], m[1]) for m in msgs}):
+        tf_topic = "/tf" if spec.tf_on_tf else "/tf_static"
+        for topic, typ in [(tf_topic, "tf2_msgs/msg/TFMessage")] + sorted({(m[0], m[1]) for m in msgs}):
             conns[topic] = writer.add_connection(topic, typ, typestore=store)
         if spec.empty_topic:
             writer.add_connection("/unused", "sensor_msgs/msg/Imu", typestore=store)
-        writer.write(conns["/tf_static"], spec.start_ns, ser(tf_static(store, spec, tf_extra), "tf2_msgs/msg/TFMessage"))
+        static = ser(tf_static(store, spec, tf_extra), "tf2_msgs/msg/TFMessage")
+        if spec.tf_on_tf:
+            for k, i in enumerate(range(0, len(tr.t), 20)):     # 10 Hz: the moving odom -> base_link, mounts at 1 Hz
+                ns = spec.start_ns + int(round(tr.t[i] * 1e9))
+                moving = [("odom", "base_link", (tr.x[i], tr.y[i], 0.0), _quat_yaw(tr.yaw[i]))]
+                msgs.append((tf_topic, "tf2_msgs/msg/TFMessage", ns, ns,
+                             tf_static(store, spec, tf_extra, moving, mounts=k % 10 == 0)))
+            msgs.sort(key=lambda m: m[3])
+        else:
+            writer.write(conns[tf_topic], spec.start_ns, static)
         for topic, typ, _, recv, msg in msgs:
             writer.write(conns[topic], recv, ser(msg, typ))
     return tr

@@ -120,6 +120,17 @@ def test_static_tf_rotation_gives_the_mount_in_frd(tmp_path):
     np.testing.assert_allclose([float(v) for v in words[8:12]], [s, s, 0.0, 0.0], atol=1e-9)
 
 
+def test_mounts_repeated_on_tf_are_static_and_motion_is_not(tmp_path):
+    # ROS 1's static_transform_publisher repeats a mount on /tf; odom -> base_link there is the robot's motion
+    bag = tmp_path / "tf.bag"
+    write_bag(bag, "ros1", Spec(tf_on_tf=True), duration=3.0)
+    assert fusion("import", bag, "-o", tmp_path / "o.log") == 0
+    rec = Recording(tmp_path / "o.log")
+    assert rec.meta("tf base_link imu_link").startswith("0.1 0 0.2 0 0 0")
+    assert not any(c.startswith("# tf odom base_link") for c in rec.comments)
+    assert rec.meta("imu_data mount").startswith("lever_arm 0.1 0 -0.2 m")
+
+
 def test_mapping_names_truth_and_maps_another_type(tmp_path):
     bag = tmp_path / "u.bag"
     write_bag(bag, "ros1", Spec(unknown_topic=True), duration=2.0)
