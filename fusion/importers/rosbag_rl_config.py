@@ -34,13 +34,14 @@ IGNORED = {   # parameter -> why it has no counterpart here
     "frequency": "the output rate: output.rate_hz is set from it",
     "sensor_timeout": "no fixed-rate filter loop: predictions run to each message",
     "publish_tf": "no ROS graph", "publish_acceleration": "no ROS graph", "print_diagnostics": "no ROS graph",
-    "map_frame": "frames are NED/FRD here (docs/ros.md)", "odom_frame": "frames are NED/FRD here",
+    "map_frame": "frames are NED/FRD here, docs/ros.md", "odom_frame": "frames are NED/FRD here",
     "base_link_frame": "the body frame (mounts are given on it with --tf)", "world_frame": "frames are NED/FRD here",
     "transform_time_offset": "no tf output", "transform_timeout": "static transforms only (--tf, /tf_static)",
     "debug": "fusion run --summary-json and the event lines", "debug_out_file": "see debug",
     "permit_corrected_publication": "no publication", "reset_on_time_jump": "the run's clock guard handles jumps",
     "predict_to_current_time": "no publication", "disabled_at_startup": "no services",
     "dynamic_process_noise_covariance": "use_dynamic_process_noise is not modelled",
+    "use_sim_time": "the bag's header stamps are the clock here",
 }
 UNSUPPORTED = {
     "use_dynamic_process_noise": "velocity-scaled process noise is not modelled: the static matrix is used",
