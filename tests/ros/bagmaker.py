@@ -62,6 +62,7 @@ class Spec:
     zero_cov: bool = False         # wheel odometry with all-zero covariances
     empty_topic: bool = False      # a /unused topic without messages
     unknown_topic: bool = False    # a std_msgs/Float64 topic
+    mag_range: bool = False        # a /mag MagneticField (1 Hz) and a /sonar Range (every 4th out of range)
     tf_on_tf: bool = False         # ROS 1 style: the mounts repeated on /tf each second, with odom -> base_link
     seed: int = 1
     extra: dict = field(default_factory=dict)
@@ -169,6 +170,16 @@ def messages(store, spec: Spec, tr: Truth):
                                            pose=M.pose(tr.x[i], tr.y[i], tr.yaw[i], np.eye(6) * 1e-4),
                                            twist=M.twist(tr.v[i], tr.r[i], np.eye(6) * 1e-4))
         out.append(("/odometry/filtered", "nav_msgs/msg/Odometry", ns(i), ns(i) + delay, msg))
+    if spec.mag_range:
+        for k, i in enumerate(at(1.0)):
+            mag = M.T["sensor_msgs/msg/MagneticField"](header=M.header(ns(i), "imu_link"),
+                                                       magnetic_field=M.vec(2e-5, 1e-6, -4e-5),
+                                                       magnetic_field_covariance=np.zeros(9))
+            out.append(("/mag", "sensor_msgs/msg/MagneticField", ns(i), ns(i), mag))
+            rng_ = 0.5 + 0.1 * k if k % 4 else 9.0     # 9 m: past max_range
+            son = M.T["sensor_msgs/msg/Range"](header=M.header(ns(i), "sonar"), radiation_type=0, field_of_view=0.5,
+                                               min_range=0.2, max_range=4.0, range=rng_)
+            out.append(("/sonar", "sensor_msgs/msg/Range", ns(i), ns(i), son))
     if spec.unknown_topic:
         out.append(("/battery", "std_msgs/msg/Float64", spec.start_ns, spec.start_ns, M.T["std_msgs/msg/Float64"](data=12.1)))
     out.sort(key=lambda m: m[3])

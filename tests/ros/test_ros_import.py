@@ -131,6 +131,18 @@ def test_mounts_repeated_on_tf_are_static_and_motion_is_not(tmp_path):
     assert rec.meta("imu_data mount").startswith("lever_arm 0.1 0 -0.2 m")
 
 
+def test_magnetic_field_in_ut_frd_and_ranges_out_of_range_dropped(tmp_path, capsys):
+    bag = tmp_path / "m.bag"
+    write_bag(bag, "ros1", Spec(mag_range=True), duration=8.0)
+    assert fusion("import", bag, "-o", tmp_path / "o.log") == 0
+    rec = Recording(tmp_path / "o.log")
+    # ROS FLU tesla (2e-5, 1e-6, -4e-5) -> FRD microtesla (20, -1, 40)
+    np.testing.assert_allclose([rec.column("mag", k)[0] for k in ("mx", "my", "mz")], [20.0, -1.0, 40.0])
+    r = rec.column("sonar", "range")
+    assert len(r) == 6 and np.all(r <= 4.0)       # 9 readings, those at k = 0, 4, 8 past max_range
+    assert "sonar (/sonar): 3 messages outside [min_range, max_range] (no detection), dropped" in capsys.readouterr().err
+
+
 def test_mapping_names_truth_and_maps_another_type(tmp_path):
     bag = tmp_path / "u.bag"
     write_bag(bag, "ros1", Spec(unknown_topic=True), duration=2.0)
