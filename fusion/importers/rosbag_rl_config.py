@@ -30,6 +30,9 @@ for _k, _M in enumerate((T_NE, J_RPY, D_FLU, D_FLU, D_FLU)):
     STATE_J[3 * _k:3 * _k + 3, 3 * _k:3 * _k + 3] = _M
 PERMUTE = (1, 0, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14)   # an ENU/FLU axis flag -> the NED/FRD one
 KINDS = {"odom": "pose", "pose": "pose", "twist": "twist", "imu": "imu"}
+#: The state axes each kind of robot_localization sensor can fuse (its message has them)
+FUSES = {"odom": range(12), "pose": range(6), "twist": range(6, 12), "imu": (3, 4, 5, 9, 10, 11, 12, 13, 14)}
+TWO_D = (2, 3, 4, 8, 9, 10, 14)
 IGNORED = {   # parameter -> why it has no counterpart here
     "frequency": "the output rate: output.rate_hz is set from it",
     "sensor_timeout": "no fixed-rate filter loop: predictions run to each message",
@@ -284,7 +287,13 @@ def _sensors(params: dict, used: set, out: Translation, two_d: bool, rec: Record
             sensor = sensor_name(topic)
             if rec is not None:
                 out.untranslated.append(f"{key}: topic {topic} is not in {rec.path}; the sensor is named {sensor!r}")
-        model: dict[str, Any] = {"type": KINDS[family], "select": _names(select)}
+        fused = [i for i in FUSES[family] if select[i] and not (two_d and i in TWO_D)]
+        if not fused:
+            article = "an" if family[0] in "aeiou" else "a"
+            out.untranslated.append(f"{key}_config: selects nothing {article} {family} message has"
+                                    f"{' outside two_d_mode' if two_d else ''}: the sensor is left out")
+            continue
+        model: dict[str, Any] = {"type": KINDS[family], "select": _names([i in fused for i in range(15)])}
         if two_d:
             model["two_d_mode"] = True
         for opt in ("differential", "relative"):

@@ -185,3 +185,20 @@ def test_ros1_launch_with_a_mounted_imu_runs_on_the_bag(tmp_path, capsys):
     # over ~25 m, a few decimetres; the launch file's own tolerance is 1 m (NED north = ENU y)
     assert math.hypot(float(last["px"]) - tr.y[-1], float(last["py"]) - tr.x[-1]) < 1.0
     assert s > 0
+
+
+def test_a_sensor_that_fuses_nothing_is_left_out_and_others_kept(tmp_path, capsys):
+    params = {"two_d_mode": True,
+              "twist0": "/t", "twist0_config": [True] * 6 + [False] * 9,            # pose axes: a twist has none
+              "imu0": "/i", "imu0_config": [False] * 3 + [True, True] + [False] * 10,   # roll, pitch: 2-D drops them
+              "odom0": "/o", "odom0_config": [True, True] + [False] * 13}
+    f = tmp_path / "p.yaml"
+    f.write_text(yaml.safe_dump(params))
+    cfg, out = _translate(tmp_path, f)
+    assert list(cfg["sensors"]) == ["o"]
+    err = capsys.readouterr().err
+    assert "twist0_config: selects nothing a twist message has" in err
+    assert "imu0_config: selects nothing an imu message has outside two_d_mode" in err
+    from fusion.config import load_system
+
+    load_system(out)        # wires: every model builds
