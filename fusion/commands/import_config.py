@@ -118,6 +118,14 @@ def run(args: argparse.Namespace) -> int:
     out.close()
     for line in result.untranslated:
         print(f"fusion import-config: not translated: {line}", file=sys.stderr)
+    if args.output != "-":   # the translation must wire as fusion run will wire it
+        from fusion.config import load_system
+
+        try:
+            load_system(args.output)
+        except ConfigError as exc:
+            raise ConfigError(f"{args.output}: written, but it does not wire (a translation this command should not "
+                              f"make; please report it with the parameter file): {exc}") from None
     n = len(result.config["sensors"])
     print(f"wrote {'stdout' if args.output == '-' else args.output}: omni, {result.config['filter']['type']}, "
           f"{n} sensor(s) ({', '.join(result.config['sensors'])}); {len(result.untranslated)} parameter(s) not "
