@@ -122,6 +122,9 @@ def run(args: argparse.Namespace) -> int:
         if one and numbered:   # PX4: only instance 0 of a topic is read (the one the estimator uses)
             raise ConfigError(f"--sensors {' '.join(numbered)}: importer {cls.name!r} reads only instance 0 of each "
                               f"topic (it writes: {', '.join(cls.sensors)})")
+    if args.gps == "nmea" and not getattr(cls, "flight_log", True):
+        raise ConfigError(f"--gps nmea: importer {cls.name!r} writes its GPS as local NED fixes with their covariance, "
+                          "not as a flight log's fields (docs/ros.md)")
     if args.map and not getattr(cls, "takes_map", cls.name == "csv"):
         raise ConfigError(f"--map: a mapping file applies to CSV files and ROS bags, not to {cls.name!r} logs")
     check_outputs({"-o": args.output}, [str(src)] + ([args.map] if args.map else []), force=args.force)
