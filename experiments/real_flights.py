@@ -39,11 +39,14 @@ sys.path.insert(0, str(ROOT / "experiments"))
 PX4_LOG = Path(os.environ.get("FUSION_TEST_LOGS", ROOT.parent / "shared" / "logs")) / "px4_sample_log_small.ulg"
 PAGE = ROOT / "docs" / "results" / "real_flights.md"
 
+import provenance  # noqa: E402  (experiments/, on the path: the page's provenance block)
 from fusion.cli import main  # noqa: E402
 from fusion.importers.flight_events import in_flight  # noqa: E402
 from fusion.logformat import ParsedStream, iter_messages  # noqa: E402
 
 CONFIG = {"bin": ROOT / "configs" / "ardupilot_ins_gps_mag.yaml", "ulg": ROOT / "configs" / "px4_ins_gps_mag.yaml"}
+#: The files the page is made from: their hashes go in its provenance block (experiments/provenance.py).
+INPUTS = ("configs/ardupilot_ins_gps_mag.yaml", "configs/px4_ins_gps_mag.yaml")
 LABELS = {"dataflash_new": "ArduPilot 4.x DataFlash (synthetic)", "dataflash_old": "ArduPilot 3.3 DataFlash, older GPS (synthetic)",
           "ulog_new": "PX4 ULog, newer topics (synthetic)", "ulog_old": "PX4 ULog, older sensor_combined (synthetic)",
           "ulog_low_rate": "PX4 ULog logged at 10 Hz (synthetic)"}
@@ -190,7 +193,7 @@ def main_() -> int:
             path = work / (layout + (".bin" if layout.startswith("dataflash") else ".ulg"))
             fl.write(layout, f, path)
             results.append((LABELS[layout], run_one(path, work, layout)))
-    PAGE.write_text(page(results, commit), encoding="utf-8")
+    provenance.write_page(PAGE, page(results, commit), INPUTS)
     print(f"wrote {PAGE}")
     return 0
 
