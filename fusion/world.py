@@ -74,7 +74,10 @@ def read_world(path: str | Path) -> RecordingWorld | None:
     except OSError:
         return None
     with fh:
-        return read_world_lines(fh, str(path))
+        try:
+            return read_world_lines(fh, str(path))
+        except OSError:   # unreadable past its name (/proc/self/mem: EIO): the run and validate report it
+            return None
 
 
 def read_world_lines(lines: Iterable[str], label: str) -> RecordingWorld:
