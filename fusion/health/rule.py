@@ -17,8 +17,9 @@ A run is *degraded* (``fusion run`` exits DEGRADED_EXIT, 4, unless ``--allow-deg
   when ``c = min(2, K)`` consecutive windows are beyond: on a consistent filter (independent windows) the
   chance of a flag is at most ``K q^c = alpha`` (``nis_false_alarm``, 1e-3). Only too large an NIS flags
   (an overconfident filter or a model that disagrees with the data); a small one is a conservative noise;
-- errors against truth (``health.truth``: NEES mean over its dof above 10 by default) or agreement with a
-  reference (``health.reference``: attitude RMSE above 30 deg by default) beyond a limit.
+- errors against truth (``health.truth``: NEES mean over its dof above 10 by default, with under half the
+  estimates' NEES inside their 95 % interval) or agreement with a reference (``health.reference``: attitude
+  RMSE above 30 deg by default) beyond a limit.
 
 Each finding names the sensor, the figures and the likely causes in order (fusion.health.causes)."""
 from __future__ import annotations
@@ -198,10 +199,13 @@ def _agreement(kind: str, errors: dict[str, Any], consistency: dict[str, Any], l
         if limit is not None and isinstance(value, (int, float)) and math.isfinite(value) and value > limit:
             over.append(f"{label} {value:.3g} {unit} > {limit:g} (health.{kind}.{key})")
     nees, dof = consistency.get("nees_mean"), consistency.get("nees_dof")
+    inside = consistency.get("nees_in_95_fraction")
     if kind == "truth" and limits.nees_per_dof is not None and nees is not None and dof:
-        if nees / dof > limits.nees_per_dof:
-            over.append(f"NEES {nees:.4g} on {dof} dof ({nees / dof:.3g} per dof) > {limits.nees_per_dof:g} per dof "
-                        "(health.truth.nees_per_dof)")
+        persistent = not isinstance(inside, (int, float)) or not inside >= limits.nees_inside_min
+        if nees / dof > limits.nees_per_dof and persistent:
+            told = f", {100 * inside:.0f} % inside its 95 % interval" if isinstance(inside, (int, float)) else ""
+            over.append(f"NEES {nees:.4g} on {dof} dof ({nees / dof:.3g} per dof{told}) > {limits.nees_per_dof:g} "
+                        "per dof (health.truth.nees_per_dof)")
     if not over:
         return []
     what = "errors against truth" if kind == "truth" else "disagreement with the reference"

@@ -37,9 +37,12 @@ class AgreementLimits(BaseModel):
 
 class TruthLimits(AgreementLimits):
     """``health.truth``: by default the NEES mean at most 10 per dof, an order of magnitude over a consistent
-    filter's 1 (the covariance understating the error ~3x in sd)."""
+    filter's 1 (the covariance understating the error ~3x in sd), unless at least ``nees_inside_min`` of the
+    estimates' NEES are inside their 95 % interval (the mean made by a few samples, e.g. a bad truth line,
+    is no persistent inconsistency)."""
 
     nees_per_dof: float | None = Field(10.0, gt=1.0)
+    nees_inside_min: float = Field(0.5, gt=0.0, le=1.0)
 
 
 class ReferenceLimits(AgreementLimits):

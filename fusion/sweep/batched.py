@@ -168,7 +168,8 @@ def _health(system: Any, counts: dict, i: int, row: dict[str, Any], nees_dof: in
                    "late": c["late"], "malformed": 0} for n, c in counts.items()}
     errors = {k: row[k] for k in ("position_rmse_m", "position_max_m", "velocity_rmse_mps") if k in row}
     summary = {"sensors": sensors, "errors": errors,
-               "consistency": {"nees_mean": row.get("nees_mean"), "nees_dof": nees_dof}}
+               "consistency": {"nees_mean": row.get("nees_mean"), "nees_dof": nees_dof,
+                               "nees_in_95_fraction": row.get("nees_in_95_fraction")}}
     return health_columns(system, summary, watch)
 
 
