@@ -131,6 +131,12 @@ def _f(v, digits: str = ".2f") -> str:
     return "-" if v is None else format(v, digits)
 
 
+def _hashes() -> str:
+    """``name sha256[:12]`` of each config the page ran (a page whose inputs changed since is stale)."""
+    import hashlib
+    return ", ".join(f"{c.name} {hashlib.sha256(c.read_bytes()).hexdigest()[:12]}" for c in CONFIG.values())
+
+
 def page(results: list[tuple[str, dict]], commit: str) -> str:
     head = ("| log | config | in flight (s) | roll RMSE / max (deg) | pitch RMSE / max (deg) | yaw RMSE / max (deg) "
             "| velocity RMSE (m/s) | horizontal position RMSE (m) | real-time factor | exit |\n"
@@ -146,7 +152,8 @@ def page(results: list[tuple[str, dict]], commit: str) -> str:
            for label, r in results if r.get("coverage")]
     return f"""# Real flights: the vehicle configs on logs of every layout
 
-Regenerate: `python experiments/real_flights.py` (about 10 s; made at commit {commit}). Each log: `fusion import
+Regenerate: `python experiments/real_flights.py` (about 10 s; made at commit {commit}, configs
+{_hashes()}). Each log: `fusion import
 LOG -o X.log`, then `fusion run configs/<vehicle>_ins_gps_mag.yaml --input X.log`, unchanged. Scored in
 flight (between the header's `ARMED` and `DISARMED` lines) against the vehicle's own estimator (the log's
 `reference` lines) at its times: roll, pitch, yaw differences of the ZYX Euler angles, velocity (3-D) and
