@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from fusion.lapack import blas
+from scipy.linalg import blas
 from fusion.api import (Belief, Gate, MeasurementModel, NonAdditiveMeasurementNoise, NonAdditiveProcessNoise,
                         ProcessModel, UpdateResult, has)
 
