@@ -79,6 +79,9 @@ def _check_models(path: str, system) -> None:
             h1, h2 = model.h(x0), model.h(np.stack([x0, x0]))
             H = model.jacobian(x0) if uses_h_jacobian else None
         except Exception as exc:   # unbound until observe(), or needs what the run builds: the run reports it
+            if isinstance(exc, ModelFault):   # a plugin's model, checked at its calls (checks.checked)
+                raise ConfigError(f"{where}: measurement model {model.name!r} (dim {model.dim}): {exc}; every "
+                                  f"update of {name} would fail") from None
             if _writes_its_argument(exc):
                 raise ConfigError(f"{where}: measurement model {model.name!r} writes into the state it is given "
                                   f"({type(exc).__name__}: {exc}); every update of {name} would fail") from None
@@ -129,6 +132,9 @@ def _check_process(path: str, system, x0) -> None:
         F = process.jacobian(x0, u, PROBE_DT) if uses_jacobian else None
         Q = process.Q(x0, u, PROBE_DT)
     except Exception as exc:
+        if isinstance(exc, ModelFault):   # a plugin's model, checked at its calls (checks.checked)
+            raise ConfigError(f"{where}: process model {process.name!r} ({n} states): {exc}; every prediction "
+                              "would fail") from None
         if _writes_its_argument(exc):
             raise ConfigError(f"{where}: process model {process.name!r} writes into the state it is given "
                               f"({type(exc).__name__}: {exc}); every prediction would fail") from None
