@@ -11,15 +11,7 @@ from fusion.api import (Belief, Gate, InputRunNoise, IntegratesInputRuns, Measur
 from .base import KalmanBase, as_vector, residual_of
 from .sigma_points import SigmaPoints
 
-__all__ = ["SigmaPointFilter", "measurement_transform"]
-
-
-def measurement_transform(sp: SigmaPoints, x: np.ndarray, L: np.ndarray, model: MeasurementModel, m: int):
-    """The sigma points' deviations ``dX`` (2n+1, n) from the mean x (n,) for the lower factor L of P
-    (P = L L^T), the predicted measurements ``Z = h(x + dX)`` (2n+1, m) in ONE call of h (paper 001
-    eq. 14, paper 000 eq. 8), and the model's difference function (``residual``, or plain subtraction)."""
-    dX = sp.E @ L.T
-    return dX, model.h(x + dX), residual_of(model)
+__all__ = ["SigmaPointFilter"]
 
 
 class SigmaPointFilter(KalmanBase):
@@ -100,6 +92,9 @@ class SigmaPointFilter(KalmanBase):
         raise NotImplementedError
 
     # ------------------------------------------------------------------ update
+    #: whether the belief holds the square root S (srukf) rather than P (ukf)
+    square_root = False
+
     def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                gate: Gate | None = None) -> UpdateResult:
         r"""The sigma-point update (paper 001 eqs. 14-20; paper 000 Algorithm 1, eqs. 8-16), with sigma points
@@ -107,40 +102,44 @@ class SigmaPointFilter(KalmanBase):
 
             Z_i = h(x^- + dX_i)  (one call),   z^ = sum W_m^i Z_i,   y = residual(z, z^)
             L_y L_y^T = S = sum W_c^i (Z_i - z^)(Z_i - z^)^T + R
-            C = P_xz L_y^-T,   w = L_y^-1 y,   NIS = w^T w,   x^+ = x^- + C w   (K y = P_xz S^-1 y)
-            P^+ = P^- - C C^T
+            G = L_y^-1 P_xz^T,   w = L_y^-1 y,   NIS = w^T w,   x^+ = x^- + G^T w   (K y = P_xz S^-1 y)
+            P^+ = P^- - G^T G
 
-        :meth:`innovation` is where the filters differ: the ukf forms S and P_xz and factors S; the srukf
-        gets L_y, C and the posterior's square root from one QR (its docstring)."""
+        :meth:`innovation` is where the filters differ: the ukf forms S and P_xz as sums and factors S; the
+        srukf gets L_y, G and the posterior's square root from one QR (its docstring)."""
         x = belief.x
         z = as_vector(z)
         m = z.shape[0]
         events: list = []
         L, prior = self.prior_factor(belief, events)
-        sp, dX, Z, diff, R = self.measure(belief, L, model, R, m)
-        y, S, w, gain, posterior = self.innovation(sp, dX, Z, diff, z, R, prior, belief, events)
+        if self._augmented:
+            sp, dX, Z, diff = self.measure_augmented(belief, L, model, R, m)
+            R = None
+        else:
+            sp = self.sigma_points(x.shape[0])
+            dX = sp.E @ L.T
+            Z = model.h(x + dX)                                  # one call (001 eq. 14, 000 eq. 8)
+            diff = residual_of(model)
+        y, S, w, G, post = self.innovation(sp, dX, Z, diff, z, R, prior, belief.t, events)
         nis = float(w.dot(w))
-        out = self.rejected(belief, y, S, nis, gate, m, tuple(events), 0)
-        if out is not None:
-            return out
-        x1 = self.normalizer(model)(x + gain(w))
-        return UpdateResult(posterior(belief.t, x1), y, S, nis, True, tuple(events), 0)
+        if gate is not None and not gate.accept(nis, m):
+            return UpdateResult(belief, y, S, nis, False, tuple(events), 0)
+        x1 = self.normalizer(model)(x + w @ G)                   # 001 eqs. 18-19, 000 eq. 14
+        b = Belief(belief.t, x1, S=post) if self.square_root else Belief(belief.t, x1, P=post)
+        return UpdateResult(b, y, S, nis, True, tuple(events), 0)
 
     def prior_factor(self, belief: Belief, events: list) -> tuple[np.ndarray, np.ndarray]:
         """``(L, prior)``: L the lower factor of the prior's covariance (a repair's event appended to
         ``events``), ``prior`` what the posterior is formed from (the ukf's P, the srukf's S = L)."""
         raise NotImplementedError
 
-    def measure(self, belief: Belief, L: np.ndarray, model: MeasurementModel, R, m: int):
-        """``(sp, dX, Z, diff, R)``: the weights, the sigma points' deviations, ``h`` on the points (one
-        call), the model's difference and R as the innovation takes it (the ukf's augmented form overrides)."""
-        sp = self.sigma_points(belief.x.shape[0])
-        dX, Z, diff = measurement_transform(sp, belief.x, L, model, m)
-        return sp, dX, Z, diff, R
+    def measure_augmented(self, belief: Belief, L: np.ndarray, model: MeasurementModel, R, m: int):
+        """``(sp, dX, Z, diff)`` of the augmented form (the ukf's ``augmented: true``)."""
+        raise NotImplementedError
 
     def innovation(self, sp: SigmaPoints, dX: np.ndarray, Z: np.ndarray, diff, z: np.ndarray, R,
-                   prior: np.ndarray, belief: Belief, events: list):
-        """``(y, S, w, gain, posterior)``: the innovation ``y = residual(z, z^)``, its covariance S, the
-        whitened innovation ``w = L_y^-1 y`` (L_y L_y^T = S), ``gain(w)`` = C w = K y, and ``posterior(t,
-        x^+)`` the updated Belief."""
+                   prior: np.ndarray, t: float, events: list):
+        """``(y, S, w, G, post)``: the innovation ``y = residual(z, z^)``, its covariance S, the whitened
+        innovation ``w = L_y^-1 y`` (L_y L_y^T = S), ``G = L_y^-1 P_xz^T`` (so K y = w G) and the posterior's
+        P (ukf) or S (srukf). R is None when the points already carry the noise (augmented)."""
         raise NotImplementedError

@@ -72,6 +72,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
     """
 
     name = "srukf"
+    square_root = True
 
     class Params(UnscentedParams):
         """Scaled unscented transform parameters and the square-root variant."""
@@ -166,7 +167,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         S = belief.S if belief.S is not None else self.sqrt_of(belief, events)
         return S, S
 
-    def innovation(self, sp, dX, Z, diff, z, R, prior, belief, events):
+    def innovation(self, sp, dX, Z, diff, z, R, prior, t, events):
         """S_y, P_xz S_y^-T and S^+ as the blocks of one QR (eqs. 9-16 in array form, the class docstring)."""
         m = Z.shape[1]
         n = dX.shape[1]
@@ -192,12 +193,8 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
             A[-1, :m] = V[1] if V is not None else v0 * (math.sqrt(w0) / c)
         J = qr_lower_scaled(A, c)                                    # eqs. 10, 12-13, 15-16 at once
         if w0 < 0.0:
-            J = self.rank1(J, np.concatenate((v0, np.zeros(n))), w0, belief.t, "srukf update", events)  # eq. 11
+            J = self.rank1(J, np.concatenate((v0, np.zeros(n))), w0, t, "srukf update", events)  # eq. 11
         Sy = J[:m, :m]
-        C = J[m:, :m]
         y = diff(z, zm)
-
-        def posterior(t: float, x1: np.ndarray) -> Belief:
-            return Belief(t, x1, S=J[m:, m:])
-
-        return y, Sy @ Sy.T, solve_lower(Sy, y), lambda w: C @ w, posterior   # eq. 14: K y = (P_xz S_y^-T) S_y^-1 y
+        # eq. 14: K y = (P_xz S_y^-T) S_y^-1 y, G^T = P_xz S_y^-T the joint factor's lower-left block
+        return y, Sy @ Sy.T, solve_lower(Sy, y), J[m:, :m].T, J[m:, m:]

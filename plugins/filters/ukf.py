@@ -111,12 +111,8 @@ class UnscentedKalmanFilter(SigmaPointFilter):
             events.append(event)
         return L, P
 
-    def measure(self, belief: Belief, L: np.ndarray, model: MeasurementModel, R, m: int):
-        """Sigma points, h on them, and R as a matrix; augmented: the points also sample v ~ N(0, R) and
-        R is then in the points (returned as None)."""
-        if not self._augmented:
-            sp, dX, Z, diff, R = super().measure(belief, L, model, R, m)
-            return sp, dX, Z, diff, as_covariance(R, m)
+    def measure_augmented(self, belief: Belief, L: np.ndarray, model: MeasurementModel, R, m: int):
+        """The points also sample v ~ N(0, R): R is then in them."""
         n = belief.x.shape[0]
         sp = self.sigma_points(n + m)
         La = np.zeros((n + m, n + m))
@@ -128,9 +124,9 @@ class UnscentedKalmanFilter(SigmaPointFilter):
             Z = model.h_with_noise(belief.x + dX, dXa[:, n:])
         else:
             Z = model.h(belief.x + dX) + dXa[:, n:]
-        return sp, dX, Z, residual_of(model), None
+        return sp, dX, Z, residual_of(model)
 
-    def innovation(self, sp, dX, Z, diff, z, R, P, belief, events):
+    def innovation(self, sp, dX, Z, diff, z, R, P, t, events):
         """S and P_xz as sums (001 eqs. 14-17), S factored; ``W = L_y^-1 P_xz^T`` (C = W^T) and w from one
         triangular solve, P^+ = P^- - W^T W (001 eqs. 18-20)."""
         zm = sp.Wm @ Z
@@ -138,8 +134,8 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         A = dZ * sp.Wc_col
         S = dZ.T @ A                                           # 001 eq. 16
         if R is not None:
-            S += R                                             # 001 eq. 17
-        Ly, S, event = self.factor(S, belief.t, "ukf innovation covariance")
+            S += as_covariance(R, Z.shape[1])                  # 001 eq. 17
+        Ly, S, event = self.factor(S, t, "ukf innovation covariance")
         if event is not None:
             events.append(event)
         # [P_xz; y^T] (n + 1, m) in one buffer, so that one triangular solve gives both
@@ -150,10 +146,6 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         y = B[n] = diff(z, zm)
         V = _dtrsm(1.0, Ly, B.T, 0, 1, 0, 0, 1)               # (m, n + 1) = L_y^-1 [P_xz^T, y] (left, lower, overwrite_b)
         W = V[:, :n]
-
-        def posterior(t: float, x1: np.ndarray) -> Belief:
-            # W.T @ W is computed by BLAS syrk (numpy detects a.T @ a), exactly symmetric, so P1 is exactly
-            # symmetric when P is (tests/filters/test_filters_exactness.py checks it bit for bit)
-            return Belief(t, x1, P=P - W.T @ W)                # 001 eq. 20
-
-        return y, S, V[:, n], lambda w: w @ W, posterior          # 001 eqs. 18-19: K y = W^T w
+        # W.T @ W is computed by BLAS syrk (numpy detects a.T @ a), exactly symmetric, so P^+ is exactly
+        # symmetric when P is (tests/filters/test_filters_exactness.py checks it bit for bit)
+        return y, S, V[:, n], W, P - W.T @ W                   # 001 eq. 20
