@@ -267,10 +267,20 @@ def _checking_class(cls: type) -> type:
 
         calls = _PROCESS if issubclass(cls, ProcessModel) else _MEASUREMENT
         body = {name: fn for name, fn in calls.items() if callable(getattr(cls, name, None))}
-        body.update(__module__=cls.__module__, __qualname__=cls.__qualname__, __doc__=cls.__doc__)
+        body.update(__module__=cls.__module__, __qualname__=cls.__qualname__, __doc__=cls.__doc__,
+                    __reduce_ex__=_reduce_checked)
         sub = _CLASSES[cls] = type(cls.__name__, (cls,), body)
         sub._fusion_checked = sub
     return sub
+
+
+def _reduce_checked(self, protocol):
+    """Pickled (and deep-copied) as ``checked(the model)``: the checking class is made at run time, so it is
+    not found by name; the copy gets a fresh QCheck."""
+    base = type(self).__mro__[1]
+    raw = base.__new__(base)
+    raw.__dict__.update((k, v) for k, v in self.__dict__.items() if k != "_fusion_qcheck")
+    return checked, (raw,)
 
 
 def checked(model):

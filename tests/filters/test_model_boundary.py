@@ -323,3 +323,15 @@ def test_the_adapter_keeps_the_models_class_capabilities_and_state():
     assert np.array_equal(x, 0.0 * x)
     own = testing.ConstantVelocity(testing.ConstantVelocity.Params())
     assert checked(own) is own
+
+
+def test_a_checked_model_pickles_and_copies_as_a_checked_model():
+    """The checking class is made at run time: a pickled or deep-copied checked model is checked(its model)."""
+    import copy
+    import pickle
+
+    c = checked(Cv1(FaultParams(fault="shape")))
+    for d in (pickle.loads(pickle.dumps(c)), copy.deepcopy(c)):
+        assert type(d) is type(c) and d.params.fault == "shape"
+        with pytest.raises(ModelFault, match=r"f returned shape \(1,\)"):
+            d.f(np.array([1.0, 2.0]), None, 0.1)
