@@ -63,14 +63,14 @@ def _check_models(path: str, system) -> None:
 
     from fusion.errors import ConfigError, ModelFault
     from fusion.yamlsource import load_yaml
-    from fusion_plugins.filters.checks import array_of, finite, frozen
+    from fusion_plugins.filters.checks import array_of, finite, frozen, unchecked
 
     x0 = frozen(np.asarray(system.x0, dtype=float))   # read-only: a model that writes into it raises
     n = x0.shape[0]
     _check_process(path, system, x0)
     uses_h_jacobian = not _sigma_point(system.filter)
     for name, sensor in system.sensors.items():
-        model = sensor.model
+        model = unchecked(sensor.model)   # probed as written, not through the run's checking adapter
         if model is None or not hasattr(model, "h"):
             continue
         where = load_yaml(path).where(["sensors", name, "model"])
@@ -79,9 +79,6 @@ def _check_models(path: str, system) -> None:
             h1, h2 = model.h(x0), model.h(np.stack([x0, x0]))
             H = model.jacobian(x0) if uses_h_jacobian else None
         except Exception as exc:   # unbound until observe(), or needs what the run builds: the run reports it
-            if isinstance(exc, ModelFault):   # a plugin's model, checked at its calls (checks.checked)
-                raise ConfigError(f"{where}: measurement model {model.name!r} (dim {model.dim}): {exc}; every "
-                                  f"update of {name} would fail") from None
             if _writes_its_argument(exc):
                 raise ConfigError(f"{where}: measurement model {model.name!r} writes into the state it is given "
                                   f"({type(exc).__name__}: {exc}); every update of {name} would fail") from None
@@ -119,9 +116,9 @@ def _check_process(path: str, system, x0) -> None:
 
     from fusion.errors import ConfigError, ModelFault
     from fusion.yamlsource import load_yaml
-    from fusion_plugins.filters.checks import QCheck, array_of, finite
+    from fusion_plugins.filters.checks import QCheck, array_of, finite, unchecked
 
-    process, n = system.process, x0.shape[0]
+    process, n = unchecked(system.process), x0.shape[0]   # probed as written, not through the checking adapter
     u = np.zeros(process.input_dim) if process.input_dim else None
     flt = system.filter
     uses_jacobian = not _sigma_point(flt) or flt.use_linear_prediction(process)
@@ -132,9 +129,6 @@ def _check_process(path: str, system, x0) -> None:
         F = process.jacobian(x0, u, PROBE_DT) if uses_jacobian else None
         Q = process.Q(x0, u, PROBE_DT)
     except Exception as exc:
-        if isinstance(exc, ModelFault):   # a plugin's model, checked at its calls (checks.checked)
-            raise ConfigError(f"{where}: process model {process.name!r} ({n} states): {exc}; every prediction "
-                              "would fail") from None
         if _writes_its_argument(exc):
             raise ConfigError(f"{where}: process model {process.name!r} writes into the state it is given "
                               f"({type(exc).__name__}: {exc}); every prediction would fail") from None

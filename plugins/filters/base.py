@@ -168,14 +168,13 @@ def _identity(x: np.ndarray) -> np.ndarray:
     return x
 
 
-def linearised_predict(belief: Belief, process: ProcessModel, u: np.ndarray | None, dt: float,
-                       check_Q: object = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def linearised_predict(belief: Belief, process: ProcessModel, u: np.ndarray | None,
+                       dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The linearised prediction's terms (paper 001 eqs. 9-10), shared by ekf, ukf and srukf::
 
         x^- = normalize(f(x, u, dt)),   F = df/dx (x, u, dt),   Q = Q(x, u, dt)
 
-    returned as ``(x^-, F, Q)``; the covariance (``F P F^T + Q``, or its square root) is the caller's.
-    (``check_Q`` is ignored: a plugin's model is checked by its adapter, checks.checked.)"""
+    returned as ``(x^-, F, Q)``; the covariance (``F P F^T + Q``, or its square root) is the caller's."""
     x = belief.x
     F = process_jacobian(process, x, u, dt)
     Q = process.Q(x, u, dt)

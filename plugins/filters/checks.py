@@ -29,7 +29,7 @@ import numpy as np
 from fusion.errors import ModelFault
 
 __all__ = ["ModelFault", "frozen", "array_of", "finite", "all_finite", "QCheck", "SYMMETRY_RTOL", "PSD_RTOL",
-           "MEAN", "ITERATE", "SIGMA", "nonfinite", "trusted", "checked"]
+           "MEAN", "ITERATE", "SIGMA", "nonfinite", "trusted", "checked", "unchecked"]
 
 #: What a model was given, for the messages.
 MEAN, ITERATE, SIGMA = "the belief's mean", "an iterate of the update", "the sigma points"
@@ -274,13 +274,21 @@ def _checking_class(cls: type) -> type:
     return sub
 
 
+def unchecked(model):
+    """The model a :func:`checked` one wraps (a shallow copy of it, of its own class); any other as it is."""
+    cls = type(model)
+    if getattr(cls, "_fusion_checked", None) is not cls:
+        return model
+    base = cls.__mro__[1]
+    raw = base.__new__(base)
+    raw.__dict__.update((k, v) for k, v in model.__dict__.items() if k != "_fusion_qcheck")
+    return raw
+
+
 def _reduce_checked(self, protocol):
     """Pickled (and deep-copied) as ``checked(the model)``: the checking class is made at run time, so it is
     not found by name; the copy gets a fresh QCheck."""
-    base = type(self).__mro__[1]
-    raw = base.__new__(base)
-    raw.__dict__.update((k, v) for k, v in self.__dict__.items() if k != "_fusion_qcheck")
-    return checked, (raw,)
+    return checked, (unchecked(self),)
 
 
 def checked(model):
