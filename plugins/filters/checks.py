@@ -23,6 +23,7 @@ to the same bytes.
 from __future__ import annotations
 
 import copy
+import dataclasses
 
 import numpy as np
 
@@ -251,9 +252,19 @@ def _h_with_noise(self, X, V):
     return _out(Z, _m_shape(self, X, Z), "h_with_noise", X, V)
 
 
+def _observe(self, message):
+    """The model's observation, its model checked too (a model bound to the message may be a new object)."""
+    o = super(self._fusion_checked, self).observe(message)
+    model = getattr(o, "model", None)
+    if (model is None or model is self or getattr(type(model), "_fusion_checked", None) is type(model)
+            or not dataclasses.is_dataclass(o)):
+        return o
+    return dataclasses.replace(o, model=checked(model))
+
+
 _PROCESS = {"f": _f, "jacobian": _process_jacobian, "Q": _Q, "f_inputs": _f_inputs, "Q_inputs": _Q_inputs,
             "linearise_inputs": _linearise_inputs, "f_with_noise": _f_with_noise}
-_MEASUREMENT = {"h": _h, "jacobian": _measurement_jacobian, "h_with_noise": _h_with_noise}
+_MEASUREMENT = {"h": _h, "jacobian": _measurement_jacobian, "h_with_noise": _h_with_noise, "observe": _observe}
 _CLASSES: dict[type, type] = {}
 
 

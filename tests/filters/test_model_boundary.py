@@ -335,3 +335,20 @@ def test_a_checked_model_pickles_and_copies_as_a_checked_model():
         assert type(d) is type(c) and d.params.fault == "shape"
         with pytest.raises(ModelFault, match=r"f returned shape \(1,\)"):
             d.f(np.array([1.0, 2.0]), None, 0.1)
+
+
+def test_a_model_bound_by_observe_is_checked_too():
+    """A plugin's observe() that returns a new model (bound to the message) gets it checked as well."""
+    from fusion.api import Message, Observation
+
+    class Bound(Pos1):
+        name = "test_bound"
+
+        def observe(self, message):
+            return Observation(message.t, np.array([float(message.values[0])]), Pos1(FaultParams(fault="nan")))
+
+    c = checked(Bound(FaultParams()))
+    o = c.observe(Message(1.0, "pos", (1.5,), 1))
+    assert isinstance(o.model, Pos1) and type(o.model) is not Pos1
+    with pytest.raises(ModelFault, match="h returned NaN or inf"):
+        o.model.h(np.array([1.0, 2.0]))
