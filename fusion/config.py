@@ -384,6 +384,7 @@ def _build_failed(registry: Registry, cls: type, kind: str, name: str, where: st
 
 
 from fusion.config_values import initial_belief_values, noise_matrix  # noqa: E402 (the numbers of a config, split out)
+from fusion_plugins.filters.checks import checked  # noqa: E402 (a plugin's models are checked at their calls)
 
 
 def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = None,
@@ -406,7 +407,7 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
         if world.gravity is not None:
             extra["gravity"] = world.gravity.value
     ctx = BuildContext(layout=None, beacons=beacons, base_dir=base_dir, extra=dict(extra))
-    process = build_component(reg, "process", spec.process, ctx, doc, ["process"])
+    process = checked(build_component(reg, "process", spec.process, ctx, doc, ["process"]))
     assert isinstance(process, ProcessModel)
     layout = process.layout
     fctx = BuildContext(layout, beacons, None, base_dir, dict(extra))
@@ -433,7 +434,7 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
         if s.role == "measurement":
             if s.model is None:
                 raise ConfigError(f"{where}: a measurement sensor needs 'model: NAME'")
-            model = build_component(reg, "measurement", s.model, sctx, doc, [*loc, "model"])
+            model = checked(build_component(reg, "measurement", s.model, sctx, doc, [*loc, "model"]))
             R = noise_matrix(s.noise, model.dim, doc.where([*loc, "noise"]) if doc else f"{where}.noise")
             if R is None and model.carries_R is False:
                 raise ConfigError(f"{where}: a measurement sensor needs 'noise:' (sd or R): its model "
