@@ -25,6 +25,7 @@ def wrong_field(tmp: Path) -> Path:
     declination -20.5 deg, inclination -36 deg, 23.5 uT): most magnetometer updates are rejected."""
     def edit(d):
         d["sensors"]["mag"]["model"].update(declination_deg=12.3, inclination_deg=65.8, intensity=57.6)
+        d["prefer"] = {"magnetic_field": "config"}     # else refused before the run (fusion.header_checks)
     return config(tmp, "imu_gps_mag_ekf.yaml", edit, "wrong_field.yaml")
 
 
