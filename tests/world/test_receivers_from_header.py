@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import ROOT, edited, run, simulate
+from world_helpers import ROOT, edited, run, simulate
 
 from fusion.api import BuildContext, ConfigError
 from fusion.cli import main
