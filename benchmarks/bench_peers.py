@@ -146,7 +146,7 @@ def cv_problem(d: int, K: int, seed: int = 1):
     return dict(n=n, dt=dt, x0=x0, P0=P0, R=R, F=F, Q=Q, zs=zs, beacons=beacons, process=process, model=model)
 
 
-def cv_rows(n: int, peers: list[str], args, agree: list, r_scale: float) -> dict[str, float]:
+def cv_rows(n: int, peers: list[str], args, agree: list, r_scale: float) -> dict[str, tuple[float, float]]:
     """us per predict + update (CPU, wall) of each filter on the n-state problem."""
     p = cv_problem(n // 2, args.steps)
     b, F, Q, R, x0, P0, dt = p["beacons"], p["F"], p["Q"], p["R"], p["x0"], p["P0"], p["dt"]
@@ -171,7 +171,7 @@ def cv_rows(n: int, peers: list[str], args, agree: list, r_scale: float) -> dict
     return interleave({k: stepper(m, p["zs"]) for k, m in makers.items()}, args.rounds)
 
 
-def ins_rows(peers: list[str], args, agree: list, r_scale: float) -> dict[str, float]:
+def ins_rows(peers: list[str], args, agree: list, r_scale: float) -> dict[str, tuple[float, float]]:
     """us per IMU predict + position-fix update on the 16-state INS (fusion's ``ins`` and ``position``)."""
     from bench_filters import ins_position_model
 
@@ -226,7 +226,7 @@ def _filterpy_ins(fx, hx, x0, P0, noise, R, dt):
     return step, lambda: (ukf.x.copy(), ukf.P.copy())
 
 
-def batch_rows(peers: list[str], args, agree: list, r_scale: float) -> dict[str, float]:
+def batch_rows(peers: list[str], args, agree: list, r_scale: float) -> dict[str, tuple[float, float]]:
     """Filter-steps per second of N filters over T steps (seconds per filter-step, CPU and wall)."""
     N, T = args.batch_n, args.batch_steps
     x0, Z = pbt.problem(N, T)

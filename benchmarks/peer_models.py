@@ -122,27 +122,16 @@ def _columns(fun):
     return lambda X: np.stack([fun(c) for c in X.T], axis=1)
 
 
-def stonesoup_ukf(fx, hx, x0, P0, Q, R, dt, alpha, beta, kappa, fx_cols=None, hx_cols=None,
-                  normalize=None) -> Step:
-    """Stone Soup's UnscentedKalmanPredictor/Updater on a transition and a measurement model that call
-    the plain functions. Stone Soup evaluates a model on all sigma points at once (states as columns):
-    ``fx_cols(X, dt)``, ``hx_cols(X)`` when given, otherwise ``fx(x, dt)``, ``hx(x)`` column by column.
-    ``normalize(x)`` (in place) after predict and update, if given."""
-    fxc = fx_cols or (lambda X, dt_: _columns(lambda x: fx(x, dt_))(X))
-    hxc = hx_cols or _columns(hx)
-    from datetime import datetime, timedelta
-
+def _stonesoup_models(fxc, hxc, n: int, m: int, dt: float, Q: np.ndarray, R: np.ndarray):
+    """A Stone Soup transition model (Q fixed) and measurement model calling fxc(X, dt) and hxc(X)."""
     from stonesoup.base import Property
     from stonesoup.models.measurement.nonlinear import NonLinearGaussianMeasurement
     from stonesoup.models.transition.nonlinear import GaussianTransitionModel, TimeVariantModel
-    from stonesoup.predictor.kalman import UnscentedKalmanPredictor
     from stonesoup.types.array import CovarianceMatrix, StateVector, StateVectors
-    from stonesoup.types.detection import Detection
-    from stonesoup.types.hypothesis import SingleHypothesis
-    from stonesoup.types.state import GaussianState
-    from stonesoup.updater.kalman import UnscentedKalmanUpdater
 
-    n, m = x0.shape[0], R.shape[0]
+    def columns(fun, state):
+        X = np.asarray(state.state_vector, dtype=float)
+        return StateVectors(fun(X)) if X.shape[1] > 1 else StateVector(fun(X)[:, 0])
 
     class Transition(GaussianTransitionModel, TimeVariantModel):
         noise: np.ndarray = Property(doc="Q (n, n)")
@@ -152,8 +141,7 @@ def stonesoup_ukf(fx, hx, x0, P0, Q, R, dt, alpha, beta, kappa, fx_cols=None, hx
             return n
 
         def function(self, state, noise=False, **kwargs):
-            X = np.asarray(state.state_vector, dtype=float)
-            return StateVectors(fxc(X, dt)) if X.shape[1] > 1 else StateVector(fxc(X, dt)[:, 0])
+            return columns(lambda X: fxc(X, dt), state)
 
         def covar(self, **kwargs):
             return CovarianceMatrix(self.noise)
@@ -164,11 +152,29 @@ def stonesoup_ukf(fx, hx, x0, P0, Q, R, dt, alpha, beta, kappa, fx_cols=None, hx
             return m
 
         def function(self, state, noise=False, **kwargs):
-            X = np.asarray(state.state_vector, dtype=float)
-            return StateVectors(hxc(X)) if X.shape[1] > 1 else StateVector(hxc(X)[:, 0])
+            return columns(hxc, state)
 
-    meas = Measurement(ndim_state=n, mapping=tuple(range(n)), noise_covar=CovarianceMatrix(R))
-    pred = UnscentedKalmanPredictor(Transition(noise=Q), alpha=alpha, beta=beta, kappa=kappa)
+    return Transition(noise=Q), Measurement(ndim_state=n, mapping=tuple(range(n)), noise_covar=CovarianceMatrix(R))
+
+
+def stonesoup_ukf(fx, hx, x0, P0, Q, R, dt, alpha, beta, kappa, fx_cols=None, hx_cols=None,
+                  normalize=None) -> Step:
+    """Stone Soup's UnscentedKalmanPredictor/Updater on a transition and a measurement model that call
+    the plain functions. Stone Soup evaluates a model on all sigma points at once (states as columns):
+    ``fx_cols(X, dt)``, ``hx_cols(X)`` when given, otherwise ``fx(x, dt)``, ``hx(x)`` column by column.
+    ``normalize(x)`` (in place) after predict and update, if given."""
+    from datetime import datetime, timedelta
+
+    from stonesoup.predictor.kalman import UnscentedKalmanPredictor
+    from stonesoup.types.array import CovarianceMatrix, StateVector
+    from stonesoup.types.detection import Detection
+    from stonesoup.types.hypothesis import SingleHypothesis
+    from stonesoup.types.state import GaussianState
+    from stonesoup.updater.kalman import UnscentedKalmanUpdater
+
+    fxc = fx_cols or (lambda X, dt_: _columns(lambda x: fx(x, dt_))(X))
+    trans, meas = _stonesoup_models(fxc, hx_cols or _columns(hx), x0.shape[0], R.shape[0], dt, Q, R)
+    pred = UnscentedKalmanPredictor(trans, alpha=alpha, beta=beta, kappa=kappa)
     upd = UnscentedKalmanUpdater(meas, alpha=alpha, beta=beta, kappa=kappa)
     t0 = datetime(2026, 1, 1)
     box = {"s": GaussianState(StateVector(x0.copy()), CovarianceMatrix(P0.copy()), timestamp=t0), "k": 0}
@@ -184,7 +190,8 @@ def stonesoup_ukf(fx, hx, x0, P0, Q, R, dt, alpha, beta, kappa, fx_cols=None, hx
         box["s"] = upd.update(SingleHypothesis(prior, det))
         if normalize is not None:
             normalize(box["s"].state_vector[:, 0])
-    return step, lambda: (np.asarray(box["s"].state_vector, dtype=float).ravel(), np.asarray(box["s"].covar, dtype=float))
+    return step, lambda: (np.asarray(box["s"].state_vector, dtype=float).ravel(),
+                          np.asarray(box["s"].covar, dtype=float))
 
 
 def fusion_single(name: str, process, model, x0, P0, u, R, dt, alpha, beta, kappa) -> Step:

@@ -102,7 +102,9 @@ def write_page(out: Path, cmd: str, env: dict, res: dict, agree: list, args) -> 
               f"interleaved rounds of {args.steps} predict + update steps (the INS {max(5, args.steps // 4)}) from a "
               f"fresh filter, the median round; process CPU time (all threads), wall time in the detail tables; "
               f"BLAS single-threaded, XLA single-threaded, garbage collection off while timing. The whole process: "
-              f"median of {args.repeats} runs (child CPU time from wait4).", "",
+              f"median of {args.repeats} runs (child CPU time from wait4). A batched filter-step is one update with the "
+              f"4 ranges and one predict (dt 0.1 s), every filter on its own x0 and ranges; FilterPy's loop runs "
+              f"1/50 of the filters.", "",
               "## Summary (CPU time; ratio = the FilterPy time over the project's)", ""] + _headline(res)
     lines += ["", "## Agreement checked before timing", "",
               "max |x - x_fusion| / sd_fusion and max |P - P_fusion| / max |P_fusion| (the larger) after the run "
