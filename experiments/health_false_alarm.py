@@ -6,7 +6,7 @@ recordings (seeds 1000..), as a sweep trial runs it (fusion.sweep.trial), with t
 
 Per config: the trials flagged, and the largest over its unflagged trials of each test's statistic over its
 limit (1 would flag): the unused share of a sensor over max_unused_share, the NIS of the second-worst of
-two consecutive windows over its chi-square quantile, the NEES per dof over truth.nees_per_dof.
+two consecutive windows over its threshold (its chi-square quantile or nis_min_ratio per dof), the NEES per dof over truth.nees_per_dof.
 """
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ def margins(summary: dict, report: dict, spec) -> tuple[float, float, float]:
             continue
         c = min(2, len(w))
         q = (spec.nis_false_alarm / len(w)) ** (1 / c)
-        ratios = [s / chi2.isf(q, d) for _, _, s, d in w]
+        ratios = [s / max(chi2.isf(q, d), spec.nis_min_ratio * d) for _, _, s, d in w]
         pairs = [min(ratios[i:i + c]) for i in range(len(ratios) - c + 1)]
         nis = max(nis, max(pairs))
     cons = summary.get("consistency") or {}
@@ -102,7 +102,7 @@ def main() -> int:
             "alarm, unless the filter did fail on it (listed below the table with its error). The last three "
             "columns are the largest, over the unflagged trials, of each test's statistic over its limit (1 "
             "flags): a sensor's unused share over `max_unused_share`; the smaller NIS window sum of the worst "
-            "two consecutive windows over its chi-square quantile; the NEES per dof over "
+            "two consecutive windows over its threshold (chi-square quantile or `nis_min_ratio`); the NEES per dof over "
             "`truth.nees_per_dof`.\n\n" + "\n".join(lines) + "\n")
     if flags:
         text += ("\nThe flagged trials, with their position error against the typical one of their config (a "
