@@ -61,11 +61,13 @@ def main() -> int:
              "max NEES / limit |", "|---|---|---:|---:|---:|---:|---:|"]
     total = flagged = 0
     flags: list[str] = []
+    inputs: list[str] = []   # the configs and scenarios run: the page's provenance block (experiments/provenance.py)
     for config in sorted((ROOT / "configs").glob("*.yaml")):
         try:
             scenario = default_scenario(str(config))
         except Exception:
             continue   # an imported-log config (px4, ardupilot): judged on its recordings by tests/health
+        inputs += [str(config.relative_to(ROOT)), str(Path(scenario).resolve().relative_to(ROOT))]
         worst = [0.0, 0.0, 0.0]
         bad = 0
         rmse: list[float] = []
@@ -102,14 +104,17 @@ def main() -> int:
             "alarm, unless the filter did fail on it (listed below the table with its error). The last three "
             "columns are the largest, over the unflagged trials, of each test's statistic over its limit (1 "
             "flags): a sensor's unused share over `max_unused_share`; the smaller NIS window sum of the worst "
-            "two consecutive windows over its threshold (chi-square quantile or `nis_min_ratio`); the NEES per dof over "
-            "`truth.nees_per_dof`.\n\n" + "\n".join(lines) + "\n")
+            "two consecutive windows over its threshold (chi-square quantile or `nis_min_ratio`); the NEES per "
+            "dof over `truth.nees_per_dof`.\n\n" + "\n".join(lines) + "\n")
     if flags:
         text += ("\nThe flagged trials, with their position error against the typical one of their config (a "
                  "flagged trial whose error is many times the typical one is a filter that failed on clean data, "
                  "found, not a false alarm):\n\n" + "\n".join(flags) + "\n")
     if args.output:
-        Path(args.output).write_text(text, encoding="utf-8")
+        sys.path.insert(0, str(ROOT / "experiments"))
+        import provenance
+
+        provenance.write_page(args.output, text, inputs)
     print(text)
     return 0
 

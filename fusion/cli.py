@@ -32,7 +32,7 @@ from typing import Iterator  # noqa: E402
 from fusion import __version__  # noqa: E402
 from fusion.errors import FusionError  # noqa: E402
 
-COMMANDS = ("run", "validate", "plugins", "simulate", "tui", "import_", "sweep")  # import_: `fusion import`
+COMMANDS = ("run", "validate", "plugins", "simulate", "tui", "import_", "import_config", "sweep")  # import_: `fusion import`
 # Commands that import numpy and scipy.linalg: numpy's unused submodules are deferred for them (start-up).
 NUMERIC_COMMANDS = ("run", "validate", "tui", "simulate", "import", "sweep")
 # Commands that write outputs: SIGTERM and SIGHUP stop them as Ctrl-C does (stop_signals). The live view
@@ -149,10 +149,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         if args.command in NUMERIC_COMMANDS:
-            from fusion.lazy_imports import cheap_yaml_reader, defer_unused_numpy_modules
+            from fusion.lazy_imports import defer_unused_numpy_modules
 
             defer_unused_numpy_modules()
-            cheap_yaml_reader()
         with warnings.catch_warnings(), _stoppable(args.command) as received:
             warnings.showwarning = _warning_printer(args.command)
             try:

@@ -36,7 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="fixed-lag smoother: each estimate SECONDS late, smoothed over that window")
     p.add_argument("--force", action="store_true", help="replace output files that exist")
     p.add_argument("--quiet", "-q", action="store_true",
-                   help="no table on stdout (on stderr when an output is '-', so stdout holds only that output)")
+                   help="no table on stdout (on stderr when an output is '-', so stdout holds only that output) and no "
+                        "progress bar; warnings still go to stderr")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--allow-degraded", action="store_true",
                    help="exit 0 even when the run's health says its estimate cannot be trusted (exit 4 otherwise; "
@@ -107,10 +108,15 @@ def _run(args: argparse.Namespace) -> int:
 
     refuse_empty(args, "--input", "--output", "--summary-json", "--plot")
     override = filter_override(args.config, args.filter, args.filter_param)
-    system = load_system(args.config, filter_override=override)
+    from fusion.config import OWN_RECORDING
+    from fusion.header_checks import check as check_header
+
+    system = load_system(args.config, filter_override=override,
+                         recording=OWN_RECORDING if args.input is None else args.input)
     source = system.recording if args.input is None else args.input
     if source is None:
         raise ConfigError(f"{args.config}: no 'recording:' in the config; give one with --input LOG")
+    check_header(system, system.world, str(args.config))   # a config that contradicts its recording: exit 2
     from fusion.outputs import check_outputs
 
     src = open_source(str(source), system.registry)
@@ -138,7 +144,7 @@ def _run(args: argparse.Namespace) -> int:
 
     show_progress = not args.no_progress and not args.quiet and data_stdout().isatty()
     with report.progress(_duration_hint(source), enabled=show_progress) as tick:
-        notes = EventNotes(sys.stderr, enabled=not args.quiet)
+        notes = EventNotes(sys.stderr)   # -q hides the table and progress only, never a warning
         smoothing = _smoothing(args, system)
         if smoothing is None:
             result = pipeline.run(system, src, [*guarded, watch], on_event=notes, progress=tick, plot=plot,
@@ -301,6 +307,11 @@ class _KeepSinkError:
                 if isinstance(exc, StdoutClosed):
                     raise
                 self.error = exc
+
+    def discard(self) -> None:
+        """Drop what the sink wrote, when it can (an incomplete smoothed output: fusion.smoothing.run)."""
+        if self.error is None:
+            getattr(self.sink, "discard", self.sink.close)()
 
 
 class _KeepSinkErrorEvents(_KeepSinkError):

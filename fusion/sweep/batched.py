@@ -43,7 +43,7 @@ def unsupported(system: Any, trial: Trial) -> str | None:
     if getattr(system.filter, "_augmented", False):
         return "augmented ukf"
     p = getattr(system.filter, "params", None)
-    if system.filter.name == "srukf" and (p.zeroth_point != "recentred" or p.covariance_update != "joint"):
+    if system.filter.name == "srukf" and p.zeroth_point != "recentred":
         return "srukf variant without a batched version"
     if system.process.input_dim:
         return "an input sensor (IMU) drives the process"

@@ -119,9 +119,10 @@ def scenario_of(trial: Trial):
         raise _validation(f"{trial.scenario}{with_}", exc) from None
 
 
-def system_of(trial: Trial):
+def system_of(trial: Trial, lines: list[str] | None = None):
     """The wired System of a trial: the config with its params and filter (``filter`` other than the
-    config's own type starts from that filter's defaults: the config's parameters belong to its filter)."""
+    config's own type starts from that filter's defaults: the config's parameters belong to its filter),
+    given the world its recording (``lines``, else the scenario's header) declares (fusion.world)."""
     from pydantic import ValidationError
 
     from fusion.config import SystemSpec, wire
@@ -144,7 +145,9 @@ def system_of(trial: Trial):
                                  ("--filter", trial.filter is not None)) if on]
         raise _validation(f"{trial.config}{' (with ' + '/'.join(given) + ')' if given else ''}", exc) from None
     try:
-        return wire(spec, path=Path(trial.config))
+        from fusion.world import read_world_lines
+        world = read_world_lines(lines if lines is not None else _scenario_header(trial), f"{trial.scenario} (simulated)")
+        return wire(spec, path=Path(trial.config), world=world)
     except ConfigError as exc:
         given = [f"--param {k}={v}" for k, v in trial.params if not k.startswith("scenario.")]
         given += [f"--filter {trial.filter}"] if trial.filter is not None else []
@@ -211,6 +214,24 @@ def with_initial(system, trial: Trial, lines: list[str] | None = None, truth: tu
     return dataclasses.replace(system, x0=drawn_mean(system, lines, trial.seed))
 
 
+def _scenario_header(trial: Trial) -> list[str]:
+    """The header lines of a trial's scenario (what its recordings declare: field, receivers, beacons ...),
+    simulated once per scenario and its ``scenario.`` params."""
+    key = (trial.scenario, tuple(kv for kv in trial.params if kv[0].startswith("scenario.")))
+    if key not in _HEADERS:
+        from fusion.simulate import simulate
+        try:
+            lines = simulate(scenario_of(trial), seed=trial.seed).splitlines()
+        except Exception:      # a broken scenario: said where the sweep simulates it, not here
+            return []
+        _HEADERS[key] = [ln for ln in lines[:20_000] if ln.startswith("#")] + [
+            ln for ln in lines[:20_000] if ",$GP" in ln or ",$GN" in ln][:20]
+    return _HEADERS[key]
+
+
+_HEADERS: dict[tuple, list[str]] = {}
+
+
 def recording_of(trial: Trial) -> list[str]:
     """The simulated recording of a trial, as lines (fusion.simulate, the trial's seed)."""
     from fusion.simulate import simulate
@@ -275,7 +296,7 @@ def run_trial(trial: Trial) -> dict[str, Any]:
     t0 = time.perf_counter()
     try:
         lines = recording_of(trial)
-        system = with_initial(system_of(trial), trial, lines)
+        system = with_initial(system_of(trial, lines), trial, lines)
         from fusion.health import HealthWatch, spec_of
         watch = HealthWatch(system, spec_of(system))
         if trial.smooth:
