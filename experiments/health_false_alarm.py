@@ -2,11 +2,12 @@
 (docs/results/health.md): every shipped config that has a scenario is run over ``--seeds`` freshly simulated
 recordings (seeds 1000..), as a sweep trial runs it (fusion.sweep.trial), with the health watch, and judged.
 
-    python experiments/health_false_alarm.py --seeds 50 -o docs/results/health.md
+    python experiments/health_false_alarm.py --seeds 30 -o docs/results/health.md
 
 Per config: the trials flagged, and the largest over its unflagged trials of each test's statistic over its
 limit (1 would flag): the unused share of a sensor over max_unused_share, the NIS of the second-worst of
-two consecutive windows over its threshold (its chi-square quantile or nis_min_ratio per dof), the NEES per dof over truth.nees_per_dof.
+two consecutive windows over its threshold (its chi-square quantile or nis_min_ratio per dof), the NEES per
+dof over truth.nees_per_dof.
 """
 from __future__ import annotations
 
