@@ -23,6 +23,7 @@ Modules: this one is the loop (``Run``, ``run``, ``RunResult``, the ``Collect`` 
 from __future__ import annotations
 
 import copy
+import itertools
 import math
 import time
 from dataclasses import dataclass, field
@@ -92,6 +93,11 @@ class RunResult:
     plugin_exceptions: tuple[BaseException, ...] = field(default=(), repr=False)
 
 
+#: Estimates a second of a run started without its fix when the config sets no output.rate_hz (an
+#: attitude-only run may have no update to emit an estimate at).
+ATTITUDE_ONLY_HZ = 10.0
+
+
 class Run:
     """One run of a system, fed one message at a time (``run()`` is the loop over a whole source).
 
@@ -118,6 +124,8 @@ class Run:
         self.label = label
         self.parsed = ParsedStream(on_fields=self._check_fields)
         self._fields_told: set[str] = set()
+        self.imu_coverage: dict[str, dict] = {}   # input sensor -> fusion.imu_coverage facts (summary health)
+        self._header_open = True                   # until the first message: the '# fields' lines are all read
         self.stats: RunStats
         self.scheduler = Scheduler(system)
         self.stats = RunStats(system, self.scheduler, self.parsed)
@@ -151,6 +159,9 @@ class Run:
     def push(self, item: Message | MalformedMessage) -> list[Estimate | Event]:
         """Feed one message (or a malformed-line marker from ``iter_messages``); returns what it released,
         after the sinks, hooks and statistics have seen it."""
+        if self._header_open and item.__class__ is Message:
+            self._header_open = False
+            self._fix_sensor_absent()
         if item.__class__ is Message and (item.sensor == "truth" or item.sensor == "reference"):
             self._compare(item)
             return []
@@ -166,6 +177,14 @@ class Run:
         """Feed every message of ``items`` (the fast loop of ``run()``)."""
         push = self.scheduler.push
         dispatch = self._dispatch
+        if self._header_open:   # the header is read once the first message is: checks of it, once
+            items = iter(items)
+            first = next(items, None)
+            if first is None:
+                return
+            self._header_open = False
+            self._fix_sensor_absent()
+            items = itertools.chain((first,), items)
         for item in items:
             if item.__class__ is Message and (item.sensor == "truth" or item.sensor == "reference"):
                 self._compare(item)
@@ -223,6 +242,8 @@ class Run:
         runtime = self.system.sensors.get(sensor)
         if runtime is None or not names:
             return
+        if runtime.role == "input" and sensor not in self.imu_coverage:
+            self._check_coverage(sensor)
         expected, who = expected_fields(runtime, self.system.process)
         if expected is None or tuple(names) == tuple(expected):
             return
@@ -235,6 +256,35 @@ class Run:
             self._fields_told.add(sensor)
             self._dispatch(Event(math.nan, "warning", sensor, f"{line}: {who} reads {' '.join(expected)}; the "
                                  "values are read in that order, by position"))
+
+    def _fix_sensor_absent(self) -> None:
+        """A recording whose header names its streams (``# fields``) without ``initial.from_sensor`` (a flight
+        log without GPS): the filter starts without waiting for a fix that never comes, and says so."""
+        fs = self.system.spec.initial.from_sensor
+        fields = self.parsed.header.fields
+        inputs = [n for n, s in self.system.sensors.items() if s.role == "input"]
+        if fs is None or fs in fields or not any(n in fields for n in inputs):
+            return
+        rate = None if self.system.spec.output.rate_hz else ATTITUDE_ONLY_HZ
+        self.scheduler.start_without_fix(rate)
+        self._dispatch(Event(math.nan, "warning", fs, (
+            f"the recording has no {fs!r} stream (no '# fields {fs}' line): the filter starts without its fix "
+            f"(initial.from_sensor), from the configured prior position and velocity and the aligned attitude"
+            + (" (initial_attitude: the reference's)" if "initial_attitude" in fields else "")
+            + "; position and velocity are dead reckoning only, the attitude is the estimate to read"
+            + (f" (estimates also at {rate:g} Hz, output.rate_hz)" if rate else ""))))
+
+    def _check_coverage(self, sensor: str) -> None:
+        """The header's IMU coverage against the sensor's limits (fusion.imu_coverage): one warning, and the
+        figures for the summary's health."""
+        from fusion.imu_coverage import assess
+
+        spec = self.system.spec.sensors[sensor]
+        facts, warning = assess(sensor, self.parsed.header.meta, spec.min_coverage, spec.max_rotation_deg)
+        if facts is not None:
+            self.imu_coverage[sensor] = facts
+        if warning is not None:
+            self._dispatch(Event(math.nan, "warning", sensor, warning))
 
     def _on_nis(self, sensor: str, t: float, nis: float, dim: int, accepted: bool = True) -> None:
         self.stats.add_nis(sensor, t, nis, dim, accepted)
@@ -337,6 +387,8 @@ class Run:
         self.stats.finish()
         wall = time.perf_counter() - self.wall0
         summary = self.stats.summary(self.label, wall)
+        if self.imu_coverage and isinstance(summary.get("health"), dict):
+            summary["health"]["imu_coverage"] = self.imu_coverage
         if interrupted:
             summary["interrupted"] = True
         if source_error is not None:

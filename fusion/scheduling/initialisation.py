@@ -112,6 +112,8 @@ class Initialisation:
                 elif has(self.process, Aligns):   # wiring refuses align_s for a process without it
                     self._x0, self._P0 = self.process.align(self._x0, self._P0, u_mean)
                 for name, observations in self._aligners.items():
+                    if self._still is not True:   # not a static window (in flight): only its last align_s s
+                        observations = [o for o in observations if o.t >= t - self._align_s] or observations[-1:]
                     # called with no observations too (no sample of the sensor in the window): the model
                     # then knows the static start is over and can refuse its later messages with the reason
                     s = self.sensors[name]
@@ -130,6 +132,15 @@ class Initialisation:
                  "widened to the speed its fixes show") if self._from_sensor else ""
         self._filter_events.append(Event(t, "warning", sensor, f"alignment: the static start (initial.align_s "
                                          f"{self._align_s:g} s) is not static: {why}{fixes}"))
+
+    def start_without_fix(self, output_hz: float | None = None) -> None:
+        """Start without waiting for ``initial.from_sensor`` (the recording has no such stream): the position
+        and velocity from the configured prior, the rest aligned as usual; ``output_hz``: estimates by
+        prediction at that rate when the config has none (a recording that may have no update to emit at)."""
+        self._from_sensor = None
+        self._have_fix = True
+        if output_hz and not self.output_dt:
+            self.output_dt = 1.0 / output_hz
 
     def _take_fix(self, obs) -> None:
         """Remember a fix of ``initial.from_sensor`` for the initial position (module doc: combined when the

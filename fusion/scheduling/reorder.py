@@ -94,22 +94,22 @@ class Reordering:
         yield from self._release(self._newest - self.max_latency)
 
     def _release(self, until: float, flush: bool = True) -> Iterator[Estimate | Event]:
-        pending = self._pending
         while self._buffer and self._buffer[0][0] <= until:
             _, _, msg = heapq.heappop(self._buffer)
             if msg.t > self._horizon:
                 self._horizon = msg.t
             if self._batch and self.sensors[msg.sensor].role == "input":
                 # Input samples wait until the belief is needed (a measurement, an output tick, the end, or
-                # a full batch), then go to the filter in one predict_inputs call.
-                pending.append(msg)
-                if len(pending) >= _BATCH_MAX or msg.t >= self._next_output:
+                # a full batch), then go to the filter in one predict_inputs call. self._pending, never a
+                # local alias: a measurement's _flush_inputs(until) replaces the list with its later part.
+                self._pending.append(msg)
+                if len(self._pending) >= _BATCH_MAX or msg.t >= self._next_output:
                     yield from self._flush_inputs()
                 continue
             # Pending inputs stay pending through measurements that produce no observation (ranges a
             # solver gathers); _measure flushes them, up to its own time, when it needs the belief.
             yield from self._process(msg)
-        if until == math.inf and pending and flush:
+        if until == math.inf and self._pending and flush:
             yield from self._flush_inputs()
 
     def _flush_inputs(self, until: float | None = None) -> Iterator[Estimate | Event]:

@@ -166,17 +166,19 @@ def test_ardupilot_config_starts_by_triad_with_the_field_from_the_config(ardupil
 def test_px4_config_without_the_reference_attitude_says_why_the_magnetometer_is_unused(tmp_path, capsys):
     """Imported without the reference (so no initial_attitude line): nothing gives the attitude a heading, so
     the field is not estimated from a guess; every magnetometer sample is rejected with the reason, the
-    run still completes on the GPS."""
+    run still completes on the GPS, and ends degraded (exit 4) for the unused magnetometer."""
     log = need_px4_log()
     rec = tmp_path / "noref.log"
     assert main(["import", str(log), "-o", str(rec), "--sensors", "imu", "gps", "mag"]) == 0
     summary = tmp_path / "s.json"
-    assert main(["run", str(PX4), "--input", str(rec), "--summary-json", str(summary)]) == 0
+    # a magnetometer unused for the run is a degraded run (exit 4), the sensor named
+    assert main(["run", str(PX4), "--input", str(rec), "--summary-json", str(summary)]) == 4
     s = json.loads(summary.read_text())
     mag = s["sensors"]["mag"]
     # used: only the samples of the 0.2 s alignment window (10 at 49 Hz at most), every later one rejected
     assert mag["used"] <= 10 and mag["rejected"] == mag["received"] - mag["used"] > 0
-    assert "no initial_attitude line" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "no initial_attitude line" in err and "degraded" in err and "mag:" in err
 
 
 def test_shipped_recording_is_the_synthetic_flight_regenerated(ardupilot_run, tmp_path):
