@@ -75,6 +75,9 @@ from fusion.config_values import MAX_INITIAL_SD  # noqa: E402 (= 1e6, used by th
 #: Fastest fixed-rate output (Hz): each output costs a prediction and a row (~200 B of CSV); beyond the
 #: fastest sensor (an IMU at 100 Hz-1 kHz) more rows carry no information (1 kHz over an hour: 3.6 M rows).
 MAX_OUTPUT_RATE_HZ = 1000.0
+#: The longest reorder window, s: a minute (the default max_predict_s) is longer than any link's jitter; a
+#: longer known delay is a sensor's time_offset. The buffer's memory is bounded apart (fusion.scheduling.reorder).
+MAX_LATENCY_S = 60.0
 #: Largest |time_offset| (s): Unix time is 1.7e9 s, so an offset between time bases fits; 1e10 s (317
 #: years) is no clock's.
 MAX_TIME_OFFSET_S = 1e10
@@ -133,7 +136,9 @@ class InitialSpec(_Strict):
 
 
 class SchedulerSpec(_Strict):
-    max_latency: float = Field(0.0, ge=0.0, description="reorder buffer length, s")
+    max_latency: float = Field(0.0, ge=0.0, le=MAX_LATENCY_S, allow_inf_nan=False,
+                               description="reorder buffer length, s (at most MAX_LATENCY_S: a longer delay is a "
+                                           "sensor's time_offset, not a transport latency)")
     late_policy: Literal["drop", "replay"] = "drop"
     history: int = Field(500, ge=1, le=100_000, description="beliefs kept for replay")
     future_s: float = Field(5.0, gt=0.0, allow_inf_nan=False,

@@ -147,6 +147,11 @@ class Run:
         self._flushed = False
         self._unnamed: dict[str, int] = {}  # stream -> truth/reference lines without a "# fields" line
 
+    @property
+    def buffered(self) -> int:
+        """Messages waiting in the reorder buffer (``scheduler.max_latency``), at most a bound."""
+        return self.scheduler.buffered
+
     # ------------------------------------------------------------------ feeding
     def push(self, item: Message | MalformedMessage) -> list[Estimate | Event]:
         """Feed one message (or a malformed-line marker from ``iter_messages``); returns what it released,

@@ -97,6 +97,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         self.belief: Belief | None = None
         self.u: np.ndarray | None = None
         self._buffer: list[tuple[float, int, Message]] = []
+        self._buffer_full_told = False
         self._seq = itertools.count()
         self._newest = -math.inf
         self._horizon = -math.inf

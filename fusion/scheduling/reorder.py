@@ -14,6 +14,9 @@ from fusion.config import SensorRuntime
 
 _NOT_FED = frozenset(("truth", "reference"))  # streams that are compared against, never fused
 _BATCH_MAX = 64  # input samples integrated per predict_inputs call at most (bounds the live latency)
+#: Messages the reorder buffer holds at most (its memory: ~300 bytes each). A max_latency that spans more (a
+#: fast stream and a long window) releases the oldest early, told once by a warning.
+BUFFER_MAX = 100_000
 
 
 def _msg_t(msg: Message) -> float:
@@ -28,6 +31,11 @@ class Reordering:
         """The latest sensor time (s) accepted so far (-inf before any): where the clock guard centres
         its window for truth and reference lines as for the sensors."""
         return self._newest
+
+    @property
+    def buffered(self) -> int:
+        """Messages in the reorder buffer now (at most BUFFER_MAX)."""
+        return len(self._buffer)
 
     def push(self, item: Message | MalformedMessage) -> Iterable[Estimate | Event]:
         """Accept one message; returns (an iterable of) whatever it releases. Iterate it to drive the filter.
@@ -92,16 +100,26 @@ class Reordering:
         heapq.heappush(self._buffer, (t, next(self._seq), msg))
         self._newest = max(self._newest, t)
         yield from self._release(self._newest - self.max_latency)
+        if len(self._buffer) > BUFFER_MAX:
+            # a window longer than the buffer holds: the oldest go on early (the horizon with them)
+            if not self._buffer_full_told:
+                self._buffer_full_told = True
+                yield Event(t, "warning", None, f"the reorder buffer holds {BUFFER_MAX} messages, fewer than "
+                            f"scheduler.max_latency ({self.max_latency:g} s) spans: the oldest are released "
+                            "early, and a message later older than them is late")
+            while len(self._buffer) > BUFFER_MAX:
+                yield from self._release(self._buffer[0][0])
 
     def _release(self, until: float, flush: bool = True) -> Iterator[Estimate | Event]:
-        pending = self._pending
         while self._buffer and self._buffer[0][0] <= until:
             _, _, msg = heapq.heappop(self._buffer)
             if msg.t > self._horizon:
                 self._horizon = msg.t
             if self._batch and self.sensors[msg.sensor].role == "input":
                 # Input samples wait until the belief is needed (a measurement, an output tick, the end, or
-                # a full batch), then go to the filter in one predict_inputs call.
+                # a full batch), then go to the filter in one predict_inputs call. self._pending is read
+                # anew each time: a flush replaces the list.
+                pending = self._pending
                 pending.append(msg)
                 if len(pending) >= _BATCH_MAX or msg.t >= self._next_output:
                     yield from self._flush_inputs()
@@ -109,7 +127,7 @@ class Reordering:
             # Pending inputs stay pending through measurements that produce no observation (ranges a
             # solver gathers); _measure flushes them, up to its own time, when it needs the belief.
             yield from self._process(msg)
-        if until == math.inf and pending and flush:
+        if until == math.inf and self._pending and flush:
             yield from self._flush_inputs()
 
     def _flush_inputs(self, until: float | None = None) -> Iterator[Estimate | Event]:
