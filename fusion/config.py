@@ -143,7 +143,7 @@ class SchedulerSpec(_Strict):
     history: int = Field(500, ge=1, le=100_000, description="beliefs kept for replay")
     future_s: float = Field(5.0, gt=0.0, allow_inf_nan=False,
                             description="s a stamp may be ahead of (or behind) the newest accepted time before it "
-                                        "is held as a wild stamp or a clock jump (fusion.clock)")
+                                        "is held as a wild stamp or a clock jump (fusion.run.clock)")
     resync_after: int = Field(3, ge=1, description="messages of a sensor that must agree on a new time base "
                                                    "before its clock is re-synchronised")
     max_predict_s: float = Field(60.0, gt=0.0, allow_inf_nan=False,
@@ -152,7 +152,7 @@ class SchedulerSpec(_Strict):
                              description="a stamp past the stream's newest time (+ max_latency) by more than "
                                          "cadence_floor_s and ahead of its sensor's newest stamp, or of the stream's "
                                          "newest time, by more than cadence_k x their learned message spacing + "
-                                         "cadence_floor_s is held until its sensor's next message (fusion.clock); "
+                                         "cadence_floor_s is held until its sensor's next message (fusion.run.clock); "
                                          "0: off; off with late_policy replay, which expects arrival jitter")
     cadence_floor_s: float = Field(0.02, gt=0.0, allow_inf_nan=False,
                                    description="s a stamp may always be past the stream's newest time (+ max_latency) "

@@ -33,7 +33,7 @@ import numpy as np
 
 from fusion.api import (Belief, Closes, Estimate, Event, FusionError, InputError, MalformedMessage, Message, Opens,
                         ReceivesEvents, Source, UpdateResult, has)
-from fusion.clock import COMPARED
+from fusion.run.clock import COMPARED
 from fusion.config import System
 from fusion.logformat import ParsedStream, iter_messages, parse_values
 from fusion.run_stats import COUNTERS, RunStats

@@ -35,12 +35,14 @@ import numpy as np
 
 from fusion.api import (AlignsState, Belief, Estimate, Event, Fix, FusionError, HasThreshold, HoldsInput,
                         MalformedMessage, Message, PredictsInputRuns, PseudoMeasurement, ReadsBelief, UsesInput, has)
-from fusion.clock import ClockGuard
+from fusion.run.clock import ClockGuard
 from fusion.errors import ModelFault
 from fusion.recovery import LockoutWatch, recover
 from fusion.config import SensorRuntime, System
 from fusion.scheduling.checks import CheckedGateRun, GateFailed, shown, usable, who as _who
 from fusion.scheduling.initialisation import FIXES_MAX, Initialisation
+from fusion.run.inputs import PendingInputs
+from fusion.run.reorder import ReorderBuffer
 from fusion.scheduling.reorder import Reordering
 from fusion.scheduling.replay import Replay, _Snapshot
 from fusion.scheduling.reporting import Reporting
@@ -87,7 +89,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         # sensor sends next, so it would take arrival jitter for wild stamps; a replaying scheduler expects
         # jitter (it rewinds for late messages), so the bound is off there.
         cadence_k = spec.scheduler.cadence_k if self.late_policy != "replay" else 0.0
-        self.clock = ClockGuard(spec.scheduler.future_s, spec.scheduler.resync_after, on_drop=self._count_wild,
+        self.clock = ClockGuard(spec.scheduler.future_s, spec.scheduler.resync_after,
                                 max_gap_s=spec.scheduler.max_predict_s, cadence_k=cadence_k,
                                 cadence_floor_s=spec.scheduler.cadence_floor_s, window_s=self.max_latency,
                                 sensors=self.sensors, hold_start=True)
@@ -96,11 +98,8 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         self.on_update = spec.output.on_update
         self.belief: Belief | None = None
         self.u: np.ndarray | None = None
-        self._buffer: list[tuple[float, int, Message]] = []
+        self.buffer = ReorderBuffer(self.max_latency)
         self._buffer_full_told = False
-        self._seq = itertools.count()
-        self._newest = -math.inf
-        self._horizon = -math.inf
         self._next_output = math.inf
         self._history: deque[_Snapshot] = deque(maxlen=spec.scheduler.history)
         self._log: deque[Message] = deque(maxlen=spec.scheduler.history * 8)
@@ -128,7 +127,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         # An input gap cut into several predictions by the other sensors: each is told how long the sample
         # it holds has been held already (fusion.api.HoldsInput), so the gap is one hold, not many.
         self._hold_after = self.process.hold_after if has(self.process, HoldsInput) else None
-        self._pending: list[Message] = []
+        self.pending = PendingInputs()
         self._warned: set[str] = set()  # sensors whose model's check() currently warns
         self._checked: dict[str, float] = {}  # sensor time of each sensor's last check()
         # Initialisation: x0/P0 refined by a fix of initial.from_sensor and/or alignment over a static start.
@@ -184,7 +183,10 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
     def finish(self) -> Iterator[Estimate | Event]:
         """Release everything still buffered (end of input)."""
         yield from self.clock.flush()
-        for m, t in self.clock.release():  # held by the cadence bound, never contradicted
+        self._count_wild()
+        released = self.clock.release()
+        self._count_wild()
+        for m, t in released:  # held by the cadence bound, never contradicted
             yield from self._accept(self.sensors[m.sensor], m, t)
         yield from self._release(math.inf, flush=False)
         # What the preprocessors still gather comes before the last input samples are integrated, so a
@@ -202,7 +204,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                 for out in outs:
                     yield from self._measure(sensor, out)
             yield from self._drain_solver_events(sensor)
-        if self._pending:
+        if self.pending:
             yield from self._flush_inputs()
         for (name, _), (n, why) in self._update_failures.items():
             if n > 1:
@@ -235,7 +237,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         time of another sensor's message: a sensor that dies is reported while the others go on, not only
         when (if ever) it comes back."""
         name, max_gap = self._input_gap  # type: ignore[misc]
-        last = self._pending[-1].t if self._pending else self._last_input_t
+        last = self.pending.last_t if self.pending else self._last_input_t
         if last is not None and t - last > max_gap:
             self._silence_told, self._silence_last = True, last
             yield Event(t, "gap", name, f"no {name} sample for {t - last:.3f} s (limit {max_gap} s) while {other} goes on; the "
@@ -254,7 +256,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         if users or (self.belief is None and msg.sensor in self._aligners):
             # integrate the inputs up to this message first: a UsesInput component reads the latest sample,
             # and an aligning sensor's message must know whether the static start is over
-            if self._pending:
+            if self.pending:
                 yield from self._flush_inputs(until=msg.t if self.belief is not None else None)
             for c in users or ():
                 c.take_input(self._last_input_t, self._last_u)
@@ -294,7 +296,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
         emits is yielded after the preprocessor's feed returns."""
         if self.belief is None:
             return None
-        if self._pending:
+        if self.pending:
             self._deferred.extend(self._flush_inputs(until=t))
         if self.belief.t < t:
             self._deferred.extend(self._predict_to(t))
@@ -557,7 +559,7 @@ class Scheduler(Reordering, Initialisation, Reporting, Replay):
                 yield event
             return
         obs = checked
-        if self._pending:
+        if self.pending:
             yield from self._flush_inputs(until=obs.t)
         if self.belief is None and self._from_sensor == sensor.name:
             self._take_fix(obs)

@@ -4,6 +4,8 @@
     python scripts/compare_runs.py record /tmp/after       # on the new code
     python scripts/compare_runs.py diff /tmp/before /tmp/after
 
+(To record another commit's code with this checkout's configs: ``PYTHONPATH=/path/to/its/worktree``.)
+
 ``record`` runs ``fusion run CONFIG --output DIR/NAME.csv --summary-json DIR/NAME.json`` for each
 configs/*.yaml and ``fusion sweep --engine serial --seeds 5`` on configs/uwb_pv_ukf.yaml and
 configs/ultrasonic_3d_iekf.yaml. ``diff`` requires the estimate CSVs to be byte-identical, the summaries
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -24,6 +27,11 @@ TIMINGS = frozenset(("wall_s", "us_per_predict", "us_per_update"))
 SWEEPS = {"sweep_uwb": "configs/uwb_pv_ukf.yaml", "sweep_us": "configs/ultrasonic_3d_iekf.yaml"}
 
 
+#: One BLAS thread: a multi-threaded BLAS sums in an order that varies from run to run (the last digits of a
+#: config with large matrix products, ultrasonic_3d_moving, differ between two runs of the same code).
+ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+
+
 def record(out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     for config in sorted((ROOT / "configs").glob("*.yaml")):
@@ -31,14 +39,14 @@ def record(out: Path) -> None:
         with open(out / f"{name}.stderr", "w") as err, open(out / f"{name}.stdout", "w") as std:
             rc = subprocess.call(["fusion", "run", str(config.relative_to(ROOT)), "--output", str(out / f"{name}.csv"),
                                   "--summary-json", str(out / f"{name}.json"), "--force"], cwd=ROOT, stdout=std,
-                                 stderr=err)
+                                 stderr=err, env=ENV)
         (out / f"{name}.rc").write_text(f"{rc}\n")
     for name, config in SWEEPS.items():
         target = out / f"{name}.csv"
         target.unlink(missing_ok=True)
         with open(out / f"{name}.stdout", "w") as std:
             rc = subprocess.call(["fusion", "sweep", config, "--seeds", "5", "--engine", "serial", "--no-progress",
-                                  "-o", str(target)], cwd=ROOT, stdout=std, stderr=subprocess.STDOUT)
+                                  "-o", str(target)], cwd=ROOT, stdout=std, stderr=subprocess.STDOUT, env=ENV)
         (out / f"{name}.rc").write_text(f"{rc}\n")
 
 

@@ -4,8 +4,6 @@ samples gathered into runs for the filter's PredictsInputRuns capability; late m
 replayed. A mixin of fusion.scheduler.Scheduler."""
 from __future__ import annotations
 
-import bisect
-import heapq
 import math
 from typing import Iterable, Iterator
 
@@ -14,13 +12,6 @@ from fusion.config import SensorRuntime
 
 _NOT_FED = frozenset(("truth", "reference"))  # streams that are compared against, never fused
 _BATCH_MAX = 64  # input samples integrated per predict_inputs call at most (bounds the live latency)
-#: Messages the reorder buffer holds at most (its memory: ~300 bytes each). A max_latency that spans more (a
-#: fast stream and a long window) releases the oldest early, told once by a warning.
-BUFFER_MAX = 100_000
-
-
-def _msg_t(msg: Message) -> float:
-    return msg.t
 
 
 class Reordering:
@@ -30,12 +21,12 @@ class Reordering:
     def newest(self) -> float:
         """The latest sensor time (s) accepted so far (-inf before any): where the clock guard centres
         its window for truth and reference lines as for the sensors."""
-        return self._newest
+        return self.buffer.newest
 
     @property
     def buffered(self) -> int:
         """Messages in the reorder buffer now (at most BUFFER_MAX)."""
-        return len(self._buffer)
+        return len(self.buffer)
 
     def push(self, item: Message | MalformedMessage) -> Iterable[Estimate | Event]:
         """Accept one message; returns (an iterable of) whatever it releases. Iterate it to drive the filter.
@@ -46,13 +37,14 @@ class Reordering:
             sensor = self.sensors.get(item.sensor)
             if sensor is not None:
                 t = item.t
-                if (sensor.role == "input" and self._batch and not sensor.time_offset and not self._buffer
-                        and self.max_latency == 0.0 and t >= self._horizon and t < self._next_output
-                        and not self.clock.busy and len(self._pending) < _BATCH_MAX - 1
-                        and self.clock.steady(item.sensor, t, self._newest)):
+                buffer = self.buffer
+                if (sensor.role == "input" and self._batch and not sensor.time_offset and not buffer
+                        and self.max_latency == 0.0 and t >= buffer.horizon and t < self._next_output
+                        and not self.clock.busy and len(self.pending) < _BATCH_MAX - 1
+                        and self.clock.steady(item.sensor, t, buffer.newest)):
                     sensor.counters["received"] += 1
-                    self._horizon = self._newest = t
-                    self._pending.append(item)
+                    buffer.passed(t)
+                    self.pending.add(item)
                     return ()
             elif item.sensor in _NOT_FED:
                 return ()
@@ -81,7 +73,9 @@ class Reordering:
                 yield Event(msg.t, "warning", msg.sensor, f"sensor {msg.sensor!r} is not in the config; its messages are ignored")
             return
         sensor.counters["received"] += 1
-        admitted, events = self.clock.admit(sensor.name, msg, msg.t + sensor.time_offset, self._newest)
+        admitted, events = self.clock.admit(sensor.name, msg, msg.t + sensor.time_offset, self.buffer.newest)
+        if events:
+            self._count_wild()
         yield from events
         for m, t in admitted:  # other sensors' held messages the stream reached come first
             yield from self._accept(sensor if m.sensor == msg.sensor else self.sensors[m.sensor], m, t)
@@ -90,56 +84,46 @@ class Reordering:
         """A message on the stream's time base, stamped ``t`` (s, offsets applied)."""
         if t != msg.t:
             msg = Message(t, msg.sensor, msg.values, msg.line)
-        if t < self._horizon:
+        buffer = self.buffer
+        if buffer.late(t):
             if self.late_policy == "drop" or not self._history:
                 sensor.counters["late"] += 1
-                yield Event(t, "late", msg.sensor, f"{self._horizon - t:.3f} s behind the released horizon; dropped")
+                yield Event(t, "late", msg.sensor, f"{buffer.horizon - t:.3f} s behind the released horizon; dropped")
                 return
             yield from self._replay(msg)    # counted by its re-run outcome (late when it cannot be replayed)
             return
-        heapq.heappush(self._buffer, (t, next(self._seq), msg))
-        self._newest = max(self._newest, t)
-        yield from self._release(self._newest - self.max_latency)
-        if len(self._buffer) > BUFFER_MAX:
+        buffer.add(t, msg)
+        yield from self._release(buffer.due)
+        if buffer.overfull:
             # a window longer than the buffer holds: the oldest go on early (the horizon with them)
             if not self._buffer_full_told:
                 self._buffer_full_told = True
-                yield Event(t, "warning", None, f"the reorder buffer holds {BUFFER_MAX} messages, fewer than "
+                yield Event(t, "warning", None, f"the reorder buffer holds {buffer.capacity} messages, fewer than "
                             f"scheduler.max_latency ({self.max_latency:g} s) spans: the oldest are released "
                             "early, and a message later older than them is late")
-            while len(self._buffer) > BUFFER_MAX:
-                yield from self._release(self._buffer[0][0])
+            while buffer.overfull:
+                yield from self._release(buffer.oldest)
 
     def _release(self, until: float, flush: bool = True) -> Iterator[Estimate | Event]:
-        while self._buffer and self._buffer[0][0] <= until:
-            _, _, msg = heapq.heappop(self._buffer)
-            if msg.t > self._horizon:
-                self._horizon = msg.t
+        buffer = self.buffer
+        while (msg := buffer.pop(until)) is not None:
             if self._batch and self.sensors[msg.sensor].role == "input":
                 # Input samples wait until the belief is needed (a measurement, an output tick, the end, or
-                # a full batch), then go to the filter in one predict_inputs call. self._pending is read
-                # anew each time: a flush replaces the list.
-                pending = self._pending
-                pending.append(msg)
+                # a full batch), then go to the filter in one predict_inputs call.
+                pending = self.pending
+                pending.add(msg)
                 if len(pending) >= _BATCH_MAX or msg.t >= self._next_output:
                     yield from self._flush_inputs()
                 continue
             # Pending inputs stay pending through measurements that produce no observation (ranges a
             # solver gathers); _measure flushes them, up to its own time, when it needs the belief.
             yield from self._process(msg)
-        if until == math.inf and self._pending and flush:
+        if until == math.inf and self.pending and flush:
             yield from self._flush_inputs()
 
     def _flush_inputs(self, until: float | None = None) -> Iterator[Estimate | Event]:
         """Integrate the pending input samples; with ``until`` only those up to that time (the last one held
         to it), the later ones stay pending, so a measurement at ``until`` is applied at its own time."""
-        pending = self._pending
-        if until is not None and pending and pending[-1].t > until:
-            k = bisect.bisect_right(pending, until, key=_msg_t)      # pending is in time order
-            batch, self._pending = pending[:k], pending[k:]
-            if not batch:
-                return
-        else:
-            batch, self._pending = pending, []
+        batch = self.pending.take(until)
         if batch:  # nothing pending: nothing to integrate (a measurement right after a flush)
             yield from self._inputs(batch, until)

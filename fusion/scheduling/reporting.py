@@ -98,7 +98,8 @@ class Reporting:
             if events:
                 yield from events
 
-    def _count_wild(self, sensor: str, n: int) -> None:
+    def _count_wild(self) -> None:
         """Held messages the clock guard dropped as wild stamps: malformed (their time is)."""
-        if sensor in self.sensors:
-            self.sensors[sensor].counters["malformed"] += n
+        for sensor, n in self.clock.take_dropped().items():
+            if sensor in self.sensors:
+                self.sensors[sensor].counters["malformed"] += n

@@ -97,7 +97,7 @@ def test_validate_refuses_an_absurd_reorder_window(tmp_path, capsys):
 def test_the_reorder_buffer_holds_a_bounded_number_of_messages(monkeypatch):
     """A window that spans more messages than the buffer holds releases the oldest early (a warning, once):
     the buffer never grows past its bound, and every message is still accounted for and used."""
-    import fusion.scheduling.reorder as reorder
+    import fusion.run.reorder as reorder
 
     monkeypatch.setattr(reorder, "BUFFER_MAX", 50)
     sys_ = odo_system()
