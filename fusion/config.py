@@ -76,7 +76,7 @@ from fusion.config_values import MAX_INITIAL_SD  # noqa: E402 (= 1e6, used by th
 #: fastest sensor (an IMU at 100 Hz-1 kHz) more rows carry no information (1 kHz over an hour: 3.6 M rows).
 MAX_OUTPUT_RATE_HZ = 1000.0
 #: The longest reorder window, s: a minute (the default max_predict_s) is longer than any link's jitter; a
-#: longer known delay is a sensor's time_offset. The buffer's memory is bounded apart (fusion.scheduling.reorder).
+#: longer known delay is a sensor's time_offset. The buffer's memory is bounded apart (fusion.run.reorder).
 MAX_LATENCY_S = 60.0
 #: Largest |time_offset| (s): Unix time is 1.7e9 s, so an offset between time bases fits; 1e10 s (317
 #: years) is no clock's.
@@ -118,7 +118,7 @@ class SensorSpec(_Strict):
 class InitialSpec(_Strict):
     """Initial belief by block name: ``mean`` values and ``sd`` (scalar or per element), or full ``P``.
     ``from_sensor`` takes the position block from that sensor's fixes before the start: the latest, or all of
-    an ``align_s`` window the process model judged static, combined (fusion.scheduling.initialisation)."""
+    an ``align_s`` window the process model judged static, combined (fusion.run.startup)."""
 
     mean: dict[str, float | list[float]] = Field(default_factory=dict)
     sd: dict[str, float | list[float]] = Field(default_factory=dict)

@@ -27,9 +27,11 @@ TIMINGS = frozenset(("wall_s", "us_per_predict", "us_per_update"))
 SWEEPS = {"sweep_uwb": "configs/uwb_pv_ukf.yaml", "sweep_us": "configs/ultrasonic_3d_iekf.yaml"}
 
 
-#: One BLAS thread: a multi-threaded BLAS sums in an order that varies from run to run (the last digits of a
-#: config with large matrix products, ultrasonic_3d_moving, differ between two runs of the same code).
-ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+#: One BLAS thread and one hash seed: a multi-threaded BLAS sums in an order that varies from run to run (the
+#: last digits of ultrasonic_3d_moving differ between two runs of the same code), and so does a set's order of
+#: iteration with Python's random hash seed (the last digits of a seed of the ultrasonic_3d_iekf sweep).
+ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+       "PYTHONHASHSEED": "0"}
 
 
 def record(out: Path) -> None:
