@@ -26,7 +26,7 @@ from fusion.run.measure import Updated
 from fusion.run.plan import plan_sensor
 from fusion.run.process import Processor
 from fusion.run.reorder import ReorderBuffer
-from fusion.run.replay import ReplayLog
+from fusion.run.replay import ReplayLog, replay_late
 from fusion.run.startup import StartUp
 from fusion.run.tally import Tally
 
@@ -197,7 +197,8 @@ class Loop:
                 self.sensors[msg.sensor].counters["late"] += 1
                 yield Event(t, "late", msg.sensor, f"{buffer.horizon - t:.3f} s behind the released horizon; dropped")
                 return
-            yield from self._replay(msg)    # counted by its re-run outcome (late when it cannot be replayed)
+            # counted by its re-run outcome (late when it cannot be replayed)
+            yield from replay_late(msg, self.replay, self.processor, self.on_update)
             return
         buffer.add(t, msg)
         yield from self._release(buffer.due)
@@ -253,56 +254,3 @@ class Loop:
             yield Event(math.nan, "warning", None, f"process model {self.process.name!r}: {self.integrator.failed} "
                         "prediction(s) failed; the belief was held over each")
 
-    # ------------------------------------------------------------------ late_policy: replay
-    def _replay(self, late: Message) -> Iterator:
-        sensor = self.sensors[late.sensor]
-        rewound = self.replay.rewind(late)  # type: ignore[union-attr]
-        if rewound is None:
-            sensor.counters["late"] += 1
-            yield Event(late.t, "late", late.sensor, "older than the replay history; dropped")
-            return
-        snap, rerun = rewound
-        ig, processor = self.integrator, self.processor
-        processor.belief, ig.u, ig.next_output, ig.u_t = snap.belief, snap.u, snap.next_output, snap.u_t
-        for n, state in snap.gates.items():
-            # the gate decides the re-run messages again, and its counts are those of the re-run decisions
-            self.gates[n].state = state
-            self.gates[n].counters = snap.gate_counts[n].copy()
-        counters = {n: dict(s.counters) for n, s in self.sensors.items()}
-        own: dict[str, int] = {}      # the late message's own outcome in the re-run (used, rejected, ...)
-        events: list = []             # and what it reported (a rejection, a geometry warning, its NIS)
-        self._quiet(True, False)
-        try:
-            for msg in rerun:
-                self.replay.record(msg)  # type: ignore[union-attr]
-                if msg is late:   # new to the run: its outcome, events and NIS are reported as in time order
-                    before = dict(sensor.counters)
-                    self._quiet(True, True)
-                    try:
-                        events += [e for e in processor.process(msg) if e.__class__ is not Estimate]
-                    finally:
-                        self._quiet(True, False)
-                    own = {k: v - before.get(k, 0) for k, v in sensor.counters.items() if v != before.get(k, 0)}
-                else:
-                    for _ in processor.process(msg):
-                        pass
-                if self.sensors[msg.sensor].role != "input":   # as a run keeps them: after measurements
-                    processor.snapshot(rerun=True)
-        finally:
-            self._quiet(False, False)
-        for n, s in self.sensors.items():  # re-run messages were already counted
-            s.counters.update(counters[n])
-        for k, v in own.items():   # counted once, by its re-run outcome, not as late
-            sensor.counters[k] += v
-        processor.snapshot()
-        yield from events
-        yield Event(late.t, "replayed", late.sensor, f"re-ran {len(rerun)} messages")
-        if self.on_update and self.belief is not None:
-            yield Estimate(self.belief.t, self.belief, "update", late.sensor)
-
-    def _quiet(self, replaying: bool, live: bool) -> None:
-        """A replay's re-run (``replaying``) reports nothing of the messages it re-runs, except of the late one
-        itself (``live``)."""
-        self.processor.replaying, self.processor.live = replaying, live
-        self.integrator.quiet = replaying
-        self.failures.quiet = replaying and not live

@@ -47,6 +47,13 @@ class Processor:
         self._silence_last = -math.inf   # the input's last sample time when its silence was told
 
     # ------------------------------------------------------------------ replay's hooks
+    def quiet(self, replaying: bool, live: bool) -> None:
+        """A replay's re-run (``replaying``) reports nothing of the messages it re-runs, except of the late one
+        itself (``live``)."""
+        self.replaying, self.live = replaying, live
+        self.integrator.quiet = replaying
+        self.failures.quiet = replaying and not live
+
     def snapshot(self, rerun: bool = False) -> None:
         """Keep the belief after the messages logged so far (late_policy: replay); ``rerun``: also in a late
         message's re-run."""

@@ -1,18 +1,18 @@
 """``late_policy: replay``: a bounded log of the messages processed and snapshots of the belief (with the gates'
 per-run states, values like the belief), and the rewind that says what to re-run for a late message. The
-loop re-runs them (fusion.run.loop); this part only keeps and trims what a rewind needs."""
+re-run (:func:`replay_late`) goes through the run's Processor (fusion.run.process), given as an argument."""
 from __future__ import annotations
 
 import itertools
 from collections import deque
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
-from fusion.api import Belief, Message
+from fusion.api import Belief, Estimate, Event, Message
 
-__all__ = ["Snapshot", "ReplayLog"]
+__all__ = ["Snapshot", "ReplayLog", "replay_late"]
 
 
 @dataclass
@@ -71,3 +71,55 @@ class ReplayLog:
         while self._history and self._history[-1] is not snap:
             self._history.pop()
         return snap, rerun
+
+
+def replay_late(late: Message, log: ReplayLog, processor, on_update: bool) -> Iterator:
+    """A late message: the run rewound to the newest snapshot before it and the messages after it re-run through
+    ``processor`` with it. Counted once, by what its re-run made of it (used, rejected, ...), with its events
+    and NIS, and late only when it is older than the history; the re-run messages are not counted again."""
+    sensors = processor.sensors
+    sensor = sensors[late.sensor]
+    rewound = log.rewind(late)
+    if rewound is None:
+        sensor.counters["late"] += 1
+        yield Event(late.t, "late", late.sensor, "older than the replay history; dropped")
+        return
+    snap, rerun = rewound
+    ig = processor.integrator
+    processor.belief, ig.u, ig.next_output, ig.u_t = snap.belief, snap.u, snap.next_output, snap.u_t
+    for n, state in snap.gates.items():
+        # the gate decides the re-run messages again, and its counts are those of the re-run decisions
+        processor.gates[n].state = state
+        processor.gates[n].counters = snap.gate_counts[n].copy()
+    counters = {n: dict(s.counters) for n, s in sensors.items()}
+    own: dict[str, int] = {}      # the late message's own outcome in the re-run (used, rejected, ...)
+    events: list = []             # and what it reported (a rejection, a geometry warning, its NIS)
+    processor.quiet(True, False)
+    try:
+        for msg in rerun:
+            log.record(msg)
+            if msg is late:   # new to the run: its outcome, events and NIS are reported as in time order
+                before = dict(sensor.counters)
+                processor.quiet(True, True)
+                try:
+                    events += [e for e in processor.process(msg) if e.__class__ is not Estimate]
+                finally:
+                    processor.quiet(True, False)
+                own = {k: v - before.get(k, 0) for k, v in sensor.counters.items() if v != before.get(k, 0)}
+            else:
+                for _ in processor.process(msg):
+                    pass
+            if sensors[msg.sensor].role != "input":   # as a run keeps them: after measurements
+                processor.snapshot(rerun=True)
+    finally:
+        processor.quiet(False, False)
+    for n, s in sensors.items():  # re-run messages were already counted
+        s.counters.update(counters[n])
+    for k, v in own.items():      # counted once, by its re-run outcome, not as late
+        sensor.counters[k] += v
+    processor.snapshot()
+    yield from events
+    yield Event(late.t, "replayed", late.sensor, f"re-ran {len(rerun)} messages")
+    belief = processor.belief
+    if on_update and belief is not None:
+        yield Estimate(belief.t, belief, "update", late.sensor)
