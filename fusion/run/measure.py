@@ -7,7 +7,6 @@ recovery's ``reset``), lose the message when ``failure`` is set (a plugin's faul
 count ``counts`` on the sensor, and take ``belief``."""
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 
