@@ -75,7 +75,7 @@ def test_late_messages_dropped_and_counted():
     late = sum(s.counters["late"] for s in sched.sensors.values())
     assert late > 0
     assert late == sum(1 for e in out if isinstance(e, Event) and e.kind == "late")
-    # A message arriving ahead of the others by more than the cadence bound is held (fusion.clock) and, when
+    # A message arriving ahead of the others by more than the cadence bound is held (fusion.run.clock) and, when
     # its sensor's next message comes stamped before it, dropped as a wild stamp: counted, with a time event.
     wild = sum(s.counters["malformed"] for s in sched.sensors.values())
     assert wild == sum(1 for e in out if isinstance(e, Event) and e.kind == "time")
