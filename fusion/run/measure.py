@@ -8,7 +8,7 @@ count ``counts`` on the sensor, and take ``belief``."""
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -19,8 +19,7 @@ from fusion.run.plan import SensorPlan, ungated
 __all__ = ["Outcome", "Updated", "measure", "finite"]
 
 
-@dataclass(frozen=True)
-class Updated:
+class Updated(NamedTuple):
     """An update tried: its time (s), sensor, NIS, dimension and whether it was accepted. Travels once, from the
     measurement step to the run's statistics (not to the sinks)."""
 
@@ -31,8 +30,7 @@ class Updated:
     accepted: bool
 
 
-@dataclass(frozen=True)
-class Outcome:
+class Outcome(NamedTuple):
     """What one measurement step made of an observation.
 
     ``belief``: the belief to go on with (the given one when nothing was fused); ``result``: the last update
@@ -46,7 +44,7 @@ class Outcome:
     result: UpdateResult | None
     results: tuple[UpdateResult, ...] = ()
     events: tuple[Event, ...] = ()
-    counts: dict[str, int] = field(default_factory=dict)
+    counts: dict[str, int] = {}   # never changed: the counts of a failed step
     verdict: str = "failed"
     failure: Exception | None = None
     resets: int = 0

@@ -201,9 +201,10 @@ class Run:
             self.plot.on_nis(u.sensor, u.t, u.nis, u.dim)
 
     def _dispatch(self, out: Estimate | Event | Updated) -> None:
-        if out.__class__ is Updated:
+        cls = out.__class__
+        if cls is Updated:
             self._updated(out)   # type: ignore[arg-type]
-        elif out.__class__ is Estimate:
+        elif cls is Estimate:
             self.last = out
             self.stats.add_estimate(out)
             seen = read_only(out) if self._copies or self._hook_estimate is not None else out
