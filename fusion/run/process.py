@@ -7,6 +7,8 @@ from __future__ import annotations
 import math
 from typing import Iterator
 
+import numpy as np
+
 from fusion.api import Belief, Estimate, Event, Fix, MalformedMessage, Message, RejectedMessage
 from fusion.run.checks import failed, shown, usable, who
 from fusion.run.inputs import PendingInputs
@@ -346,7 +348,5 @@ def _bad(sensor, msg, exc: MalformedMessage) -> Event:
     return Event(msg.t, kind, sensor.name, f"line {msg.line}: {exc}")
 
 
-def _per_item(R, k: int):
-    import numpy as np
-
+def _per_item(R: np.ndarray, k: int) -> np.ndarray:
     return np.kron(np.eye(k), R)
