@@ -66,11 +66,9 @@ class Observers:
         at = f" at t = {t:.3f} s" if isinstance(t, float) and math.isfinite(t) else (
             " at the end of the run" if self.name == "fusion_on_run_end" else "")
         again = "" if self.name == "fusion_on_run_end" else "; it was not called again"
-        self.run._plugin_failed(f"{impl[2]}: its {self.name} hook raised {type(exc).__name__}: {exc}{at}{again}", exc)
+        self.run.plugin_failed(f"{impl[2]}: its {self.name} hook raised {type(exc).__name__}: {exc}{at}{again}", exc)
         if not self.impls:    # none left: the run stops copying estimates for it
-            for attr in ("_hook_estimate", "_hook_event", "_hook_end"):
-                if getattr(self.run, attr) is self:
-                    setattr(self.run, attr, None)
+            self.run.observers_gone(self)
 
 
 def plugin_label(pm: Any, plugin: Any, providers: dict[str, str]) -> str:

@@ -239,7 +239,17 @@ class Run:
             if self._hook_event is not None:
                 self._hook_event(event=out, system=self.system)
 
-    def _plugin_failed(self, text: str, exc: BaseException) -> None:
+    def observers_gone(self, observers: Observers) -> None:
+        """An observation hook none of whose implementations is left (each raised): not called any more."""
+        if self._hook_estimate is observers:
+            self._hook_estimate = None
+        if self._hook_event is observers:
+            self._hook_event = None
+        if self._hook_end is observers:
+            self._hook_end = None
+
+    def plugin_failed(self, text: str, exc: BaseException) -> None:
+        """A plugin's observer (a hook implementation, a sink) raised: named in the result, the run goes on."""
         self.plugin_errors.append(text)
         self.plugin_exceptions.append(exc)
 
@@ -261,7 +271,7 @@ class Run:
         at = f" at t = {t:.3f} s" if math.isfinite(t) else ""
         lost = f"; its output {', '.join(paths)} was discarded (incomplete)" if paths else ""
         more = "" if method == "close" else "; it got nothing more"
-        self._plugin_failed(f"{who}: its {method}() raised {type(exc).__name__}: {exc}{at}{more}{lost}", exc)
+        self.plugin_failed(f"{who}: its {method}() raised {type(exc).__name__}: {exc}{at}{more}{lost}", exc)
 
     def scheduler_finish(self) -> list[Estimate | Event]:
         """End of input: release what the scheduler still buffers (dispatched, and returned); ``finish()``
