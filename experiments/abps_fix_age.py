@@ -35,6 +35,11 @@ import numpy as np  # noqa: E402
 HERE = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(HERE / "experiments"))
 import abps_routes as routes  # noqa: E402
+import provenance  # noqa: E402  (experiments/, on the path: the page's provenance block)
+
+#: The files the page is made from: their hashes go in its provenance block (experiments/provenance.py).
+INPUTS = ("configs/abps_ins.yaml", "recordings/abps_mine.log", *(f"scenarios/{s}.yaml" for s in
+                  ("abps_mine", "abps_room_eight", "abps_l_drift", "abps_long_legs", "abps_fast_l")))
 
 OUT = HERE / "docs" / "results" / "abps_fix_age.md"
 ROUTES = ("abps_mine", "abps_room_eight", "abps_l_drift", "abps_long_legs", "abps_fast_l")
@@ -276,7 +281,7 @@ def main(argv=None) -> None:
     else:
         data = json.loads(args.from_json.read_text())
     before = json.loads(args.before.read_text()) if args.before else None
-    OUT.write_text(page(data, before))
+    provenance.write_page(OUT, page(data, before), INPUTS)
     print(f"wrote {OUT.relative_to(HERE)}")
 
 

@@ -41,6 +41,11 @@ from fusion.metrics import Truth  # noqa: E402
 
 import abps_routes  # noqa: E402  (experiments/, on the path above)
 from abps_smoothed import error_rows  # noqa: E402
+import provenance  # noqa: E402  (experiments/, on the path: the page's provenance block)
+
+#: The files the page is made from: their hashes go in its provenance block (experiments/provenance.py).
+INPUTS = ("configs/abps_ins.yaml", "recordings/abps_mine.log", *(f"scenarios/{s}.yaml" for s in
+                  ("abps_mine", "abps_room_eight", "abps_l_drift", "abps_long_legs", "abps_fast_l")))
 
 CONFIG = ROOT / "configs" / "abps_ins.yaml"
 OUT = ROOT / "docs" / "results" / "abps_ins.md"
@@ -395,8 +400,8 @@ def main(argv=None) -> None:
     load = os.getloadavg()[0]
     replay_["data_s"] = replay_["duration_s"]
     replay_["lines"] = sum(1 for _ in open(results[0][1]["system"].recording))
-    OUT.write_text(page(results, {"steps": steps, "replay": replay_, "load": load}, ukf_diff, time.perf_counter() - t0, routes,
-                        smoothed))
+    provenance.write_page(OUT, page(results, {"steps": steps, "replay": replay_, "load": load}, ukf_diff,
+                                    time.perf_counter() - t0, routes, smoothed), INPUTS)
     print(f"wrote {OUT.relative_to(ROOT)} and {FIG.relative_to(ROOT)}/*.png")
 
 

@@ -30,6 +30,13 @@ sys.path.insert(0, str(ROOT))
 from fusion.config import load_system  # noqa: E402
 from fusion.fuzzing import (CONFIG_OPS, OPS, Recording, accounting_errors, field_index, mutate,  # noqa: E402
                             mutate_config, run_cli)
+import provenance  # noqa: E402  (experiments/, on the path: the page's provenance block)
+
+#: The files the page is made from: their hashes go in its provenance block (experiments/provenance.py).
+INPUTS = tuple(f"{kind}/{name}" for pair in (("abps_ins.yaml", "abps_mine.log"), ("uwb_pv_ukf.yaml", "uwb_route1.log"),
+                                                ("example_2d.yaml", "example_2d.log"),
+                                                ("uwb_pv_ukf_line.yaml", "uwb_route1_line.log"))
+               for kind, name in zip(("configs", "recordings"), pair))
 
 TARGETS = (("configs/abps_ins.yaml", "recordings/abps_mine.log"),
            ("configs/uwb_pv_ukf.yaml", "recordings/uwb_route1.log"),
@@ -177,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
         *(cfg_refused or ["None."]),
         "",
     ]
-    out.write_text("\n".join(text))
+    provenance.write_page(out, "\n".join(text), INPUTS)
     print(f"{args.n} trials in {wall:.0f} s: exit codes {dict(sorted(codes.items()))}; {len(lost)} with lines lost; "
           f"{args.configs} configs: {dict(sorted(cfg_codes.items()))}; written to {out}")
     return 0

@@ -30,6 +30,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+import provenance  # noqa: E402  (experiments/, on the path: the page's provenance block)
+
+#: The files the page is made from: their hashes go in its provenance block (experiments/provenance.py).
+INPUTS = ("configs/abps_ins.yaml", "configs/imu_gps_mag_ekf.yaml", "recordings/abps_mine.log",
+          "recordings/car_gps_mag.log", "scenarios/abps_mine.yaml", "scenarios/car_gps_mag.yaml")
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "docs" / "results" / "imu_dropout.md"
@@ -226,7 +231,8 @@ def main(argv: list[str] | None = None) -> int:
         saved = json.loads(args.from_json.read_text())
         before = json.loads(args.before.read_text()) if args.before else None
         figure(saved["seeds"])
-        OUT.write_text(page(saved["seeds"], saved["shipped"], before, args, saved.get("wall_s", 0.0)))
+        provenance.write_page(OUT, page(saved["seeds"], saved["shipped"], before, args, saved.get("wall_s", 0.0)),
+                              INPUTS)
         print(f"wrote {OUT.relative_to(ROOT)}")
         return 0
     with tempfile.TemporaryDirectory() as d:
@@ -243,7 +249,7 @@ def main(argv: list[str] | None = None) -> int:
         args.json.write_text(json.dumps({"shipped": ship, "seeds": rows, "wall_s": time.perf_counter() - t0},
                                         indent=1))
     figure(rows)
-    OUT.write_text(page(rows, ship, before, args, time.perf_counter() - t0))
+    provenance.write_page(OUT, page(rows, ship, before, args, time.perf_counter() - t0), INPUTS)
     print(f"wrote {OUT.relative_to(ROOT)}")
     return 0
 

@@ -41,6 +41,10 @@ from fusion import quaternion as quat  # noqa: E402
 from fusion.config import SystemSpec, wire  # noqa: E402
 from fusion.metrics import Truth  # noqa: E402
 from fusion.simulate import simulate_file  # noqa: E402
+import provenance  # noqa: E402  (experiments/, on the path: the page's provenance block)
+
+#: The files the page is made from: their hashes go in its provenance block (experiments/provenance.py).
+INPUTS = ("configs/imu_gps_mag_ekf.yaml", "scenarios/car_gps_mag.yaml")
 
 QNORM = {"model": {"type": "quat_norm", "sd": 1e-3}}
 PAPER = {"process.renormalize": False, "sensors.qnorm": QNORM}
@@ -540,7 +544,7 @@ def write_page(table, align, filters, seeds, wall, smoothed=None) -> None:
     L.append("![errors](imu_gps_mag/errors.png)\n")
     L.append("![gap](imu_gps_mag/gap.png)\n")
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text("\n".join(L) + "\n" + NOTES)
+    provenance.write_page(OUT, "\n".join(L) + "\n" + NOTES, INPUTS)
 
 
 NOTES = """

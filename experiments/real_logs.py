@@ -40,6 +40,10 @@ RECORDING = ROOT / "recordings" / "flight_synthetic.log"
 from fusion.cli import main  # noqa: E402
 from fusion.quaternion import to_euler  # noqa: E402
 from fusion.logformat import ParsedStream, iter_messages  # noqa: E402
+import provenance  # noqa: E402  (experiments/, on the path: the page's provenance block)
+
+#: The files the page is made from: their hashes go in its provenance block (experiments/provenance.py).
+INPUTS = ("configs/px4_ins_gps_mag.yaml", "configs/ardupilot_ins_gps_mag.yaml", "recordings/flight_synthetic.log")
 
 
 def _run(log: Path, config: Path, work: Path, name: str, run: str | None = None) -> dict:
@@ -145,7 +149,7 @@ def main_() -> int:
     rows.append(_row("ArduPilot synthetic `.bin` (40 s), ardupilot_ins_gps_mag", ap))
     rows.append(_row("the same, started by Improved TRIAD (field from the config)", triad))
     _plot(px4, ap)
-    PAGE.write_text(PAGE_TEXT.format(table="\n".join(rows)), encoding="utf-8")
+    provenance.write_page(PAGE, PAGE_TEXT.format(table="\n".join(rows)), INPUTS)
     print(f"wrote {PAGE.relative_to(ROOT)}, {(FIG / 'agreement.png').relative_to(ROOT)} and "
           f"{RECORDING.relative_to(ROOT)}")
     return 0

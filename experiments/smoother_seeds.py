@@ -45,6 +45,15 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "experiments"))
 import abps_smoothed  # noqa: E402  (experiments/, on the path above)
+import provenance  # noqa: E402  (experiments/, on the path: the page's provenance block)
+
+#: The files the page is made from: their hashes go in its provenance block (experiments/provenance.py).
+INPUTS = (*(f"configs/{c}" for c in ("abps_ins.yaml", "uwb_pv_ukf.yaml", "uwb_pv_ukf_line.yaml",
+                                          "imu_gps_mag_ekf.yaml", "example_2d.yaml", "ultrasonic_3d_iekf.yaml",
+                                          "ultrasonic_3d_pose.yaml")),
+          *(f"scenarios/{s}" for s in ("abps_mine.yaml", "uwb_route1.yaml", "uwb_route2.yaml", "uwb_route1_line.yaml",
+                                       "car_gps_mag.yaml", "example_2d.yaml", "ultrasonic_3d_walk.yaml",
+                                       "controls/uwb_pv_matched.yaml", "controls/car_gps_mag_matched.yaml")))
 
 OUT = ROOT / "docs" / "results" / "smoothing.md"
 JSON = ROOT / "docs" / "results" / "smoothing.json"   # the page's numbers (--rerun updates a subset)
@@ -603,7 +612,7 @@ def main(argv=None) -> int:
         json_path.write_text(json.dumps({"seeds": args.seeds, "first_seed": args.first_seed, "minutes": minutes,
                                          "rows": table, **({"note": stored} if stored else {})},
                                         indent=1, default=float) + "\n")
-        OUT.write_text(page(table, args.seeds, args.first_seed, minutes, note))
+        provenance.write_page(OUT, page(table, args.seeds, args.first_seed, minutes, note), INPUTS)
         print(f"wrote {OUT.relative_to(ROOT)} and {json_path}")
     return 0
 

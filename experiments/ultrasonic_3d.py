@@ -28,6 +28,11 @@ import ultrasonic_3d_cases as uc  # noqa: E402
 
 from ultrasonic_3d_tables import (ECHO_RATE, PAPER_III, POSITIONS, SD_TARGET_MM, table_3, table_smooth,  # noqa: E402
                                   tables_12)
+import provenance  # noqa: E402  (experiments/, on the path: the page's provenance block)
+
+#: The files the page is made from: their hashes go in its provenance block (experiments/provenance.py).
+INPUTS = ("configs/ultrasonic_3d_iekf.yaml", "configs/ultrasonic_3d_pose.yaml",
+          "scenarios/ultrasonic_3d_static.yaml", "scenarios/ultrasonic_3d_walk.yaml")
 
 PAPER_STEP_MS = 230.0
 
@@ -393,7 +398,7 @@ def main(argv=None) -> int:
     text = page(rows, walks, args, wall)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(text)
+    provenance.write_page(out, text, INPUTS)
     summary = {"static": rows, "walks": [{k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in w.items()
                                           if not isinstance(v, np.ndarray)} for w in walks],
                "table3": table_3(walks)[1]}

@@ -10,6 +10,11 @@ import numpy as np
 
 from fusion.sweep.report import format_ci
 from fusion.sweep.stats import mean_ci, paired
+import provenance  # noqa: E402  (experiments/, on the path: the page's provenance block)
+
+#: The files the page is made from: their hashes go in its provenance block (experiments/provenance.py).
+INPUTS = ("configs/uwb_pv_ukf.yaml", "configs/uwb_pv_ukf_line.yaml", "scenarios/uwb_route1.yaml",
+          "scenarios/uwb_route2.yaml", "scenarios/uwb_route1_line.yaml", "scenarios/uwb_route2_line.yaml")
 
 METRICS = [("position_rmse_m", "position RMSE, m"), ("position_max_m", "position max, m"),
            ("nees_mean", "mean NEES (4 if consistent)"), ("nees_in_95_fraction", "NEES in 95% interval"),
@@ -215,4 +220,4 @@ def write_page(out: Path, studies: list, results: dict[str, list[dict]], walls: 
           "drew truth from the filters' own model and evaluated the paper's 4-range vector update with a "
           "simulator, interpolator and NEES of its own (experiments/uwb_cases.py, still used by "
           "tests/systems/test_uwb.py); those studies are not part of this sweep-based page.", ""]
-    out.write_text("\n".join(L) + "\n")
+    provenance.write_page(out, "\n".join(L) + "\n", INPUTS)

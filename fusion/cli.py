@@ -32,7 +32,7 @@ from typing import Iterator  # noqa: E402
 from fusion import __version__  # noqa: E402
 from fusion.errors import FusionError  # noqa: E402
 
-COMMANDS = ("run", "validate", "plugins", "simulate", "tui", "import_", "sweep")  # import_: `fusion import`
+COMMANDS = ("run", "validate", "plugins", "simulate", "tui", "import_", "import_config", "sweep")  # import_: `fusion import`
 # Commands that import numpy and scipy.linalg: numpy's unused submodules are deferred for them (start-up).
 NUMERIC_COMMANDS = ("run", "validate", "tui", "simulate", "import", "sweep")
 # Commands that write outputs: SIGTERM and SIGHUP stop them as Ctrl-C does (stop_signals). The live view

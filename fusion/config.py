@@ -17,6 +17,7 @@ plugin's ``Params`` model. Example::
 """
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,6 +31,7 @@ from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationE
 from fusion.api import (Aligns, BuildContext, CapabilityWarning, Component, ConfigError, Decoder, Filter, Gate,
                         KeepsGateState, MeasurementModel, ProcessModel, Solver, has, near_misses)
 from fusion.api.components import reject_bool_numbers
+from fusion.health.spec import HealthSpec
 from fusion.recovery import RecoverySpec
 from fusion.registry import Registry, default_registry
 from fusion.yamlsource import LocatedYAML, load_yaml, pydantic_errors
@@ -85,6 +87,24 @@ MAX_TIME_OFFSET_S = 1e10
 
 ComponentSpec = Union[str, dict[str, Any]]
 
+#: Longest path (bytes) and path component the system takes (Linux PATH_MAX and NAME_MAX).
+PATH_MAX, NAME_MAX = 4096, 255
+
+
+def check_path_text(v: str) -> str:
+    """A file name from a config as text: no NUL byte, no component over NAME_MAX bytes and no more than
+    PATH_MAX bytes in all (the system refuses them when the file is opened, as an internal error)."""
+    if "\0" in v:
+        raise ValueError(f"a path cannot hold a NUL byte (at character {v.index(chr(0))} of {v[:60]!r}...)")
+    size = len(os.fsencode(v))
+    if size > PATH_MAX:
+        raise ValueError(f"a path of {size} bytes, longer than the system's {PATH_MAX} ({v[:60]!r}...)")
+    longest = max(v.split("/"), key=lambda part: len(os.fsencode(part)))
+    if len(os.fsencode(longest)) > NAME_MAX:
+        raise ValueError(f"a path component of {len(os.fsencode(longest))} bytes, longer than the system's "
+                         f"{NAME_MAX} ({longest[:60]!r}...)")
+    return v
+
 
 class NoiseSpec(_Strict):
     """Measurement noise: ``sd`` (scalar or one per component, in the measurement's units) or a full ``R``."""
@@ -112,6 +132,10 @@ class SensorSpec(_Strict):
     max_gap: float | None = Field(None, gt=0.0, description="input sensors: report a gap between samples "
                                   "longer than this (s)")
     recovery: RecoverySpec | None = Field(None, description="recover from a lock-out (fusion.recovery); off by default")
+    min_coverage: float = Field(0.5, ge=0.0, le=1.0, description="input sensors: warn when the recording's "
+                                "header says its samples integrate less of the time (fusion.imu_coverage)")
+    max_rotation_deg: float = Field(5.0, gt=0.0, description="input sensors: warn when the header says it turns "
+                                    "more between two samples (deg, fusion.imu_coverage)")
     enabled: bool = True
 
 
@@ -211,6 +235,16 @@ class SystemSpec(_Strict):
     output: OutputSpec = Field(default_factory=OutputSpec)
     evaluation: EvaluationSpec = Field(default_factory=EvaluationSpec)
     smoother: SmootherSpec | None = None
+    health: HealthSpec = Field(default_factory=HealthSpec)
+    prefer: Literal["config"] | dict[Literal["magnetic_field", "beacons", "receivers", "gravity", "origin"],
+                                     Literal["config"]] = Field(
+        default_factory=dict, description="where the config and the recording's header disagree on a value "
+        "(fusion.header_checks), use the config's instead of refusing the run: `config` for all, or per quantity")
+
+    @field_validator("recording")
+    @classmethod
+    def _recording_path(cls, v: str | None) -> str | None:
+        return v if v is None else check_path_text(v)
 
     @field_validator("beacons")
     @classmethod
@@ -263,6 +297,7 @@ class System:
     P0: np.ndarray
     beacons: dict[str, np.ndarray]
     registry: Registry
+    world: Any = None     # fusion.world.RecordingWorld the components were wired with, or None
 
     @property
     def layout(self):
@@ -273,7 +308,10 @@ class System:
         if self.spec.recording is None:
             return None
         base = self.path.parent if self.path else Path(".")
-        return (base / self.spec.recording).resolve()
+        try:
+            return (base / self.spec.recording).resolve()
+        except (RuntimeError, OSError):  # a symlink loop: opening it names the loop (ELOOP)
+            return Path(os.path.abspath(base / self.spec.recording))
 
 
 def _split(spec: ComponentSpec, doc: LocatedYAML | None, loc: list[Any]) -> tuple[str, dict[str, Any]]:
@@ -354,16 +392,29 @@ from fusion.config_values import initial_belief_values, noise_matrix  # noqa: E4
 
 
 def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = None,
-         registry: Registry | None = None, filter_override: ComponentSpec | None = None) -> System:
-    """Build every component of a validated SystemSpec and check dimensions."""
+         registry: Registry | None = None, filter_override: ComponentSpec | None = None,
+         world: Any = None) -> System:
+    """Build every component of a validated SystemSpec and check dimensions. ``world``: what the recording
+    to be replayed declares (fusion.world.RecordingWorld), given to every component as
+    ``context.extra["world"]``; None: the world of the spec's own ``recording:`` when it is a file."""
     reg = registry or default_registry()
     base_dir = str(path.parent) if path else "."
+    if world is None and spec.recording:
+        from fusion.world import read_world
+
+        world = read_world(Path(base_dir) / spec.recording)
     beacons = {k: np.asarray(v, float) for k, v in spec.beacons.items()}
-    ctx = BuildContext(layout=None, beacons=beacons, base_dir=base_dir)
+    extra: dict[str, Any] = {"world": world} if world is not None else {}
+    if world is not None and not world.streamed:      # what the config leaves out, the recording declares
+        if not beacons:
+            beacons = {k: np.asarray(d.value, float) for k, d in world.beacons.items() if len(d.value) in (2, 3)}
+        if world.gravity is not None:
+            extra["gravity"] = world.gravity.value
+    ctx = BuildContext(layout=None, beacons=beacons, base_dir=base_dir, extra=dict(extra))
     process = build_component(reg, "process", spec.process, ctx, doc, ["process"])
     assert isinstance(process, ProcessModel)
     layout = process.layout
-    fctx = BuildContext(layout, beacons, None, base_dir)
+    fctx = BuildContext(layout, beacons, None, base_dir, dict(extra))
     if filter_override is not None:  # from the command line: no file line to name
         filt = build_component(reg, "filter", filter_override, fctx, None, ["filter (--filter/--filter-param)"])
     else:
@@ -380,7 +431,7 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
                               f"{', '.join(RESERVED_SENSORS)}); name the sensor otherwise")
         if not s.enabled:
             continue
-        sctx = BuildContext(layout, beacons, sname, base_dir)
+        sctx = BuildContext(layout, beacons, sname, base_dir, dict(extra))
         decoder = build_component(reg, "decoder", s.decoder, sctx, doc, [*loc, "decoder"])
         pre = build_component(reg, "solver", s.preprocessor, sctx, doc, [*loc, "preprocessor"]) if s.preprocessor else None
         model = gate = R = None
@@ -411,6 +462,7 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
                                   "use action: inflate")
         sensors[sname] = SensorRuntime(sname, s.role, decoder, pre, model, R, gate, s.time_offset, s.max_gap,
                                        s.recovery)
+    check_offsets_fit_latency(spec, doc)
     if getattr(filt, "linear_only", False):
         _check_linear(filt, process, sensors, doc.where(["filter"]) if doc and filter_override is None
                       else "filter (--filter)" if filter_override is not None else "filter")
@@ -432,7 +484,35 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
             raise ConfigError(f"{doc.where(['evaluation', 'position', i]) if doc else 'evaluation.position'}: "
                               f"state has no element {name!r}; elements are {list(layout.names)}")
     x0, P0 = initial_belief_values(spec, process, doc)
-    return System(spec, path, process, filt, sensors, x0, P0, beacons, reg)  # type: ignore[arg-type]
+    if spec.initial.from_sensor:
+        from fusion.initial_checks import check_from_sensor
+
+        check_from_sensor(spec.initial.from_sensor, sensors[spec.initial.from_sensor], layout, x0,
+                          doc.where(["initial", "from_sensor"]) if doc else "initial.from_sensor")
+    return System(spec, path, process, filt, sensors, x0, P0, beacons, reg, world)  # type: ignore[arg-type]
+
+
+def check_offsets_fit_latency(spec: SystemSpec, doc: LocatedYAML | None = None) -> None:
+    """Each enabled sensor's ``time_offset`` fits in the reorder buffer: a sensor whose offset lies more than
+    ``scheduler.max_latency`` (s) below another's lands that far behind the stream's newest time, so under
+    either late policy its messages arrive behind the released horizon (every one dropped as late, or each
+    a replay). Only the spread between sensors matters: one shared offset moves the whole stream. Raises a
+    ConfigError naming the sensor's ``time_offset`` line, the other sensor and both figures."""
+    offsets = {n: s.time_offset for n, s in spec.sensors.items() if s.enabled}
+    latency = spec.scheduler.max_latency
+    for name, off in offsets.items():
+        others = {n: o for n, o in offsets.items() if n != name}
+        if not others:
+            return
+        ahead = max(others, key=others.__getitem__)
+        behind = others[ahead] - off
+        if behind > latency:
+            loc = ["sensors", name, "time_offset"]
+            where = doc.where(loc) if doc else ".".join(loc)
+            raise ConfigError(f"{where}: {off:g} s puts {name}'s messages {behind:g} s behind {ahead}'s "
+                              f"(time_offset {others[ahead]:g} s), more than scheduler.max_latency "
+                              f"({latency:g} s): every one would arrive behind the released horizon and be "
+                              f"dropped as late. Give scheduler.max_latency >= {behind:g}")
 
 
 def _check_linear(filt, process: ProcessModel, sensors: dict[str, SensorRuntime], where: str) -> None:
@@ -448,12 +528,27 @@ def _check_linear(filt, process: ProcessModel, sensors: dict[str, SensorRuntime]
                               f"uses {sr.model.name!r}, which is not linear (linear = False): {others}")
 
 
+#: load_system's default ``recording``: the config's own
+OWN_RECORDING: Any = object()
+
+
 def load_system(path: str | Path, registry: Registry | None = None,
-                filter_override: ComponentSpec | None = None) -> System:
-    """Load, validate and wire a system YAML. Raises ConfigError naming file, line and field."""
+                filter_override: ComponentSpec | None = None, recording: Any = OWN_RECORDING) -> System:
+    """Load, validate and wire a system YAML. Raises ConfigError naming file, line and field.
+    ``recording``: the input the system will replay, whose header declares its world (fusion.world): a
+    path, None (a stream: no header known ahead), or OWN_RECORDING (the config's own ``recording:``)."""
+    from fusion.world import read_world
+
     doc = load_yaml(path)
     try:
         spec = SystemSpec.model_validate(doc.data)
     except ValidationError as exc:
         raise pydantic_errors(doc, exc) from None
-    return wire(spec, doc, Path(path), registry, filter_override)
+    if recording is OWN_RECORDING:
+        recording = (Path(path).parent / spec.recording) if spec.recording else None
+    world = read_world(recording) if recording is not None else None
+    if world is None:     # a stream: no header known ahead (not the config's own recording's)
+        from fusion.world import RecordingWorld
+
+        world = RecordingWorld(str(recording) if recording is not None else "-", streamed=True)
+    return wire(spec, doc, Path(path), registry, filter_override, world)

@@ -87,6 +87,53 @@ CONFIG_VALUES = (".nan", ".inf", "-.inf", "nan", "1e308", "1.0e+308", "-1", "0",
                  "[" * 200 + "]" * 200, "{a: 1, a: 2}", "1e999", "0x1F", "2001-01-01", "'1e6'", "[1e200, 1e200]",
                  "{p: 1.0e+200, v: 1}", "-1e308")
 CONFIG_OPS = ("value", "delete_line", "duplicate_line", "truncate_line", "bitflip", "indent", "swap_lines")
+#: Recording paths a config may hold that the system refuses or that never end when read (``{tmp}``: the
+#: folder of :func:`hostile_files`, which makes the FIFO, the symlink loop and the file in place of a folder).
+HOSTILE_PATHS = ("{tmp}/fifo", "{tmp}/loop", "{tmp}/file/x.log", "{tmp}", "{tmp}/empty.log", "{tmp}/binary.log",
+                 "/proc/self/mem", "/dev/zero", "/dev/null", "/dev/tty", "/dev/urandom", "/", "/tmp/" + "a" * 5000,
+                 "/tmp/" + "b" * 300 + "/x.log", "rec\\0.log", "")
+#: Time offsets (s) put on one sensor, against the scheduler's max_latency (0.05-0.2 s in the configs fuzzed).
+HOSTILE_OFFSETS = ("-0.5", "-1e9", "-0.0", "0.3", "-0.049", "1e10", "-1e10")
+#: Mutations with a hostile value: ``recording`` (a path of HOSTILE_PATHS), ``time_offset`` (on the sensor
+#: whose line is picked), ``numbers`` (thousands of plain numbers appended: a table given as a config).
+HOSTILE_OPS = ("recording", "time_offset", "numbers")
+
+
+def hostile_files(tmp: Path) -> Path:
+    """Make in ``tmp`` the files HOSTILE_PATHS name: a FIFO without a writer, a symlink loop, a regular
+    file where a folder is expected, an empty file and a binary one. Returns ``tmp``."""
+    import os
+
+    if not (tmp / "fifo").exists():
+        os.mkfifo(tmp / "fifo")
+        (tmp / "loop").symlink_to(tmp / "loop2")
+        (tmp / "loop2").symlink_to(tmp / "loop")
+        (tmp / "file").write_text("a file, not a folder\n")
+        (tmp / "empty.log").write_bytes(b"")
+        (tmp / "binary.log").write_bytes(bytes(range(256)) * 64)
+    return tmp
+
+
+def mutate_hostile(text: str, op: str, i: int, j: int, tmp: Path) -> str:
+    """``text`` (a YAML config) after hostile mutation ``op`` (HOSTILE_OPS); ``i`` picks the line (a
+    sensor for ``time_offset``), ``j`` the value; ``tmp`` holds :func:`hostile_files`."""
+    lines = text.split("\n")
+    if op == "recording":
+        path = HOSTILE_PATHS[j % len(HOSTILE_PATHS)].replace("{tmp}", str(tmp))
+        lines = [ln for ln in lines if not ln.startswith("recording:")]
+        lines.insert(0, f'recording: "{path}"')
+    elif op == "time_offset":
+        sensors = [k for k, ln in enumerate(lines) if ln.startswith("  ") and not ln.startswith("   ")
+                   and ln.rstrip().endswith(":") and "sensors:" in "\n".join(lines[:k])]
+        if sensors:
+            k = sensors[i % len(sensors)]
+            lines.insert(k + 1, f"    time_offset: {HOSTILE_OFFSETS[j % len(HOSTILE_OFFSETS)]}")
+    elif op == "numbers":
+        lines.append("table:")
+        lines.extend(f"  - {n}.5" for n in range(1000 + 30_000 * (j % 2)))
+    else:
+        raise ValueError(f"unknown hostile mutation {op!r}; mutations are {HOSTILE_OPS}")
+    return "\n".join(lines)
 
 
 def mutate_config(text: str, op: str, i: int, j: int) -> str:

@@ -99,12 +99,49 @@ def _key(path: str | os.PathLike) -> str:
     return os.path.realpath(os.fspath(path))
 
 
+def _file_id(st: os.stat_result) -> tuple[int, int] | None:
+    """(device, inode) of a regular file or a FIFO: what an output must never be when an input is it (a
+    terminal or other device may well be both the input and an output)."""
+    return (st.st_dev, st.st_ino) if stat.S_ISREG(st.st_mode) or stat.S_ISFIFO(st.st_mode) else None
+
+
+def _open_inputs(inputs: Iterable[str | os.PathLike | None]) -> dict[tuple[int, int], str]:
+    """The files the inputs are, by identity: each path's (device, inode), and for ``-`` the file standard
+    input has open (``< in.log``), which ``/dev/fd/0``, ``/dev/stdin`` or a link to them name too."""
+    ids: dict[tuple[int, int], str] = {}
+    for p in inputs:
+        if p is None:
+            continue
+        try:
+            if str(p) == "-":
+                st, name = os.fstat(sys.stdin.fileno()), "standard input (--input -)"
+            else:
+                st, name = os.stat(p), str(p)
+        except (OSError, ValueError, AttributeError):   # no such file yet, or no real stdin (a test's capture)
+            continue
+        key = _file_id(st)
+        if key is not None:
+            ids.setdefault(key, name)
+    return ids
+
+
+def _same_file_as_input(path: str | os.PathLike, ids: Mapping[tuple[int, int], str]) -> str | None:
+    """The input that output ``path`` resolves to (through links, ``/dev/fd/N``, a hard link), or None."""
+    try:
+        key = _file_id(os.stat(path))
+    except (OSError, ValueError):
+        return None
+    return ids.get(key) if key is not None else None
+
+
 def check_outputs(outputs: Mapping[str, str | os.PathLike | None], inputs: Iterable[str | os.PathLike | None] = (),
                   force: bool = False) -> None:
     """Refuse outputs that would destroy data: ``outputs`` maps an option (``--output``) to its path
-    (None: not given); ``inputs`` are the files the run reads."""
+    (None: not given); ``inputs`` are the files the run reads (``-``: standard input)."""
+    inputs = list(inputs)
     given = {opt: p for opt, p in outputs.items() if p is not None}
     read = {_key(p): str(p) for p in inputs if p is not None and str(p) != "-"}
+    open_ids = _open_inputs(inputs)
     seen: dict[str, str] = {}
     stdout: str | None = None
     for opt, path in given.items():
@@ -117,8 +154,9 @@ def check_outputs(outputs: Mapping[str, str | os.PathLike | None], inputs: Itera
         if _key(path) == os.devnull:  # the null device takes any number
             continue
         key = _key(path)
-        if key in read:
-            raise ConfigError(f"{opt} {path}: is an input of this run ({read[key]}); choose another file "
+        same = read.get(key) or _same_file_as_input(path, open_ids)
+        if same is not None:
+            raise ConfigError(f"{opt} {path}: is an input of this run ({same}); choose another file "
                               "(nothing you gave is overwritten)")
         if key in seen:
             raise ConfigError(f"{opt} {path}: the same file as {seen[key]}; give each output its own file")

@@ -225,14 +225,30 @@ def print_summary(summary: dict, console: Console | None = None) -> None:
                       f"{run['for_s']:.2f} s from t {run['from_s']:.2f} s: a stretch of bad measurements or a "
                       f"filter locked out of them ({(summary.get('health') or {}).get('resets', 0)} recovery "
                       "resets in the run; sensors.NAME.recovery)[/]")
+    _print_verdict(summary.get("health") or {}, console)
     extra = {k: v for k, v in summary.items() if k not in _KNOWN}
     if extra:
         console.print()
         t = _kv_table("Other")
         for k, v in extra.items():
+            if k == "health" and isinstance(v, dict):   # its findings are printed above
+                v = {kk: vv for kk, vv in v.items() if kk != "findings"}
             text = ", ".join(f"{kk}: {_num(vv)}" for kk, vv in v.items()) if isinstance(v, dict) else _num(v)
             t.add_row(_text(k), _text(text))
         console.print(t)
+
+
+def _print_verdict(health: dict, console: Console) -> None:
+    """The health rule's findings (fusion.health: ``degraded`` and ``findings`` in the summary's health),
+    each with its figures; the causes are in the summary and on the command's last line."""
+    from rich.markup import escape
+
+    if not health.get("degraded"):
+        return
+    console.print("\n[bold red]degraded: the estimate cannot be trusted[/]")
+    for f in health.get("findings") or ():
+        who = f"{f.get('sensor')}: " if f.get("sensor") else ""
+        console.print(f"[red]  {escape(who + str(f.get('figures', '')))}[/]")
 
 
 # --------------------------------------------------------------------------- progress

@@ -30,10 +30,15 @@ class _Loader(yaml.SafeLoader):
     def __init__(self, stream: str):
         super().__init__(stream)
         self._depth = 0
+        self._nodes = 0
 
     def compose_node(self, parent, index):  # type: ignore[override]
         self._depth += 1
+        self._nodes += 1
         try:
+            if self._nodes > MAX_VALUES:   # refused as it is read, before the rest is composed
+                raise yaml.composer.ComposerError(None, None, f"holds more than {MAX_VALUES} values (a config has "
+                                                  "a few hundred)", self.peek_event().start_mark)
             if self._depth > MAX_DEPTH:
                 raise yaml.composer.ComposerError(None, None, f"nested deeper than {MAX_DEPTH} levels",
                                                   self.peek_event().start_mark)
@@ -199,9 +204,10 @@ class LocatedYAML:
         return ConfigError(f"{where}: {msg}")
 
 
-#: Largest YAML file read (bytes): a config or scenario is a few kB; the bound keeps a wrong path (a log,
-#: a disk image) from filling the memory.
-MAX_YAML_BYTES = 10 * 1024 * 1024
+#: Largest YAML file read (bytes): a config or scenario is a few kB (the largest shipped one ~10 kB; a 48 x 48
+#: covariance written out ~30 kB). PyYAML's pure-Python composer costs ~3 s and ~150 MB a MB of plain
+#: numbers, so a wrong path (a log, a table, a disk image) is refused by its size before it is parsed.
+MAX_YAML_BYTES = 256 * 1024
 
 
 def read_yaml_text(path: str | Path, what: str = "file") -> str:
@@ -231,14 +237,21 @@ def read_yaml_text(path: str | Path, what: str = "file") -> str:
                     else "a block device" if stat_.S_ISBLK(mode) else "a socket" if stat_.S_ISSOCK(mode)
                     else "not a regular file")
             raise ConfigError(f"{p}: {kind}, not a readable regular file; give a YAML {what}")
+        size = os.fstat(fh.fileno()).st_size
         data = fh.read(MAX_YAML_BYTES + 1)
     if len(data) > MAX_YAML_BYTES:
-        raise ConfigError(f"{p}: larger than {MAX_YAML_BYTES // (1024 * 1024)} MB, too large for a YAML {what} "
-                          "(a recording or a binary file given in its place?)")
+        raise ConfigError(f"{p}: larger than {_bytes(MAX_YAML_BYTES)} ({_bytes(max(size, len(data)))}), the most a "
+                          f"YAML {what} may be (a config is a few kB; a recording, a table or a binary file given "
+                          "in its place?)")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{p}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+
+
+def _bytes(n: int) -> str:
+    """A byte count for messages: ``812 bytes``, ``256 KiB``, ``1.1 MiB``."""
+    return f"{n} bytes" if n < 1024 else f"{n / 1024:.4g} KiB" if n < 1024 ** 2 else f"{n / 1024 ** 2:.3g} MiB"
 
 
 def load_yaml(path: str | Path, what: str = "file") -> LocatedYAML:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from fusion.errors import ConfigError, InputError
 
-HELP = "convert a PX4 .ulg, ArduPilot .bin or CSV dataset (with --map) into a recording"
+HELP = "convert a PX4 .ulg, ArduPilot .bin, ROS bag (.bag, .db3, .mcap) or CSV dataset (with --map) into a recording"
 DESCRIPTION = """\
 Convert a flight log or dataset into the fusion log format: a header with the source file, the vehicle,
 the origin and every sensor's units, '# fields' lines, then time-sorted messages: imu (m/s^2, rad/s, body
@@ -28,6 +28,7 @@ examples:
   fusion import 00000042.BIN -o flight.log --start 120 --end 300
   fusion run configs/ardupilot_ins_gps_mag.yaml --input flight.log    # agreement with ArduPilot's EKF3
   fusion import uwb_run3.csv --map docs/examples/uwb_dataset/mapping.yaml -o uwb_run3.log
+  fusion import robot.bag -o robot.log --map topics.yaml              # ROS 1 or ROS 2 bag (docs/ros.md)
 
 A flight log's recording has one origin, the first GPS fix with a 3-D fix and >= 6 satellites: the
 reference positions are re-expressed about it, and one 'initial_attitude' line (the onboard attitude at
@@ -41,7 +42,7 @@ each format, the mapping file and what a reference is.
 def register(subparsers) -> None:
     p = subparsers.add_parser("import", help=HELP, description=DESCRIPTION, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("file", metavar="FILE", help="log or dataset to read (.ulg, .bin, .csv)")
+    p.add_argument("file", metavar="FILE", help="log or dataset to read (.ulg, .bin, .csv, .bag, .db3, .mcap, a ROS 2 bag folder)")
     p.add_argument("-o", "--output", metavar="OUT.log", required=True,
                    help="recording to write ('-' for stdout); an existing file needs --force")
     p.add_argument("--start", type=float, metavar="S", help="first time to keep, s from the log's start")
@@ -49,7 +50,7 @@ def register(subparsers) -> None:
     p.add_argument("--sensors", nargs="+", metavar="NAME",
                    help="only these sensors (e.g. imu gps mag baro reference; for a CSV the mapping's names); "
                         "only their data is read. Default: all")
-    p.add_argument("--map", metavar="MAP.yaml", help="mapping file of a CSV (docs/import.md)")
+    p.add_argument("--map", metavar="MAP.yaml", help="mapping file of a CSV (docs/import.md) or a ROS bag (docs/ros.md)")
     p.add_argument("--format", metavar="NAME", help="importer by name (default: by the file's suffix)")
     p.add_argument("--gps", choices=("fields", "nmea"), default="fields",
                    help="how GPS fixes are written: 'fields' (lat lon alt vn ve vd ..., default) or 'nmea' "
@@ -65,6 +66,8 @@ def choose_importer(registry, path: str, name: str | None):
     if name:
         return registry.get("importer", name, where="--format")
     suffix = "".join(Path(path).suffixes[-1:]).lower()
+    if Path(path).is_dir():   # a ROS 2 bag folder: read by the importer of its storage files
+        suffix = next((f.suffix.lower() for f in sorted(Path(path).iterdir()) if f.suffix in (".db3", ".mcap")), "")
     entries = registry.entries("importer")
     for e in entries:
         if suffix in tuple(s.lower() for s in e.cls.suffixes):
@@ -85,6 +88,7 @@ def _sensors(values: list[str] | None) -> frozenset[str] | None:
 
 def run(args: argparse.Namespace) -> int:
     from fusion.api import ImportRequest
+    from fusion.importers.clock_check import check_one_clock
     from fusion.importers.flight import prepare
     from fusion.importers.writer import write_log
     from fusion.outputs import check_outputs
@@ -99,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
     src = Path(args.file)
     if not src.exists():
         raise InputError(f"{src}: no such file")
-    if src.is_dir():
+    if src.is_dir() and not (src / "metadata.yaml").is_file():   # a ROS 2 bag is a folder with its metadata
         raise InputError(f"{src}: is a folder, not a log file")
     if args.map and not Path(args.map).is_file():
         if not Path(args.map).exists():
@@ -119,8 +123,11 @@ def run(args: argparse.Namespace) -> int:
         if one and numbered:   # PX4: only instance 0 of a topic is read (the one the estimator uses)
             raise ConfigError(f"--sensors {' '.join(numbered)}: importer {cls.name!r} reads only instance 0 of each "
                               f"topic (it writes: {', '.join(cls.sensors)})")
-    if args.map and cls.name != "csv":
-        raise ConfigError(f"--map: a mapping file applies to CSV files, not to {cls.name!r} logs")
+    if args.gps == "nmea" and not getattr(cls, "flight_log", True):
+        raise ConfigError(f"--gps nmea: importer {cls.name!r} writes its GPS as local NED fixes with their covariance, "
+                          "not as a flight log's fields (docs/ros.md)")
+    if args.map and not getattr(cls, "takes_map", cls.name == "csv"):
+        raise ConfigError(f"--map: a mapping file applies to CSV files and ROS bags, not to {cls.name!r} logs")
     check_outputs({"-o": args.output}, [str(src)] + ([args.map] if args.map else []), force=args.force)
     request = ImportRequest(start=args.start, end=args.end, sensors=sensors, mapping=args.map,
                             allow_partial=args.partial)
@@ -149,7 +156,9 @@ def run(args: argparse.Namespace) -> int:
             span = f" between --start {args.start} and --end {args.end}"
         raise InputError(f"{src}: no samples to write{span}" + (f" ({'; '.join(log.notes)})" if log.notes else ""))
     log.streams = streams
-    prepare(log)          # one origin for the GPS and the reference; the onboard attitude to start in flight
+    check_one_clock(str(src), streams)   # every sensor overlaps the IMU's span, else exit 2 naming it
+    if getattr(cls, "flight_log", True):
+        prepare(log)      # one origin for the GPS and the reference; the onboard attitude to start in flight
     streams = [s for s in log.streams if len(s)]
     if args.gps == "nmea":
         from fusion.importers.nmea import as_nmea
@@ -159,6 +168,8 @@ def run(args: argparse.Namespace) -> int:
     t0 = min(float(s.t.min()) for s in streams)
     t1 = max(float(s.t.max()) for s in streams)
     log.meta.setdefault("duration", f"{t1 - t0:.3f}")
+    if "partial" in log.meta:
+        log.meta["partial"] += f"; the imported data end at t {t1:.3f} s"
     if args.start is not None or args.end is not None:
         log.meta["span"] = f"--start {args.start} --end {args.end} (s)"
     inputs = [str(src)] + ([args.map] if args.map else []) + list(log.inputs)

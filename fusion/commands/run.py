@@ -36,8 +36,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="fixed-lag smoother: each estimate SECONDS late, smoothed over that window")
     p.add_argument("--force", action="store_true", help="replace output files that exist")
     p.add_argument("--quiet", "-q", action="store_true",
-                   help="no table on stdout (on stderr when an output is '-', so stdout holds only that output)")
+                   help="no table on stdout (on stderr when an output is '-', so stdout holds only that output) and no "
+                        "progress bar; warnings still go to stderr")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--allow-degraded", action="store_true",
+                   help="exit 0 even when the run's health says its estimate cannot be trusted (exit 4 otherwise; "
+                        "the config's health.allow_degraded does the same)")
     p.set_defaults(func=run)
 
 
@@ -104,10 +108,15 @@ def _run(args: argparse.Namespace) -> int:
 
     refuse_empty(args, "--input", "--output", "--summary-json", "--plot")
     override = filter_override(args.config, args.filter, args.filter_param)
-    system = load_system(args.config, filter_override=override)
+    from fusion.config import OWN_RECORDING
+    from fusion.header_checks import check as check_header
+
+    system = load_system(args.config, filter_override=override,
+                         recording=OWN_RECORDING if args.input is None else args.input)
     source = system.recording if args.input is None else args.input
     if source is None:
         raise ConfigError(f"{args.config}: no 'recording:' in the config; give one with --input LOG")
+    check_header(system, system.world, str(args.config))   # a config that contradicts its recording: exit 2
     from fusion.outputs import check_outputs
 
     src = open_source(str(source), system.registry)
@@ -123,7 +132,9 @@ def _run(args: argparse.Namespace) -> int:
     if has(src, Opens):   # a missing recording or an unopenable port: one line, before any output is made
         src.open()
     guarded = [guard_sink(open_sink(args.output, system.layout, system.registry))] if args.output else []
-    sinks = guarded
+    from fusion.health import HealthWatch, spec_of
+
+    watch = HealthWatch(system, spec_of(system))   # the filtered estimates' updates, for the health rule
     plot = None
     if args.plot:
         from fusion.sinks.plot_recorder import PlotRecorder
@@ -133,17 +144,19 @@ def _run(args: argparse.Namespace) -> int:
 
     show_progress = not args.no_progress and not args.quiet and data_stdout().isatty()
     with report.progress(_duration_hint(source), enabled=show_progress) as tick:
-        notes = EventNotes(sys.stderr, enabled=not args.quiet)
+        notes = EventNotes(sys.stderr)   # -q hides the table and progress only, never a warning
         smoothing = _smoothing(args, system)
         if smoothing is None:
-            result = pipeline.run(system, src, sinks, on_event=notes, progress=tick, plot=plot, label=str(source))
+            result = pipeline.run(system, src, [*guarded, watch], on_event=notes, progress=tick, plot=plot,
+                                  label=str(source))
         else:
             from fusion.smoothing import run_smoothed
 
-            result = run_smoothed(system, src, sinks, on_event=notes, progress=tick, plot=plot, label=str(source),
-                                  **smoothing)
+            result = run_smoothed(system, src, guarded, on_event=notes, progress=tick, plot=plot, label=str(source),
+                                  forward_sinks=[watch], **smoothing)
         notes.close()
     summary = result.summary
+    verdict = _assess(system, result, watch, source)
     if args.summary_json:
         write_summary_json(args.summary_json, summary)
     if not args.quiet:
@@ -180,7 +193,36 @@ def _run(args: argparse.Namespace) -> int:
         print("fusion run: the estimate ended non-finite (the filter diverged); see the summary's health",
               file=sys.stderr)
         return 3
-    return 0
+    return _degraded_exit(verdict, args, system)
+
+
+def _assess(system: Any, result: Any, watch: Any, source: Any) -> Any:
+    """The health Verdict of a run that made estimates (None otherwise), written into its summary's
+    ``health`` (fusion.health); ``source`` the recording (its header lines name the likely causes)."""
+    from fusion.health import assess
+
+    if not result.stats.estimates:
+        return None
+    return assess(system, result.summary, watch, result.parsed.header, source)
+
+
+def _degraded_exit(verdict: Any, args: argparse.Namespace, system: Any) -> int:
+    """0, or DEGRADED_EXIT (4) after the findings on stderr, the main one on the last line, when the
+    estimate cannot be trusted and neither --allow-degraded nor health.allow_degraded says to go on."""
+    from fusion.health import DEGRADED_EXIT, spec_of
+
+    if verdict is None or not verdict.degraded:
+        return 0
+    allowed = args.allow_degraded or spec_of(system).allow_degraded
+    for finding in verdict.findings[1:]:
+        print(f"fusion run: also: {finding.line()}", file=sys.stderr)
+    if allowed:
+        print(f"fusion run: degraded, exit 0 as allowed (--allow-degraded or health.allow_degraded): "
+              f"{verdict.findings[0].line()}", file=sys.stderr)
+        return 0
+    print(f"fusion run: degraded: the estimate cannot be trusted (exit {DEGRADED_EXIT}; --allow-degraded or "
+          f"health.allow_degraded for 0): {verdict.findings[0].line()}", file=sys.stderr)
+    return DEGRADED_EXIT
 
 
 def report_plugin_errors(command: str, result: Any, debug: bool = False) -> None:
@@ -265,6 +307,11 @@ class _KeepSinkError:
                 if isinstance(exc, StdoutClosed):
                     raise
                 self.error = exc
+
+    def discard(self) -> None:
+        """Drop what the sink wrote, when it can (an incomplete smoothed output: fusion.smoothing.run)."""
+        if self.error is None:
+            getattr(self.sink, "discard", self.sink.close)()
 
 
 class _KeepSinkErrorEvents(_KeepSinkError):

@@ -185,8 +185,56 @@ def _exit_on_stop_signals(app):
             signal.signal(sig, old)
 
 
+def terminal_problem(stdin=None, stderr=None) -> str | None:
+    """Why the view cannot have the terminal (None when it can). Textual reads keys from standard input and
+    draws on standard error, so both must be the terminal, and the process must be in the terminal's
+    foreground process group: a background one (``cmd &``, or GNU ``timeout`` without ``--foreground``,
+    which moves itself and the command to a group of their own) is stopped by the terminal (SIGTTOU) as soon
+    as it sets the terminal's mode, and then never draws nor ends on SIGTERM."""
+    import os
+
+    streams = (("standard input", stdin or sys.__stdin__, "the view reads its keys there"),
+               ("standard error", stderr or sys.__stderr__, "the view draws there; redirect standard output only"))
+    fds = []
+    for name, stream, why in streams:
+        try:
+            fd = stream.fileno()
+        except (AttributeError, ValueError, OSError):
+            fd = -1
+        if fd < 0 or not os.isatty(fd):
+            return f"{name} is not a terminal ({why}); for a replay without the view use fusion run"
+        fds.append(fd)
+    try:
+        foreground = os.tcgetpgrp(fds[0])
+    except OSError:   # no controlling terminal (a terminal opened by a session that is not its own)
+        return None
+    if foreground != os.getpgrp():
+        return ("this process is not in the terminal's foreground process group (started in the background, or "
+                "by timeout without --foreground, which runs the command in a group of its own); use timeout "
+                "--foreground, or fusion run for a replay without the view")
+    return None
+
+
+def _release(app, args: argparse.Namespace) -> None:
+    """Close what ``build_app`` opened (the port, the --udp socket) when the view will not start; an empty
+    record file it created is removed (the name is free again for the next try)."""
+    feed = getattr(app, "feed", None)
+    if feed is not None:
+        feed.stop()
+    if args.record and Path(args.record).is_file() and Path(args.record).stat().st_size == 0:
+        Path(args.record).unlink()
+
+
 def run(args: argparse.Namespace) -> int:
     app = build_app(args)
+    problem = terminal_problem()
+    if problem is not None:
+        import signal
+
+        _release(app, args)
+        if hasattr(signal, "SIGTTOU"):   # the one line is written even from the background (stty tostop)
+            signal.signal(signal.SIGTTOU, signal.SIG_IGN)
+        raise InputError(f"the live view needs the terminal: {problem}")
     with _exit_on_stop_signals(app) as received:
         app.run()
     feed = getattr(app, "feed", None)

@@ -2,10 +2,12 @@
 from __future__ import annotations
 
 import argparse
+import stat
 import sys
 import traceback
+from pathlib import Path
 
-from fusion.errors import FusionError
+from fusion.errors import ConfigError, FusionError, InputError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -17,31 +19,60 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "and Q is symmetric positive semi-definite) "
                                    "and that its recording exists. Exit code 2 if any is invalid.")
     p.add_argument("files", nargs="+", metavar="FILE", help="system YAML files")
+    p.add_argument("--input", "-i", metavar="LOG", default=None,
+                   help="check the configs against this recording instead of their own: its header's field, "
+                        "beacons, receivers, gravity and origin must not contradict the config's (exit 2)")
     p.set_defaults(func=run)
 
 
-def _check_recording(path: str, system, rec) -> None:
-    from fusion.errors import ConfigError, InputError
+_KINDS = ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device (a terminal or serial port)"),
+          (stat.S_ISSOCK, "a socket"), (stat.S_ISBLK, "a block device"))
+
+
+def _stream_kind(rec: Path, where: str) -> str | None:
+    """What ``rec`` is when it is a stream validate must not read (reading would wait for a writer or a
+    device, and take what the run should read): a FIFO, a terminal or serial port, a socket, a block device;
+    None for a regular file. A path the system cannot look up (a symlink loop, a component that is a file,
+    permission) is a ConfigError naming it and why."""
+    try:
+        mode = rec.stat().st_mode
+    except FileNotFoundError:
+        raise ConfigError(f"{where}: {rec} does not exist") from None
+    except OSError as exc:
+        raise ConfigError(f"{where}: {rec}: {exc.strerror or exc}") from None
+    return next((kind for test, kind in _KINDS if test(mode)), None)
+
+
+def _check_recording(path: str, system, rec: Path) -> str | None:
+    """The recording is a readable log (not binary) and every beacon its header declares (``# beacon B5: x
+    y z``, as ``fusion simulate`` writes) is in the config's ``beacons:``, when the config has beacons: a
+    range to a beacon the config lacks would be malformed at every cycle. A stream (FIFO, device) is not
+    read: returns a note saying so (None otherwise)."""
     from fusion.logformat import read_header
     from fusion.sources.recording import open_lines
     from fusion.yamlsource import load_yaml
 
-    """The recording is a log (not binary) and every beacon its header declares (``# beacon B5: x y z``, as
-    ``fusion simulate`` writes) is in the config's ``beacons:``, when the config has beacons: a range to a
-    beacon the config lacks would be malformed at every cycle."""
-    lines = open_lines(rec)
+    where = load_yaml(path).where(["recording"])
+    kind = _stream_kind(rec, where)
+    if kind is not None:
+        return f"recording {rec} is {kind}: not read (its header is checked when a run reads it)"
     try:
-        header = read_header(lines)
+        lines = open_lines(rec)
+        try:
+            header = read_header(lines)
+        finally:
+            lines.close()  # type: ignore[attr-defined]
     except InputError as exc:   # a directory, empty, binary: no log to replay
-        raise ConfigError(f"{load_yaml(path).where(['recording'])}: {exc}") from None
-    finally:
-        lines.close()  # type: ignore[attr-defined]
+        raise ConfigError(f"{where}: {exc}") from None
+    except OSError as exc:      # unreadable: permission, an I/O error (/proc/self/mem)
+        raise ConfigError(f"{where}: cannot read {rec}: {exc.strerror or exc}") from None
     missing = [b for b in header.beacons if b not in system.beacons]
     if system.beacons and missing:
         where = load_yaml(path).where(["beacons"])
         shown = ", ".join(f"{b}: {list(header.beacons[b])}" for b in missing)
         raise ConfigError(f"{where}: the recording {rec.name} declares beacon(s) the config does not define "
                           f"({shown}); their ranges would all be malformed. Defined: {sorted(system.beacons)}")
+    return None
 
 
 #: The step (s) the process model is probed over.
@@ -146,17 +177,18 @@ def _check_process(path: str, system, x0) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fusion.config import load_system
-    from fusion.yamlsource import load_yaml
 
     bad = 0
+    from fusion.config import OWN_RECORDING
+    from fusion.header_checks import check as check_header
+
+    given = getattr(args, "input", None)
     for path in args.files:
         try:
-            system = load_system(path)
-            rec = system.recording
-            if rec is not None and not rec.exists():
-                raise FusionError(f"{load_yaml(path).where(['recording'])}: {rec} does not exist")
-            if rec is not None:
-                _check_recording(path, system, rec)
+            system = load_system(path, recording=OWN_RECORDING if given is None else given)
+            rec = system.recording if given is None else Path(given)
+            note = _check_recording(path, system, rec) if rec is not None else None
+            check_header(system, system.world, str(path))
             _check_models(path, system)
         except FusionError as exc:
             bad += 1
@@ -165,6 +197,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"{exc}", file=sys.stderr)
             continue
         sensors = ", ".join(f"{n} ({s.role})" for n, s in system.sensors.items())
+        if note:
+            print(f"{path}: note: {note}", file=sys.stderr)
         print(f"{path}: ok: {system.spec.name}: {system.process.name} {system.layout.n} states, "
               f"filter {system.filter.name}, sensors {sensors}")
     return 2 if bad else 0

@@ -25,6 +25,7 @@ import numpy as np
 from pydantic import Field, ValidationError, field_validator, model_validator
 
 from fusion.api import ConfigError, ImportedLog, Importer, ImportRequest, InputError, Params, Stream
+from fusion.importers.field_order import reading_order
 from fusion.logformat import _LABEL, _SENSOR
 
 _UNIT = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
@@ -219,7 +220,14 @@ class CsvImporter(Importer):
             else:
                 m = len(s.fields or {})
                 vals = np.frombuffer(rows, float).reshape(len(tt), m)[order] if len(tt) else np.zeros((0, m))
-                log.streams.append(Stream(name, tuple(s.fields or {}), tt, vals, (CSV_FMT,) * vals.shape[1], meta))
+                names = tuple(s.fields or {})
+                fixed = reading_order(names) if name not in ("truth", "reference") else None
+                if fixed is not None:   # fusion run reads values by position: written in the order it reads
+                    vals = vals[:, [names.index(f) for f in fixed]]
+                    log.notes.append(f"{name}: the mapping lists {' '.join(names)}; written as {' '.join(fixed)}, "
+                                     "the order the components read them")
+                    names = fixed
+                log.streams.append(Stream(name, names, tt, vals, (CSV_FMT,) * vals.shape[1], meta))
         return log
 
 

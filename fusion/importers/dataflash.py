@@ -38,7 +38,9 @@ import numpy as np
 from fusion.api import ImportedLog, Importer, ImportRequest, InputError, Stream
 from fusion.importers.common import (DEG, F32, GAUSS_TO_UT, LATLON_E7, earth_field_ned, make_stream, quat_from_euler,
                                      slerp_to)
+from fusion.importers.coverage import imu_coverage, to_header
 from fusion.importers.dataflash_tables import _BASE, collect, open_log
+from fusion.importers.flight_events import dataflash_events
 
 # unit label (UNIT record) -> (our unit, factor) per quantity
 _CONVERT = {
@@ -88,6 +90,7 @@ class DataflashImporter(Importer):
     def read(self, path: str, request: ImportRequest) -> ImportedLog:
         types = sorted(t for t, fam in _FAMILY.items() if request.wants_family(fam)
                        or (t == "ATT" and request.wants_family("mag")))   # ATT: the field in NED (mag header)
+        types += ["EV", "MODE", "ERR"]   # the flight's events (fusion.importers.flight_events)
         reader = open_log(path, request)
         log = ImportedLog()
         rows, units, vehicle, texts = collect(reader, path, types, request, log.notes)
@@ -96,10 +99,17 @@ class DataflashImporter(Importer):
             log.meta["vehicle"] = vehicle
         log.meta["time_zero"] = "0 s on the autopilot's boot clock (t = TimeUS / 1e6)"
         conv = _Units(units)
-        log.messages = texts
+        log.messages = sorted(texts + dataflash_events(rows, vehicle), key=lambda m: m[0])
         notes = log.notes
         if getattr(reader, "fusion_damage", None):   # --partial: what was skipped, said
             notes.append(f"{reader.fusion_damage}: skipped, the messages around them read")
+            log.meta["partial"] = f"{reader.fusion_damage}: skipped (--partial)"
+        if getattr(reader, "fusion_cut", None) is not None:
+            cut = (f"truncated: the last message, at byte {reader.fusion_cut}, is cut short by the end of the file "
+                   f"at byte {reader.data_len} ({reader.data_len - reader.fusion_cut} byte(s) lost, and whatever "
+                   "the log would have held after them); the messages before it imported (--partial)")
+            notes.append(cut)
+            log.meta["partial"] = "; ".join(filter(None, (log.meta.get("partial"), cut)))
         streams: list[Stream] = []
         missing: list[str] = []
         for fam, fn in (("imu", _imu), ("gps", _gps), ("mag", _mag), ("baro", _baro)):
@@ -138,6 +148,7 @@ class DataflashImporter(Importer):
             if asked:
                 raise InputError(f"{path}: no data for {', '.join(asked)}")
             notes.append("not in the log: " + ", ".join(missing))
+        to_header(streams, log.meta)
         log.streams = streams
         return log
 
@@ -226,8 +237,10 @@ def _imu(rows, conv: _Units, request, notes) -> list[Stream]:
     out = []
     for inst, (mt, r) in _instances(rows, ("IMU", "IMU2", "IMU3")).items():
         v = np.column_stack([conv.column(r, mt, f"Acc{a}") for a in "XYZ"] + [conv.column(r, mt, f"Gyr{a}") for a in "XYZ"])
-        out.append(make_stream(_name("imu", inst), ("ax", "ay", "az", "gx", "gy", "gz"), r["t"], v, request,
-                               meta={"units": "m/s^2 (specific force) rad/s, body FRD", "message": mt}, notes=notes))
+        s = make_stream(_name("imu", inst), ("ax", "ay", "az", "gx", "gy", "gz"), r["t"], v, request,
+                        meta={"units": "m/s^2 (specific force) rad/s, body FRD", "message": mt}, notes=notes)
+        s.meta.update(imu_coverage(s.t, s.values[:, 3:], None, mt))
+        out.append(s)
     return out
 
 

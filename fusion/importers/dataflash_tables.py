@@ -42,6 +42,7 @@ def open_log(path: str, request: ImportRequest):
     cut, gap, first_gap = _integrity(reader)
     why = (f": a message of unknown type 0x{stop[1]:02x}, where pymavlink's index stops"
            if stop is not None and stop[0] == first_gap else "")
+    reader.fusion_cut = cut
     reader.fusion_damage = (f"corrupt: {gap} byte(s) belong to no message (the first at byte {first_gap}{why})"
                             if gap else None)   # said by the importer under --partial
     if not request.allow_partial:
@@ -146,14 +147,32 @@ def _integrity(reader) -> tuple[int | None, int, int | None]:
     return cut, total, first
 
 
-_TIME = ("TimeUS", "TimeMS")
+# GPS time beside the boot clock, by layout: (GPS week column, GPS time-of-week column in ms)
+GPS_TIME = (("GWk", "GMS"), ("Week", "TimeMS"))
+
+
+def boot_clock(columns: list[str] | tuple[str, ...]) -> tuple[str, float] | None:
+    """(column, s per unit) of a message layout's boot clock, or None when it has none.
+
+    ``TimeUS`` (us) wherever it is; else a message that carries GPS time beside the boot clock (older
+    firmware's ``GPS``: ``Status,TimeMS,Week,...,T``, where ``TimeMS`` is the GPS time of week and ``T`` the
+    boot clock) has its boot time in ``T`` (ms); else ``TimeMS`` (ms)."""
+    cols = set(columns)
+    if "TimeUS" in cols:
+        return "TimeUS", 1e-6
+    if "T" in cols and "TimeMS" in cols and ("Week" in cols or "GWk" in cols):
+        return "T", 1e-3
+    if "TimeMS" in cols:
+        return "TimeMS", 1e-3
+    return None
 _NEEDED = {
     "IMU": ("I", "AccX", "AccY", "AccZ", "GyrX", "GyrY", "GyrZ"),
-    "GPS": ("I", "Status", "GMS", "GWk", "NSats", "HDop", "Lat", "Lng", "Alt", "Spd", "GCrs", "VZ"),
+    "GPS": ("I", "Status", "GMS", "GWk", "Week", "TimeMS", "NSats", "HDop", "Lat", "Lng", "Alt", "Spd", "GCrs", "VZ"),
     "GPA": ("I", "HAcc", "VAcc"), "MAG": ("I", "MagX", "MagY", "MagZ"), "BARO": ("I", "Alt", "Press", "Temp"),
     "ATT": ("Roll", "Pitch", "Yaw"), "EKF": ("C", "Roll", "Pitch", "Yaw", "VN", "VE", "VD", "PN", "PE", "PD"),
     "ORGN": ("Type", "Lat", "Lng", "Alt"), "FMTU": ("FmtType", "UnitIds", "MultIds"), "UNIT": ("Id", "Label"),
     "MULT": ("Id", "Mult"), "VER": ("FWS",), "MSG": ("Message",),
+    "EV": ("Id",), "MODE": ("Mode", "ModeNum"), "ERR": ("Subsys", "ECode"),
 }
 # DataFlash format characters -> numpy dtypes (pymavlink's FORMAT_TO_STRUCT, little endian, packed)
 _DTYPE = {"b": "<i1", "B": "<u1", "M": "<u1", "h": "<i2", "H": "<u2", "c": "<i2", "C": "<u2", "i": "<i4",
@@ -210,10 +229,11 @@ def _table(reader, name: str, request: ImportRequest | None, notes: list[str] | 
         mul = FORMAT_MULT.get(c)
         return v / (1.0 / mul) if mul is not None else v.astype(float)
 
-    tcol = next((c for c in _TIME if c in where), None)
+    clock = boot_clock(fmt.columns)
+    tcol = clock[0] if clock is not None else None
     out: dict[str, np.ndarray] = {}
-    if tcol is not None:
-        t = read(tcol, offs) / (1e6 if tcol == "TimeUS" else 1e3)
+    if clock is not None:
+        t = read(clock[0], offs) * clock[1]
         if request is not None and offs.size:
             offs, t = _sane(buf, fmt, name, offs, t, read if "I" in where else None, notes, jumps)
         if request is not None:
@@ -227,8 +247,11 @@ def _table(reader, name: str, request: ImportRequest | None, notes: list[str] | 
     elif request is not None:
         return None
     for col in _NEEDED.get(_BASE.get(name, name), ()):
-        if col in where:
+        if col in where and col != tcol:
             out[col] = read(col, offs)
+    for week, tow in GPS_TIME[1:]:   # an older layout's GPS time under the names of the newer one
+        if week in out and tow in out and "GWk" not in out:
+            out["GWk"], out["GMS"] = out.pop(week), out.pop(tow)
     out["_n"] = np.array(len(offs))
     return out
 

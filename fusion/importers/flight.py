@@ -81,6 +81,8 @@ def prepare(log: ImportedLog) -> None:
     elif ref is not None and "ekf_origin" in ref.meta:
         log.meta.setdefault("origin", ref.meta["ekf_origin"])
         log.meta.setdefault("origin_source", "the onboard estimator's origin (no accepted GPS fix imported)")
+    if origin is not None and _attitude_at_start(log, ref, origin[0]):
+        return
     given = any(s.sensor == "initial_attitude" and len(s) for s in log.streams)   # the importer's own (PX4)
     if not given and ref is not None and ref.values is not None and {"qw", "qx", "qy", "qz"} <= set(ref.fields):
         idx = [list(ref.fields).index(c) for c in ("qw", "qx", "qy", "qz")]
@@ -88,3 +90,22 @@ def prepare(log: ImportedLog) -> None:
         log.streams.append(Stream("initial_attitude", ("qw", "qx", "qy", "qz"), np.asarray(ref.t[:1], float), q,
                                   (F32,) * 4, {"source": "the first reference attitude (body FRD to NED), for a "
                                                "config that starts in flight"}))
+
+
+def _attitude_at_start(log: ImportedLog, ref: Stream | None, t_fix: float) -> bool:
+    """Replace the ``initial_attitude`` line by the reference attitude at the first accepted fix ``t_fix``
+    (s), written 1 us before it: a config with ``initial.from_sensor: gps`` starts at the IMU sample after that
+    fix, and the onboard attitude of the log's first sample (maybe a minute of flight earlier) is not the
+    vehicle's then. False (nothing changed) when the reference has no attitude at or before the fix."""
+    from fusion.importers.common import slerp_to
+
+    if ref is None or ref.values is None or not {"qw", "qx", "qy", "qz"} <= set(ref.fields) or ref.t[0] > t_fix:
+        return False
+    idx = [list(ref.fields).index(c) for c in ("qw", "qx", "qy", "qz")]
+    q = slerp_to(np.asarray(ref.t, float), np.asarray(ref.values, float)[:, idx], np.array([t_fix]))
+    t = round(t_fix, 6) - 1e-6
+    log.streams = [s for s in log.streams if s.sensor != "initial_attitude"]
+    log.streams.append(Stream("initial_attitude", ("qw", "qx", "qy", "qz"), np.array([t]), q, (F32,) * 4,
+                              {"source": f"the reference attitude (body FRD to NED) at the first accepted GPS fix "
+                               f"(t {t_fix:.3f} s), where a config with initial.from_sensor: gps starts"}))
+    return True

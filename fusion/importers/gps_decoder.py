@@ -32,6 +32,7 @@ from typing import Any, ClassVar
 from pydantic import Field, model_validator
 
 from fusion.api import BuildContext, Decoder, MalformedMessage, Message, Params, RejectedMessage
+from fusion.importers.gps_nmea_pair import NmeaPairs
 
 FIELDS = ("lat", "lon", "alt", "vn", "ve", "vd", "hacc", "vacc", "hdop", "fix", "nsat", "geoid")
 # The layouts the importers write, by their number of values: PX4 (with the geoid height), ArduPilot with
@@ -87,6 +88,7 @@ class GpsFieldsDecoder(Decoder):
         self._t0 = 0.0                                          # s, time of the origin fix
         self._fix_types = frozenset(p.fix_types) if p.fix_types is not None else frozenset(range(p.min_fix, 7))
         self.counters: dict[str, int] = {"fixes": 0, "rejected": 0}
+        self._nmea = NmeaPairs()   # GGA + RMC lines of an import with --gps nmea (fusion.importers.gps_nmea_pair)
 
     def info(self) -> dict[str, Any]:
         """The origin used (deg, deg, m ellipsoidal) and where it came from, and the counters."""
@@ -99,14 +101,19 @@ class GpsFieldsDecoder(Decoder):
 
         p: GpsFieldsParams = self.params  # type: ignore[assignment]
         v = message.values
-        names = LAYOUTS.get(len(v))
-        if names is None:
-            raise MalformedMessage(f"gps_fields expects 13, 12, 11 or 9 values ({' '.join(FIELDS)}, as fusion import "
-                                   f"writes them), got {len(v)}")
-        try:
-            f = dict(zip(names, (float(x) for x in v)))
-        except (TypeError, ValueError):
-            raise MalformedMessage(f"gps_fields: a value is not a number in {v!r}") from None
+        if len(v) == 1 and isinstance(v[0], str) and v[0].startswith("$"):   # fusion import --gps nmea
+            f = self._nmea.feed(v[0])
+            if f is None:
+                return None
+        else:
+            names = LAYOUTS.get(len(v))
+            if names is None:
+                raise MalformedMessage(f"gps_fields expects 13, 12, 11 or 9 values ({' '.join(FIELDS)}, as fusion "
+                                       f"import writes them) or an NMEA sentence, got {len(v)}")
+            try:
+                f = dict(zip(names, (float(x) for x in v)))
+            except (TypeError, ValueError):
+                raise MalformedMessage(f"gps_fields: a value is not a number in {v!r}") from None
         lat, lon, alt, vn, ve = f["lat"], f["lon"], f["alt"], f["vn"], f["ve"]
         fix, nsat, hdop = f["fix"], f["nsat"], f["hdop"]
         if f.get("vok", 1.0) < 0.5:                       # the receiver said its velocity is not valid

@@ -23,15 +23,17 @@ clock (``timestamp_sample`` where the topic has it).
 from __future__ import annotations
 
 import io
-import math
 import os
-from typing import Any
 
 import numpy as np
 
 from fusion.api import ImportedLog, Importer, ImportRequest, InputError, Stream
+from fusion.importers import px4_legacy
 from fusion.importers.common import (F32, GAUSS_TO_UT, LATLON_E7, LATLON_F, earth_field_ned, in_span, make_stream,
-                                     silenced, slerp_to)
+                                     silenced)
+from fusion.importers.coverage import imu_coverage, to_header
+from fusion.importers.flight_events import px4_events
+from fusion.importers.ulog_reference import _cols, _reference
 
 TOPICS = {
     "imu": ("sensor_combined",),
@@ -74,14 +76,6 @@ def _first(ulog, names: tuple[str, ...]):
     return None
 
 
-def _cols(d, names: list[str]) -> np.ndarray:
-    missing = [n for n in names if n not in d.data]
-    if missing:
-        have = ", ".join(k for k in d.data if k != "timestamp")
-        raise InputError(f"topic {d.name}: no field {missing[0]!r} in this log's layout (it has: {have[:300]})")
-    return np.column_stack([np.asarray(d.data[n], float) for n in names])
-
-
 class UlogImporter(Importer):
     """PX4 ULog (.ulg) logs through pyulog.
 
@@ -106,6 +100,9 @@ class UlogImporter(Importer):
             log.meta["vehicle"] = vehicle + _software(info)
         log.meta["time_zero"] = (f"{t0 / 1e6:.6f} s on the autopilot's boot clock (t = boot time - "
                                  f"{t0 / 1e6:.6f})")
+        if ulog.fusion_partial:
+            log.meta["partial"] = ulog.fusion_partial
+            log.notes.append(ulog.fusion_partial)
 
         def tcol(d) -> np.ndarray:
             ts = d.data.get("timestamp_sample", d.data["timestamp"])
@@ -119,16 +116,24 @@ class UlogImporter(Importer):
             if d is None:
                 missing.append("imu (sensor_combined)")
             else:
-                v = _cols(d, [f"accelerometer_m_s2[{i}]" for i in range(3)] + [f"gyro_rad[{i}]" for i in range(3)])
+                gyro = px4_legacy.gyro_field(d.data) or "gyro_rad"
+                v = _cols(d, [f"accelerometer_m_s2[{i}]" for i in range(3)] + [f"{gyro}[{i}]" for i in range(3)])
                 t_imu = tcol(d)
+                integral = (np.asarray(d.data["gyro_integral_dt"], float) * 1e-6
+                            if "gyro_integral_dt" in d.data else None)
                 rel = d.data.get("accelerometer_timestamp_relative")
                 if rel is not None and np.any(np.asarray(rel) == 0x7FFFFFFF):   # RELATIVE_TIMESTAMP_INVALID
                     stale = np.asarray(rel) == 0x7FFFFFFF
                     notes.append(f"imu: {int(stale.sum())} sample(s) without a new accelerometer sample dropped")
                     v, t_imu = v[~stale], t_imu[~stale]
-                streams.append(make_stream("imu", ("ax", "ay", "az", "gx", "gy", "gz"), t_imu, v, request,
-                                           meta={"units": "m/s^2 (specific force) rad/s, body FRD",
-                                                 "topic": "sensor_combined"}, notes=notes))
+                    integral = None if integral is None else integral[~stale]
+                s = make_stream("imu", ("ax", "ay", "az", "gx", "gy", "gz"), t_imu, v, request,
+                                meta={"units": "m/s^2 (specific force) rad/s, body FRD",
+                                      "topic": "sensor_combined"}, notes=notes)
+                keep = in_span(t_imu, request) & np.all(np.isfinite(v), axis=1)
+                s.meta.update(imu_coverage(s.t, s.values[:, 3:], None if integral is None else integral[keep],
+                                           "gyro_integral_dt"))
+                streams.append(s)
         if request.wants("gps"):
             d = _first(ulog, TOPICS["gps"])
             if d is None:
@@ -145,9 +150,15 @@ class UlogImporter(Importer):
                         start = utc[i] / 1e6 - (int(d.data["timestamp"][i]) - t0) / 1e6
                         log.meta["start_utc"] = _dt.datetime.fromtimestamp(start, _dt.timezone.utc).strftime(
                             "%Y-%m-%dT%H:%M:%S.%fZ")
+        combined = _first(ulog, ("sensor_combined",))
         if request.wants("mag"):
             d = _first(ulog, TOPICS["mag"])
-            if d is None:
+            if d is None and px4_legacy.has_mag(combined):
+                t_m, v_m = px4_legacy.combined_mag(combined, t0)
+                streams.append(make_stream("mag", ("mx", "my", "mz"), t_m, v_m * GAUSS_TO_UT, request,
+                                           meta={"units": "uT, body FRD, calibrated", "topic":
+                                                 "sensor_combined (magnetometer_ga, an older layout)"}, notes=notes))
+            elif d is None:
                 missing.append("mag (vehicle_magnetometer or sensor_mag)")
             else:
                 if d.name == "vehicle_magnetometer":
@@ -161,7 +172,11 @@ class UlogImporter(Importer):
                                            meta={"units": f"uT, {frame}", "topic": d.name}, notes=notes))
         if request.wants("baro"):
             d = _first(ulog, TOPICS["baro"])
-            if d is None:
+            if d is None and px4_legacy.has_baro(combined):
+                t_b, v_b, f_b, u_b = px4_legacy.combined_baro(combined, t0)
+                streams.append(make_stream("baro", f_b, t_b, v_b, request, meta={"units": u_b, "topic":
+                                           "sensor_combined (baro_alt_meter, an older layout)"}, notes=notes))
+            elif d is None:
                 missing.append("baro (vehicle_air_data or sensor_baro)")
             else:
                 streams.append(_baro(d, tcol(d), request, notes))
@@ -182,11 +197,12 @@ class UlogImporter(Importer):
                                           {"source": "the first valid vehicle_attitude (body FRD to NED), for a "
                                            "config that starts in flight"}))
         _field_from_reference(streams, _first(ulog, ("vehicle_attitude",)) if request.wants("mag") else None, tcol)
-        for m in ulog.logged_messages:
-            t = (int(m.timestamp) - t0) / 1e6
+        texts = [((int(m.timestamp) - t0) / 1e6, m.message) for m in ulog.logged_messages]
+        for t, text in sorted(texts + px4_events(_first(ulog, ("vehicle_status",)), tcol), key=lambda m: m[0]):
             if (request.start is None or t >= request.start) and (request.end is None or t <= request.end):
-                log.messages.append((t, m.message))
+                log.messages.append((t, text))
         _check_requested(path, request, missing, notes)
+        to_header(streams, log.meta)
         log.streams = streams
         return log
 
@@ -227,7 +243,9 @@ def _parse(path: str, request: ImportRequest):
     from pyulog.core import ULogException
 
     topics = sorted({t for s, ts in TOPICS.items() if request.wants(s) for t in ts}
-                    | ({"vehicle_attitude"} if request.wants("mag") else set()))   # the field in NED (mag header)
+                    | ({"vehicle_attitude"} if request.wants("mag") else set())    # the field in NED (mag header)
+                    | ({"sensor_combined"} if request.wants("mag") or request.wants("baro") else set())  # older layout
+                    | {"vehicle_status"})   # arming, mode, failsafe (fusion.importers.flight_events)
     try:
         with open(path, "rb") as raw:
             fh = _Reader(raw)
@@ -247,6 +265,15 @@ def _parse(path: str, request: ImportRequest):
         said = " ".join(chatter.getvalue().split())[:200]
         raise InputError(f"{path}: corrupt ULog data ({said or 'pyulog found invalid messages'}); pass --partial "
                          "to import the messages pyulog could read")
+    said = []
+    if fh.cut_at is not None:
+        said.append(f"truncated: the last message is cut short by the end of the file at byte {size}; the "
+                    "messages before it imported (--partial)")
+    if ulog.file_corruption:
+        chatter_text = " ".join(chatter.getvalue().split())[:200]
+        said.append(f"corrupt ULog data ({chatter_text or 'pyulog found invalid messages'}): the messages pyulog "
+                    "could read imported (--partial)")
+    ulog.fusion_partial = "; ".join(said)
     if not any(len(d.data.get("timestamp", ())) for d in ulog.data_list):
         raise InputError(f"{path}: no data messages of {', '.join(topics)} (is the log empty or cut in its header?)")
     return ulog
@@ -328,149 +355,3 @@ def _baro(d, t: np.ndarray, request: ImportRequest, notes: list[str]) -> Stream:
             v[:, 0] *= 100.0
             units += " (pressure logged in mbar, converted)"
     return make_stream("baro", fields, t, v, request, meta={"units": units, "topic": d.name}, notes=notes)
-
-
-_FLAGS = ("xy_valid", "z_valid", "v_xy_valid", "v_z_valid", "xy_global", "z_global")
-
-
-def _named(idx: np.ndarray, t: np.ndarray, what: list[str], limit: int = 3) -> str:
-    """``sample 324 (t 3.405 s): xy_valid=-44`` for the first ``limit`` of the samples ``idx``."""
-    out = "; ".join(f"sample {int(i)} (t {t[i]:.3f} s){': ' + what[i] if what[i] else ''}" for i in idx[:limit])
-    return out + (f"; and {len(idx) - limit} more" if len(idx) > limit else "")
-
-
-def _corrupt_flags(data: dict, n: int) -> tuple[np.ndarray, list[str]]:
-    """Samples whose validity flags are not 0/1 (a ULog bool is one byte, 0 or 1: anything else is damaged
-    data), and per sample the flags that say so."""
-    bad = np.zeros(n, bool)
-    said = [""] * n
-    for flag in _FLAGS:
-        if flag not in data:
-            continue
-        raw = np.asarray(data[flag]).astype(np.int64)
-        wrong = (raw != 0) & (raw != 1)
-        for i in np.flatnonzero(wrong).tolist():
-            said[i] += (", " if said[i] else "") + f"{flag}={int(raw[i])}"
-        bad |= wrong
-    return bad, said
-
-
-def _valid_attitude(att, tcol, notes: list[str]) -> tuple[np.ndarray, np.ndarray]:
-    """(times, q) of the ``vehicle_attitude`` samples whose quaternion is finite and of unit norm (a
-    float32 quaternion of PX4 is unit to ~1e-7: one off by more is damaged data, skipped with a note)."""
-    t = tcol(att)
-    q = _cols(att, [f"q[{i}]" for i in range(4)])
-    with np.errstate(invalid="ignore", over="ignore"):
-        ok = np.all(np.isfinite(q), axis=1) & (np.abs(np.linalg.norm(q, axis=1) - 1.0) < 1e-3)
-    if not ok.all():
-        bad = np.flatnonzero(~ok)
-        notes.append(f"reference: {len(bad)} vehicle_attitude sample(s) with a quaternion that is not of unit norm "
-                     f"(corrupt) skipped: {_named(bad, t, [''] * len(t))}")
-    return t[ok], q[ok]
-
-
-def _choose(valid: dict[str, np.ndarray], sizes: dict[str, int], extra: int, base: np.ndarray) -> list[str]:
-    """The groups of elements to write: of those ever valid, the set that writes the most values
-    (elements x samples at which all of them are valid; ``extra`` elements, the attitude, ride along with
-    every sample of ``base``, the usable samples in the span). Ties go to the larger set. The log format has one column set a stream, so an element
-    valid only late either shortens the whole reference or is left out, whichever loses less."""
-    import itertools
-
-    names = [g for g in valid if valid[g].any()]
-    best, best_score = [], (-1, -1)
-    for r in range(len(names), -1, -1):
-        for combo in itertools.combinations(names, r):
-            keep = base.copy()
-            for g in combo:
-                keep &= valid[g]
-            width = sum(sizes[g] for g in combo) + extra
-            score = (width * int(keep.sum()) if width else 0, width)
-            if score > best_score:
-                best, best_score = list(combo), score
-    return best
-
-
-def _reference(lpos, att, tcol, request: ImportRequest, notes: list[str]) -> tuple[Stream | None, Any, Any]:
-    """Reference stream at the local-position times (attitude slerped to them), or attitude only; the
-    EKF's origin on the globe (or None); the initial attitude (t, q) or None.
-
-    A ``vehicle_local_position`` sample whose validity flags are not 0/1 is corrupt and skipped (named in a
-    note). Of the element groups the EKF flags valid (``px py`` by xy_valid, ``pz`` z_valid, ``vx vy``
-    v_xy_valid, ``vz`` v_z_valid), the set that writes the most values is written (see ``_choose``; a
-    group left out is named with the time it becomes valid), at the samples where all of them are valid.
-    The initial attitude is the first valid attitude, at the first reference time or the first attitude
-    sample, whichever is earlier, in the span: never moved by when the position becomes valid."""
-    groups = (("px py", ["x", "y"], "xy_valid"), ("pz", ["z"], "z_valid"),
-              ("vx vy", ["vx", "vy"], "v_xy_valid"), ("vz", ["vz"], "v_z_valid"))
-    origin = None
-    meta = {"frame": "NED from the EKF's local origin; q body FRD to NED, [w x y z]",
-            "source": "PX4 EKF: " + " + ".join(d.name for d in (lpos, att) if d is not None)}
-    t_att = q_att = None
-    if att is not None:
-        t_att, q_att = _valid_attitude(att, tcol, notes)
-        if len(t_att) == 0:
-            t_att = q_att = None
-    initial = None
-    if t_att is not None:
-        in_att = in_span(t_att, request)
-        if in_att.any():
-            initial = (float(t_att[in_att][0]), q_att[in_att][0])
-    if lpos is not None:
-        data = lpos.data
-        t = tcol(lpos)
-        n = len(t)
-        corrupt, said = _corrupt_flags(data, n)
-        if corrupt.any():
-            idx = np.flatnonzero(corrupt)
-            notes.append(f"reference: {len(idx)} of {n} vehicle_local_position sample(s) skipped as corrupt "
-                         f"(a validity flag neither 0 nor 1): {_named(idx, t, said)}")
-        ok = ~corrupt
-        span = in_span(t, request)   # the column set is chosen by the samples to be written
-        valid = {}
-        for names, src, flag in groups:
-            v = (np.asarray(data[flag]) == 1) if flag in data else np.ones(n, bool)
-            valid[names] = v & ok & span
-        sizes = {g: len(g.split()) for g in valid}
-        base = ok & span
-        m = int(base.sum())
-        chosen = _choose(valid, sizes, 4 if t_att is not None else 0, base)
-        fields: list[str] = []
-        cols: list[np.ndarray] = []
-        keep = base.copy()
-        for names, src, flag in groups:
-            if not valid[names].any():
-                notes.append(f"reference: the EKF never flags {flag}: no {names}")
-                continue
-            if names not in chosen:
-                first = np.flatnonzero(valid[names])[0]
-                since = math.floor(t[first] * 1000.0) / 1000.0   # a --start that includes it
-                notes.append(f"reference: the EKF flags {flag} only in {int(valid[names].sum())} of {m} sample(s) "
-                             f"(from t {since:.3f} s): no {names}, so that the other elements are written over "
-                             f"the whole span (import with --start {since:.3f} for all of them)")
-                continue
-            fields += names.split()
-            cols += [np.asarray(data[c], float) for c in src]
-            keep &= valid[names]
-        if fields:
-            dropped = int(np.sum(base & ~keep))
-            if dropped:
-                notes.append(f"reference: {dropped} of {m} sample(s) at which not all of {' '.join(fields)} are "
-                             "valid dropped")
-            if t_att is not None:
-                q = slerp_to(t_att, q_att, t)
-                fields += ["qw", "qx", "qy", "qz"]
-                cols += [q[:, i] for i in range(4)]
-            if "xy_global" in data and "ref_lat" in data:
-                g = np.flatnonzero((np.asarray(data["xy_global"]) == 1) & keep)
-                if g.size:
-                    i = g[0]
-                    origin = (float(data["ref_lat"][i]), float(data["ref_lon"][i]), float(data["ref_alt"][i]))
-            v = np.column_stack(cols)[keep]
-            s = make_stream("reference", tuple(fields), t[keep], v, request, meta=meta, notes=notes)
-            if initial is not None and len(s) and s.t[0] < initial[0]:   # held back to the first reference time
-                initial = (float(s.t[0]), slerp_to(t_att, q_att, s.t[:1])[0])
-            return s, origin, initial
-    if t_att is None:
-        return None, None, None
-    return (make_stream("reference", ("qw", "qx", "qy", "qz"), t_att, q_att, request, meta=meta, notes=notes),
-            None, initial)

@@ -26,6 +26,7 @@ def _column_text(col: np.ndarray, spec: str) -> list[str]:
 
 _CHUNK = 20000
 MAX_MESSAGES = 200   # the log's text messages written to the header (flight events: takeoff, landing, modes)
+EVENT_WORDS = ("ARMED", "DISARMED", "MODE", "FAILSAFE", "EVENT", "ERROR")   # fusion.importers.flight_events
 
 
 def stream_lines(s: Stream, start: int = 0, stop: int | None = None) -> list[str]:
@@ -69,10 +70,14 @@ def render(log: ImportedLog) -> Iterator[str]:
     yield "# fusion-log 1\n"
     for k, v in log.meta.items():
         yield f"# {k}: {_text(v)}\n"
-    for t, text in log.messages[:MAX_MESSAGES]:
-        yield f"# message {t:.3f}: {' '.join(str(text).split())}\n"
-    if len(log.messages) > MAX_MESSAGES:
-        yield f"# message: ... and {len(log.messages) - MAX_MESSAGES} more\n"
+    texts = 0
+    for t, text in log.messages:     # the flight's events all, the log's other texts up to MAX_MESSAGES
+        event = str(text).split(" ", 1)[0] in EVENT_WORDS
+        texts += not event
+        if event or texts <= MAX_MESSAGES:
+            yield f"# message {t:.3f}: {' '.join(str(text).split())}\n"
+    if texts > MAX_MESSAGES:
+        yield f"# message: ... and {texts - MAX_MESSAGES} more\n"
     for s in log.streams:
         for k, v in s.meta.items():
             yield f"# {s.sensor} {k}: {_text(v)}\n"

@@ -13,7 +13,38 @@ from fusion.api import Event
 if TYPE_CHECKING:
     from fusion.run.stats import RunStats
 
-__all__ = ["expected_fields", "truth_warnings", "header_beacon_warnings", "COARSE_TRUTH_S", "BEACON_TOLERANCE_M"]
+__all__ = ["expected_fields", "truth_warnings", "header_beacon_warnings", "fix_sensor_absent", "coverage_check",
+           "COARSE_TRUTH_S", "BEACON_TOLERANCE_M", "ATTITUDE_ONLY_HZ"]
+
+#: Estimates a second of a run started without its fix when the config sets no output.rate_hz (an
+#: attitude-only run may have no update to emit an estimate at).
+ATTITUDE_ONLY_HZ = 10.0
+
+
+def fix_sensor_absent(system: Any, fields: dict) -> tuple[float | None, Event] | None:
+    """A recording whose header names its streams (``# fields``, ``fields``) without ``initial.from_sensor`` (a
+    flight log without GPS): ``(output rate or None, the warning)`` to start the filter without waiting for a fix
+    that never comes; None otherwise."""
+    fs = system.spec.initial.from_sensor
+    inputs = [n for n, s in system.sensors.items() if s.role == "input"]
+    if fs is None or fs in fields or not any(n in fields for n in inputs):
+        return None
+    rate = None if system.spec.output.rate_hz else ATTITUDE_ONLY_HZ
+    return rate, Event(math.nan, "warning", fs, (
+        f"the recording has no {fs!r} stream (no '# fields {fs}' line): the filter starts without its fix "
+        f"(initial.from_sensor), from the configured prior position and velocity and the aligned attitude"
+        + (" (initial_attitude: the reference's)" if "initial_attitude" in fields else "")
+        + "; position and velocity are dead reckoning only, the attitude is the estimate to read"
+        + (f" (estimates also at {rate:g} Hz, output.rate_hz)" if rate else "")))
+
+
+def coverage_check(system: Any, sensor: str, meta: Any) -> tuple[dict | None, str | None]:
+    """The header's IMU coverage against the input sensor's limits (fusion.imu_coverage): ``(facts for the
+    summary's health or None, a warning or None)``."""
+    from fusion.imu_coverage import assess
+
+    spec = system.spec.sensors[sensor]
+    return assess(sensor, meta, spec.min_coverage, spec.max_rotation_deg)
 
 
 def expected_fields(runtime: Any, process: Any) -> tuple[tuple[str, ...] | None, str]:

@@ -121,6 +121,13 @@ class Loop:
         """Recoveries from a lock-out (fusion.recovery) so far."""
         return self.processor.resets
 
+    def start_without_fix(self, output_hz: float | None = None) -> None:
+        """Start without waiting for ``initial.from_sensor`` (the recording has no such stream); ``output_hz``:
+        estimates by prediction at that rate when the config has none (a run that may have no update)."""
+        self.startup.start_without_fix()
+        if output_hz and not self.integrator.output_dt:
+            self.integrator.output_dt = 1.0 / output_hz
+
     # ------------------------------------------------------------------ feeding
     def run(self, messages: Iterable[Message | MalformedMessage]) -> Iterator[Estimate | Event]:
         """Consume messages (and malformed-line markers from fusion.logformat.iter_messages): the estimates and

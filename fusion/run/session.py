@@ -25,6 +25,7 @@ against the config fusion.run.header.
 from __future__ import annotations
 
 import copy
+import itertools
 import math
 import time
 from typing import Any, Callable, Iterable, Sequence
@@ -33,7 +34,8 @@ from fusion.api import Estimate, Event, FusionError, InputError, MalformedMessag
 from fusion.config import System
 from fusion.logformat import ParsedStream, iter_messages, parse_values
 from fusion.run.clock import COMPARED
-from fusion.run.header import expected_fields, header_beacon_warnings, truth_warnings
+from fusion.run.header import (coverage_check, expected_fields, fix_sensor_absent, header_beacon_warnings,
+                               truth_warnings)
 from fusion.run.integrator import ProcessModelFailed
 from fusion.run.lines import SourceLost, guarded, lines_of, source_message
 from fusion.run.loop import Loop, Updated
@@ -71,6 +73,8 @@ class Run:
         self.label = label
         self.parsed = ParsedStream(on_fields=self._check_fields)
         self._fields_told: set[str] = set()
+        self.imu_coverage: dict[str, dict] = {}   # input sensor -> fusion.imu_coverage facts (summary health)
+        self._header_open = True                   # until the first message: the '# fields' lines are all read
         self.stats: RunStats
         self.scheduler = self.loop = Loop(system)   # (``scheduler``: the name the live view reads it by)
         self.stats = RunStats(system, self.loop, self.parsed)
@@ -108,6 +112,8 @@ class Run:
     def push(self, item: Message | MalformedMessage) -> list[Estimate | Event]:
         """Feed one message (or a malformed-line marker from ``iter_messages``); returns what it released,
         after the sinks, hooks and statistics have seen it."""
+        if self._header_open and item.__class__ is Message:
+            self._header_read()
         if item.__class__ is Message and (item.sensor == "truth" or item.sensor == "reference"):
             self._compare(item)
             return []
@@ -123,6 +129,13 @@ class Run:
         """Feed every message of ``items`` (the fast loop of ``run()``)."""
         push = self.loop.push
         dispatch = self._dispatch
+        if self._header_open:   # the header is read once the first message is: checks of it, once
+            items = iter(items)
+            first = next(items, None)
+            if first is None:
+                return
+            self._header_read()
+            items = itertools.chain((first,), items)
         for item in items:
             if item.__class__ is Message and (item.sensor == "truth" or item.sensor == "reference"):
                 self._compare(item)
@@ -180,6 +193,12 @@ class Run:
         runtime = self.system.sensors.get(sensor)
         if runtime is None or not names:
             return
+        if runtime.role == "input" and sensor not in self.imu_coverage:
+            facts, warning = coverage_check(self.system, sensor, self.parsed.header.meta)
+            if facts is not None:
+                self.imu_coverage[sensor] = facts
+            if warning is not None:
+                self._dispatch(Event(math.nan, "warning", sensor, warning))
         expected, who = expected_fields(runtime, self.system.process)
         if expected is None or tuple(names) == tuple(expected):
             return
@@ -192,6 +211,16 @@ class Run:
             self._fields_told.add(sensor)
             self._dispatch(Event(math.nan, "warning", sensor, f"{line}: {who} reads {' '.join(expected)}; the "
                                  "values are read in that order, by position"))
+
+    def _header_read(self) -> None:
+        """The first message: the header is read. A recording without ``initial.from_sensor``'s stream (a flight
+        log without GPS) starts the filter without waiting for that fix, and one warning says so."""
+        self._header_open = False
+        absent = fix_sensor_absent(self.system, self.parsed.header.fields)
+        if absent is not None:
+            rate, warning = absent
+            self.loop.start_without_fix(rate)
+            self._dispatch(warning)
 
     def _updated(self, u: Updated) -> None:
         """An update's NIS: to the statistics (and a plot), not to the sinks."""
@@ -308,6 +337,8 @@ class Run:
         self.stats.finish()
         wall = time.perf_counter() - self.wall0
         summary = self.stats.summary(self.label, wall)
+        if self.imu_coverage and isinstance(summary.get("health"), dict):
+            summary["health"]["imu_coverage"] = self.imu_coverage
         if interrupted:
             summary["interrupted"] = True
         if source_error is not None:

@@ -97,7 +97,7 @@ class StartUp:
         self.still: bool | None = None   # the static window's verdict (public: the start-up's state)
         self.alignment_not_static: str | None = None   # why the window was judged moving (summary health)
         self.aligners: dict[str, list] = {n: [] for n in aligners}
-        self.stillness = process.stillness if has(process, ChecksStillness) else None
+        self._stillness = process.stillness if has(process, ChecksStillness) else None
         self._aligns = has(process, Aligns)
 
     def start(self, t: float):
@@ -127,8 +127,8 @@ class StartUp:
     def _align(self, t: float, sensor: str) -> None:
         us, ts = np.asarray(self._align_u, dtype=float), np.asarray(self._align_t, dtype=float)
         u_mean = np.mean(us, axis=0)
-        if self.stillness is not None:
-            verdict = self.stillness(self._x0, self._P0, us, ts)
+        if self._stillness is not None:
+            verdict = self._stillness(self._x0, self._P0, us, ts)
             self.still = None if verdict is None else bool(verdict[0])
             if verdict is not None and not verdict[0]:
                 self._not_static(t, sensor, verdict[1])
@@ -137,6 +137,8 @@ class StartUp:
         elif self._aligns:   # wiring refuses align_s for a process without it
             self._x0, self._P0 = self.process.align(self._x0, self._P0, u_mean)
         for name, observations in self.aligners.items():
+            if self.still is not True:   # not a static window (in flight): only its last align_s s
+                observations = [o for o in observations if o.t >= t - self.align_s] or observations[-1:]
             # called with no observations too (no sample of the sensor in the window): the model then knows
             # the static start is over and can refuse its later messages with the reason
             s = self.sensors[name]
@@ -150,6 +152,12 @@ class StartUp:
                  "widened to the speed its fixes show") if self.from_sensor else ""
         self.tally.add(Event(t, "warning", sensor, f"alignment: the static start (initial.align_s "
                              f"{self.align_s:g} s) is not static: {why}{fixes}"))
+
+    def start_without_fix(self) -> None:
+        """Start without waiting for ``initial.from_sensor`` (the recording has no such stream): the position and
+        velocity from the configured prior, the rest aligned as usual."""
+        self.from_sensor = None
+        self.have_fix = True
 
     def take_fix(self, obs) -> None:
         """Remember a fix of ``initial.from_sensor`` for the initial position (module doc: combined when the

@@ -134,6 +134,13 @@ class EstimateWriter(Sink):
         if out is not None:
             out.close()
 
+    def discard(self) -> None:
+        """Close without keeping the file: its temporary file is removed, nothing appears under the final
+        name (a stream keeps what it got)."""
+        out, self._out = self._out, None
+        if out is not None:
+            out.discard()
+
     def __enter__(self) -> "EstimateWriter":
         return self
 

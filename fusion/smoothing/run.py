@@ -18,7 +18,7 @@ import dataclasses
 import time
 from typing import Any, Callable, Sequence
 
-from fusion.api import ConfigError, Estimate, Message
+from fusion.api import ConfigError, Estimate, Event, Message
 from fusion.config import System
 from fusion.metrics import ErrorTracker
 from fusion.truth_stream import TruthComparison
@@ -88,6 +88,59 @@ def _close(sinks: list) -> None:
         sinks.pop(0).close()
 
 
+def _discard(sinks: list) -> None:
+    """Drop what the sinks wrote (a file sink removes its temporary file: nothing appears under the final
+    name); a sink without ``discard`` (a stream, a plugin's) is closed."""
+    while sinks:
+        sink = sinks.pop(0)
+        getattr(sink, "discard", sink.close)()
+
+
+#: The warning of a run interrupted after its input was read.
+INTERRUPTED = ("interrupted after the input was read, while smoothing: the smoothed output is incomplete and was "
+               "not written (a stream keeps what it got); the summary holds the forward run")
+
+
+def _interrupted(result, sinks: list, smoother: str, written: int, on_event: Callable | None):
+    """The forward run's result, marked interrupted, after Ctrl-C in the backward pass or while the
+    smoothed estimates were written: the sinks are discarded, a warning says so."""
+    _discard(sinks)
+    detail = INTERRUPTED
+    if on_event is not None:
+        on_event(Event(float("nan"), "warning", None, detail))
+    result.summary["interrupted"] = True
+    result.summary["smoothed"] = {"smoother": smoother, "interrupted": detail, "estimates_written": written}
+    return dataclasses.replace(result, interrupted=True)
+
+
+def _backward(log: ForwardLog, fixed: FixedLag | None, lagged: ChunkStore | None, out: ChunkStore | None,
+              sqrt: bool, normalize: Callable, diff: Callable, stats: _SmoothedStats, sinks: list) -> int:
+    """The backward pass after the forward one: the full smoother into ``out`` (its estimates then go to the
+    sinks), or the end of the fixed-lag window (already sent to the sinks as it went, kept in ``lagged``);
+    the smoothed estimates and the recorded truth go to ``stats``. Returns the number of nodes."""
+    if fixed is not None:
+        fixed.finish()
+        nodes = log.nodes + 1
+        estimates = smoothed_estimates(lagged, sqrt, log.sensors, forward=True)  # type: ignore[arg-type]
+    else:
+        nodes = smooth(log, normalize, diff, out)
+        estimates = smoothed_estimates(out, sqrt, log.sensors)
+    truth = log.truth.forward_rows()
+    pending = next(truth, None)
+    for est in estimates:
+        while pending is not None and pending["t"] <= est.t:
+            stats.add_truth(Message(float(pending["t"]), "truth", tuple(pending["v"].tolist()), 0))
+            pending = next(truth, None)
+        stats.add_estimate(est)
+        if fixed is None:
+            for s in sinks:
+                s.on_estimate(est)
+    while pending is not None:
+        stats.add_truth(Message(float(pending["t"]), "truth", tuple(pending["v"].tolist()), 0))
+        pending = next(truth, None)
+    return nodes
+
+
 def run_smoothed(system: System, source: Any, sinks: Sequence[Any] = (), *, lag: float | None = None,
                  disk: bool | None = None, chunk: int = 1024, on_event: Callable | None = None,
                  progress: Callable | None = None, plot: Any = None, hooks: bool = True,
@@ -147,28 +200,12 @@ def run_smoothed(system: System, source: Any, sinks: Sequence[Any] = (), *, lag:
         result = pipeline.run(wrapped, source, [_Forward()], on_event=on_event, progress=progress, plot=plot,
                               hooks=hooks, label=label, on_truth=log.note_truth)
         stats = _SmoothedStats(system, result.parsed.header.fields.get("truth"))
+        out = ChunkStore(chunk * 4, disk) if fixed is None else None
         t0 = time.perf_counter()
-        if fixed is not None:
-            fixed.finish()
-            nodes = log.nodes + 1
-            estimates = smoothed_estimates(lagged, backend.sqrt, log.sensors, forward=True)  # type: ignore[arg-type]
-        else:
-            out = ChunkStore(chunk * 4, disk)
-            nodes = smooth(log, normalize, diff, out)
-            estimates = smoothed_estimates(out, backend.sqrt, log.sensors)
-        truth = log.truth.forward_rows()
-        pending = next(truth, None)
-        for est in estimates:
-            while pending is not None and pending["t"] <= est.t:
-                stats.add_truth(Message(float(pending["t"]), "truth", tuple(pending["v"].tolist()), 0))
-                pending = next(truth, None)
-            stats.add_estimate(est)
-            if fixed is None:
-                for s in sinks:
-                    s.on_estimate(est)
-        while pending is not None:
-            stats.add_truth(Message(float(pending["t"]), "truth", tuple(pending["v"].tolist()), 0))
-            pending = next(truth, None)
+        try:
+            nodes = _backward(log, fixed, lagged, out, backend.sqrt, normalize, diff, stats, sinks)
+        except KeyboardInterrupt:
+            return _interrupted(result, sinks, "rts" if fixed is None else "fixed_lag", stats.count, on_event)
         backward_s = time.perf_counter() - t0
         _close(sinks)
         stores = [log.steps, log.estimates, log.truth] + [s for s in (out, lagged) if s is not None]

@@ -9,3 +9,4 @@ def fusion_register_components(registry):
 
     registry.add(RecordingSource)
     registry.add(SerialSource)
+    registry.add_lazy("source", "rosbag", "fusion.sources.bag:BagSource")   # imports rosbags when used

@@ -138,8 +138,13 @@ class RecordingSource(Source):
         path = self.params.path
         if path != "-":
             p = Path(path)
-            if not p.exists():
-                raise InputError(f"{p}: no such recording")
+            try:
+                p.stat()
+            except FileNotFoundError:
+                raise InputError(f"{p}: no such recording") from None
+            except (OSError, ValueError) as exc:   # a NUL, a name too long, a symlink loop, no permission
+                raise InputError(f"{str(p)[:200]}: cannot open the recording: "
+                                 f"{getattr(exc, 'strerror', None) or exc}") from None
             if p.is_dir():
                 raise InputError(f"{p}: is a directory, expected a recording (a text log)")
         return self

@@ -21,10 +21,12 @@ from typing import Any
 import numpy as np
 
 from fusion.api import Estimate, KeepsGateState, has
+from fusion.health import spec_of
+from fusion.health.batch_watch import BatchHealthWatch
 
 from . import batchstats
 from .lockstep import NotLockstep, from_simulation
-from .trial import Trial, row_of, system_of, with_initial
+from .trial import Trial, health_columns, row_of, system_of, with_initial
 
 __all__ = ["unsupported", "run_batch", "NotLockstep"]
 
@@ -93,6 +95,7 @@ def run_batch(trials: list[Trial], timings: dict[str, float] | None = None) -> l
     bf = make_batch_filter(system.filter)
     process = system.process
     max_predict = system.spec.scheduler.max_predict_s
+    watch = BatchHealthWatch(system, N, spec_of(system))   # the health rule's records, per trial
     b = None
     steps = {"predict": 0, "update": 0}
     counts = {n: {"received": 0, "used": np.zeros(N, int), "rejected": np.zeros(N, int), "late": 0}
@@ -131,6 +134,7 @@ def run_batch(trials: list[Trial], timings: dict[str, float] | None = None) -> l
         c["used"] += up.accepted
         c["rejected"] += ~up.accepted
         stats.step(name, t, k, b, up, m)
+        watch.add(name, t, up.accepted, up.nis, m)
     columns = stats.columns()
     rows = []
     share = (time.perf_counter() - t0 - math_s) / N
@@ -145,6 +149,7 @@ def run_batch(trials: list[Trial], timings: dict[str, float] | None = None) -> l
                "not_positive_definite": int(bf.counters.get("not_positive_definite", np.zeros(N, int))[i])}
         for s in sensors:
             row[f"nis_mean_{s}"] = columns[i][f"nis_mean_{s}"]
+        row.update(_health(systems[i], counts, i, row, getattr(stats, "dof", None), watch.report(i)))
         row.update(status="ok", error="", engine="batch", wall_s=share + math_s / N)
         rows.append(row)
     if timings is not None:
@@ -153,6 +158,18 @@ def run_batch(trials: list[Trial], timings: dict[str, float] | None = None) -> l
                        ("statistics", t4 - t3 - math_s)):
             timings[key] = timings.get(key, 0.0) + v
     return rows
+
+
+def _health(system: Any, counts: dict, i: int, row: dict[str, Any], nees_dof: int | None,
+            watch: dict[str, Any]) -> dict[str, Any]:
+    """Trial ``i``'s health columns (fusion.sweep.trial.health_columns) from its counters, errors and its
+    report of the batch's health watch (fusion.health.batch_watch)."""
+    sensors = {n: {"received": c["received"], "used": int(c["used"][i]), "rejected": int(c["rejected"][i]),
+                   "late": c["late"], "malformed": 0} for n, c in counts.items()}
+    errors = {k: row[k] for k in ("position_rmse_m", "position_max_m", "velocity_rmse_mps") if k in row}
+    summary = {"sensors": sensors, "errors": errors,
+               "consistency": {"nees_mean": row.get("nees_mean"), "nees_dof": nees_dof}}
+    return health_columns(system, summary, watch)
 
 
 class _PerEstimate:

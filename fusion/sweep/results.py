@@ -13,7 +13,7 @@ from typing import Any, Iterable
 
 from fusion.api import ConfigError
 
-from .trial import METRICS, SMOOTHED, Trial
+from .trial import HEALTH, METRICS, SMOOTHED, Trial
 
 __all__ = ["check_output", "columns", "trial_fields", "read_rows", "CsvWriter", "write_parquet", "done_keys"]
 
@@ -50,12 +50,12 @@ def _refuse_irregular(path: Path, option: str = "") -> None:
 
 def columns(param_keys: Iterable[str], sensors: Iterable[str], smooth: bool) -> list[str]:
     """Column order: the trial, its params (``param.<key>``), status, metrics, NIS per sensor,
-    smoothed metrics (with --smooth), engine, error."""
+    smoothed metrics (with --smooth), the health rule's (``degraded``, ``health``), engine, error."""
     cols = list(TRIAL_COLUMNS) + [f"param.{k}" for k in param_keys] + ["smooth", "status"] + list(METRICS)
     cols += [f"nis_mean_{s}" for s in sensors]
     if smooth:
         cols += list(SMOOTHED)
-    return cols + ["engine", "error"]
+    return cols + list(HEALTH) + ["engine", "error"]
 
 
 def trial_fields(trial: Trial) -> dict[str, Any]:

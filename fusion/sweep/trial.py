@@ -19,13 +19,15 @@ from typing import Any
 
 from fusion.api import ConfigError
 
-__all__ = ["Trial", "row_of", "run_trial", "system_of", "scenario_of", "recording_of", "drawn_mean", "drawn_from_truth",
-           "with_initial", "METRICS"]
+__all__ = ["Trial", "row_of", "health_columns", "run_trial", "system_of", "scenario_of", "recording_of", "drawn_mean",
+           "drawn_from_truth", "with_initial", "METRICS", "HEALTH"]
 
 #: The metric columns of a row, in order (``nis_mean_<sensor>`` columns follow, one per sensor).
 METRICS = ("position_rmse_m", "position_max_m", "velocity_rmse_mps", "attitude_rmse_deg", "nees_mean",
            "nees_in_95_fraction", "estimates", "updates", "rejected", "late", "malformed", "resets",
            "not_positive_definite", "wall_s")
+#: The health rule's judgement of a trial (fusion.health): ``degraded`` 1 or 0, ``health`` its findings.
+HEALTH = ("degraded", "health")
 SMOOTHED = ("smoothed_position_rmse_m", "smoothed_position_max_m", "smoothed_velocity_rmse_mps",
             "smoothed_nees_mean", "smoothed_nees_in_95_fraction")
 
@@ -117,9 +119,10 @@ def scenario_of(trial: Trial):
         raise _validation(f"{trial.scenario}{with_}", exc) from None
 
 
-def system_of(trial: Trial):
+def system_of(trial: Trial, lines: list[str] | None = None):
     """The wired System of a trial: the config with its params and filter (``filter`` other than the
-    config's own type starts from that filter's defaults: the config's parameters belong to its filter)."""
+    config's own type starts from that filter's defaults: the config's parameters belong to its filter),
+    given the world its recording (``lines``, else the scenario's header) declares (fusion.world)."""
     from pydantic import ValidationError
 
     from fusion.config import SystemSpec, wire
@@ -142,7 +145,9 @@ def system_of(trial: Trial):
                                  ("--filter", trial.filter is not None)) if on]
         raise _validation(f"{trial.config}{' (with ' + '/'.join(given) + ')' if given else ''}", exc) from None
     try:
-        return wire(spec, path=Path(trial.config))
+        from fusion.world import read_world_lines
+        world = read_world_lines(lines if lines is not None else _scenario_header(trial), f"{trial.scenario} (simulated)")
+        return wire(spec, path=Path(trial.config), world=world)
     except ConfigError as exc:
         given = [f"--param {k}={v}" for k, v in trial.params if not k.startswith("scenario.")]
         given += [f"--filter {trial.filter}"] if trial.filter is not None else []
@@ -209,6 +214,24 @@ def with_initial(system, trial: Trial, lines: list[str] | None = None, truth: tu
     return dataclasses.replace(system, x0=drawn_mean(system, lines, trial.seed))
 
 
+def _scenario_header(trial: Trial) -> list[str]:
+    """The header lines of a trial's scenario (what its recordings declare: field, receivers, beacons ...),
+    simulated once per scenario and its ``scenario.`` params."""
+    key = (trial.scenario, tuple(kv for kv in trial.params if kv[0].startswith("scenario.")))
+    if key not in _HEADERS:
+        from fusion.simulate import simulate
+        try:
+            lines = simulate(scenario_of(trial), seed=trial.seed).splitlines()
+        except Exception:      # a broken scenario: said where the sweep simulates it, not here
+            return []
+        _HEADERS[key] = [ln for ln in lines[:20_000] if ln.startswith("#")] + [
+            ln for ln in lines[:20_000] if ",$GP" in ln or ",$GN" in ln][:20]
+    return _HEADERS[key]
+
+
+_HEADERS: dict[tuple, list[str]] = {}
+
+
 def recording_of(trial: Trial) -> list[str]:
     """The simulated recording of a trial, as lines (fusion.simulate, the trial's seed)."""
     from fusion.simulate import simulate
@@ -253,25 +276,43 @@ def row_of(summary: dict, sensors: list[str]) -> dict[str, Any]:
     return row
 
 
+def health_columns(system: Any, summary: dict, watch: Any = None, header: Any = None,
+                   recording: Any = None) -> dict[str, Any]:
+    """The HEALTH columns of a trial: the rule of ``fusion run`` (fusion.health) on its ``summary`` and its
+    ``watch`` (a fusion.health.HealthWatch that saw the run's estimates, or a watch's report; None: from the
+    summary alone, the shares and the errors against truth), written into the summary's ``health`` too.
+    ``health`` is each finding's sensor and figures, ``; ``-joined (the causes, from the recording's parsed
+    ``header`` and its ``recording`` lines, go to the summary's health)."""
+    from fusion.health import assess
+
+    verdict = assess(system, summary, watch, header, recording)
+    text = "; ".join((f"{f.sensor}: " if f.sensor else "") + f.figures for f in verdict.findings)
+    return {"degraded": int(verdict.degraded), "health": text}
+
+
 def run_trial(trial: Trial) -> dict[str, Any]:
     """Simulate and run one trial through ``fusion.pipeline.run`` (or the smoother's run); its row. A
     failure is caught and recorded: ``status`` "error" and ``error`` the exception's one-line text."""
     t0 = time.perf_counter()
     try:
         lines = recording_of(trial)
-        system = with_initial(system_of(trial), trial, lines)
+        system = with_initial(system_of(trial, lines), trial, lines)
+        from fusion.health import HealthWatch, spec_of
+        watch = HealthWatch(system, spec_of(system))
         if trial.smooth:
             from fusion.smoothing.run import run_smoothed
-            result = run_smoothed(system, lines, hooks=False)
+            result = run_smoothed(system, lines, hooks=False, forward_sinks=[watch])
         else:
             from fusion import pipeline
-            result = pipeline.run(system, lines, hooks=False)
+            result = pipeline.run(system, lines, [watch], hooks=False)
         if result.interrupted:   # Ctrl-C, SIGTERM or SIGHUP (fusion.cli.stop_signals) mid-run: a cut trial is
             raise KeyboardInterrupt   # no row; the sweep stops, its rows so far kept (as between trials)
         row = row_of(result.summary, [n for n, s in system.sensors.items() if s.role == "measurement"])
         # a run that never initialised (e.g. a scenario without the config's sensors) is no result: a failed
         # row that says why, so the summary counts it, rather than "ok" with nothing in it
         not_started = result.summary.get("not_started")
+        if not not_started:
+            row.update(health_columns(system, result.summary, watch, result.parsed.header, lines))
         row.update(status="error" if not_started else "ok", error=not_started or "", engine="pipeline",
                    wall_s=time.perf_counter() - t0)
         return row

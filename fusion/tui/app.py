@@ -15,6 +15,7 @@ from typing import Any, Iterator
 from textual.app import App, ComposeResult
 from textual.binding import Binding
 from textual.css.query import NoMatches
+from textual.css.scalar import Scalar
 from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.widgets import ContentSwitcher, Footer, Header, TabbedContent, TabPane
 
@@ -47,21 +48,23 @@ class FusionApp(App):
     CSS = """
     #main { height: 1fr; }
     #left { width: 62; }
+    #state-scroll { height: auto; }
     #right { width: 1fr; }
     #right ContentSwitcher { height: 16; }
     #right InnovationPanel, #right StatePlot { height: 16; }
     StateTable, SensorCounters, HealthPanel, EventLog { border: round $primary-darken-2; }
-    EventLog { height: 7; }
+    EventLog { height: 5; }
+    Screen > EventLog { overflow-x: hidden; }
     TabbedContent { height: 1fr; }
     TabbedContent EventLog, TabbedContent TrackPlot, TabbedContent InnovationPanel { height: 1fr; }
     TabPane { padding: 0; }
     """
     BINDINGS = [
         Binding("q", "quit", "quit"),
-        Binding("p", "pause", "pause/resume"),
-        Binding("n", "step", "step (paused replay)"),
-        Binding("r", "reset_view", "reset view"),
-        Binding("s", "next_sensor", "plot sensor"),
+        Binding("p", "pause", "pause"),
+        Binding("n", "step", "step"),
+        Binding("r", "reset_view", "reset"),
+        Binding("s", "next_sensor", "sensor"),
         Binding("e", "next_element", "plot element", show=False),
         Binding("x", "next_state", "state element", show=False),
         Binding("v", "switch_plots", "innovations/states", show=False),
@@ -116,8 +119,9 @@ class FusionApp(App):
         states = StatePlot(list(self.feed.states.names))
         if self.wide:
             with Horizontal(id="main"):
-                with VerticalScroll(id="left"):
-                    yield state
+                with Vertical(id="left"):
+                    with VerticalScroll(id="state-scroll"):
+                        yield state
                     yield counters
                     yield health
                 with Vertical(id="right"):
@@ -158,7 +162,22 @@ class FusionApp(App):
             return
         for line in self._main.query(StatusLine):
             line.tick()
+        self._fit_state()
         await self._relayout()
+
+    def _fit_state(self) -> None:
+        """Wide layout: the state table gets what the sensors and health panels leave of the left column, and
+        scrolls within it when longer (a long state, 17 elements at 120 x 40, never pushes the health panel
+        out of view)."""
+        found = self._main.query("#state-scroll")
+        if not found:
+            return
+        box = found.first()
+        left = box.parent
+        rest = sum(w.outer_size.height for w in left.children if w is not box)
+        room = max(4, left.size.height - rest)
+        if left.size.height and box.styles.max_height != Scalar.parse(str(room)):
+            box.styles.max_height = room
 
     async def _relayout(self) -> None:
         """Switch between the wide layout and the tabs when the terminal crossed WIDE (checked twice a second)."""
@@ -220,6 +239,7 @@ class FusionApp(App):
         self._main.query_one(InnovationPanel).show(snap.series, force=force or self.paused)
         self._main.query_one(StatePlot).show(snap.states, force=force or self.paused, smoothed=snap.smoothed_states)
         self._main.query_one(StatusLine).show(snap, self.paused)
+        self.call_after_refresh(self._fit_state)   # the panels under the state may have grown a row
 
     def action_pause(self) -> None:
         """Pause or resume: a replay stops reading; a live port is still read (and recorded), the view freezes."""
@@ -325,7 +345,13 @@ def make_app(config_path_or_system: str | Path | System, source: Any = None, *, 
     if isinstance(config_path_or_system, System):
         system = config_path_or_system
     else:
-        system = load_system(config_path_or_system, filter_override=filter_override)
+        from fusion.config import OWN_RECORDING
+        from fusion.header_checks import check as check_header
+
+        # the world (magnetic field, receivers...) of what is replayed, not the config's own recording's
+        given = OWN_RECORDING if source is None else str(source) if isinstance(source, (str, Path)) else None
+        system = load_system(config_path_or_system, filter_override=filter_override, recording=given)
+        check_header(system, system.world, str(config_path_or_system))
     if source is None:
         source = system.recording
         if source is None:

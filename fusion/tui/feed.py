@@ -35,6 +35,7 @@ from fusion.tui.state_series import StateHistory
 
 __all__ = ["LiveFeed", "FeedSnapshot", "LoggedEvent", "COUNTERS"]
 _SLICE = 0.05  # s: longest sleep between checks of pause/stop while pacing
+IDLE_POST_S = 1.0  # s: a silent live source still gets a snapshot this often (its health, "no data for N s")
 CAUGHT_UP_S = 0.5  # s without a line from a live source: everything it sent has been read (lag 0)
 
 
@@ -100,6 +101,7 @@ class LiveFeed:
         self.state = "waiting"
         self.message = ""
         self._next_post = 0.0
+        self._last_post = -math.inf
         self._window: deque[tuple[float, float, dict[str, int]]] = deque()
         self._wall0: float | None = None
         self._t_first = math.nan
@@ -147,6 +149,9 @@ class LiveFeed:
         else:
             self._log(Event(self.sensor_t, "source", None, f"port back after {attempt} attempt(s)"))
             self.state, self.attempt, self.message = "running", 0, ""
+            # a reopened port holds no backlog: the lag is measured afresh from its first line (the device's
+            # clock may have stopped or restarted while it was away; the gap is no lag of the view)
+            self._best_offset = math.inf
         self._emit(time.monotonic())
 
     def stop(self) -> None:
@@ -161,8 +166,15 @@ class LiveFeed:
         return self._stop.is_set()
 
     def idle(self) -> None:
-        """Called by a live source in the reading thread when a read timed out: shows what is pending."""
-        self._maybe_emit(time.monotonic())
+        """Called by a live source in the reading thread when a read timed out: shows what is pending, and
+        at least every IDLE_POST_S the health of a port that stays silent (LOST after its silent_s, from the
+        port's opening when it never sent a byte)."""
+        now = time.monotonic()
+        if now - self._last_post >= IDLE_POST_S:
+            self._next_post = 0.0
+            self._emit(now)
+        else:
+            self._maybe_emit(now)
 
     # ------------------------------------------------------------------ the worker
     def run(self) -> FeedSnapshot:
@@ -342,6 +354,8 @@ class LiveFeed:
                 self._truth_t = msg.t
 
     def _log(self, ev: Event) -> None:
+        if ev.kind == "clock":   # a sensor re-synchronised: the stream's time base moved, the lag restarts
+            self._best_offset = math.inf
         self.health.on_event(ev)
         self._seq += 1
         self.events.append(LoggedEvent(self._seq, ev.t, ev.kind, ev.sensor, ev.detail))
@@ -385,6 +399,7 @@ class LiveFeed:
             states=self.states.snapshot(), smooth_lag=self.smooth_lag,
             **self._smoothed_fields())
         self._next_post = now + self.refresh_dt
+        self._last_post = now
         self._emitted_lines = self.lines_read
         self._post(snap)
         return snap

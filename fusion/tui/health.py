@@ -172,7 +172,7 @@ class HealthMonitor:
             return "LOST", message or "source lost"
         if source_state == "reconnecting":
             return "LOST", message or "port lost; reconnecting"
-        if live and source_state == "running" and silent_wall_s > self.silent_s:
+        if live and source_state in ("running", "waiting") and silent_wall_s > self.silent_s:
             return "LOST", f"no data for {silent_wall_s:.0f} s"
         if estimate is not None and not (np.isfinite(estimate.belief.x).all() and np.isfinite(estimate.belief.sd).all()):
             return "LOST", "estimate not finite"

@@ -1,9 +1,11 @@
 """The status line: source, state (RECONNECTING with the attempt count), overall health (OK, DEGRADED,
 LOST) with its reason, sensor time, speed against real time, filter, lines read, and for a live port that
-the view cannot keep up with, how far behind it is (``BEHIND by 12.3 s``). It wraps onto a second
-line in a narrow terminal rather than being cut."""
+the view cannot keep up with, how far behind it is (``BEHIND by 12.3 s``). In a narrow terminal the parts
+of least use are left out so that it stays one line; what is wrong still wraps onto a second line rather
+than being cut."""
 from __future__ import annotations
 
+import os
 import time
 
 from rich.text import Text
@@ -19,15 +21,36 @@ _STATE_STYLE = {"running": "bold green", "waiting": "bold", "finished": "bold bl
                 "lost": "bold red", "error": "bold red", "stopped": "bold", "reconnecting": "bold yellow"}
 
 
-def describe(snap: FeedSnapshot, paused: bool, filter_name: str, now: float | None = None) -> Text:
-    """One line: ``replay recordings/x.log | running | t = 12.345 s | 4.0x real time | filter ukf | 1234 lines``."""
+#: What a narrow status line leaves out, in turn, until it fits its width: the filter (the header names it),
+#: the source's folder, the speed against real time, the lines read.
+_COMPACT = ({}, {"filter": False}, {"filter": False, "folder": False},
+            {"filter": False, "folder": False, "speed": False},
+            {"filter": False, "folder": False, "speed": False, "lines": False})
+
+
+def describe(snap: FeedSnapshot, paused: bool, filter_name: str, now: float | None = None,
+             width: int | None = None) -> Text:
+    """One line: ``replay recordings/x.log | running | t = 12.345 s | 4.0x real time | filter ukf | 1234 lines``.
+    With ``width`` (cells), the parts of least use are left out (``_COMPACT``) until it fits: only the
+    state, health, time and what is wrong (BEHIND, a message) remain, and a line still longer wraps."""
+    for leave_out in _COMPACT:
+        out = _describe(snap, paused, filter_name, now, **leave_out)
+        if width is None or out.cell_len <= width:
+            break
+    return out
+
+
+def _describe(snap: FeedSnapshot, paused: bool, filter_name: str, now: float | None, filter: bool = True,
+              folder: bool = True, speed: bool = True, lines: bool = True) -> Text:
     state = "paused" if paused and snap.state in ("running", "waiting") else snap.state
     out = Text()
-    out.append(f" {'live' if snap.live else 'replay'} {snap.source} ")
+    source = snap.source if folder or "://" in snap.source else os.path.basename(snap.source)
+    out.append(f" {'live' if snap.live else 'replay'} {source} ")
     label = f"RECONNECTING (attempt {snap.attempt})" if state == "reconnecting" else state.upper()
     out.append(f" {label} ", style="reverse " + _STATE_STYLE.get(state, "bold"))
     health = snap.health
-    silent = now - snap.data_wall if snap.live and snap.state == "running" and now is not None else 0.0
+    listening = snap.live and snap.state in ("running", "waiting") and now is not None
+    silent = now - snap.data_wall if listening else 0.0   # since the last byte, or since opening: none yet
     if health is not None:
         overall, reason = health.state, health.reason
         if silent > SILENT_S and overall != "LOST":  # the feed posts nothing while the port is silent
@@ -37,10 +60,11 @@ def describe(snap: FeedSnapshot, paused: bool, filter_name: str, now: float | No
         if reason != snap.message and overall != "OK":
             out.append(f" {reason}")
     parts = [f"t = {snap.sensor_t:.3f} s" if snap.sensor_t == snap.sensor_t else "t = -"]
-    if snap.speed_ratio == snap.speed_ratio and not paused:
+    if speed and snap.speed_ratio == snap.speed_ratio and not paused:
         parts.append(f"{snap.speed_ratio:.1f}x real time")
-    parts += [f"filter {filter_name}", f"{snap.lines} lines"]
-    if snap.live and snap.state == "running" and now is not None and now - snap.data_wall > 2.0:
+    parts += [f"filter {filter_name}"] if filter else []
+    parts += [f"{snap.lines} lines"] if lines else []
+    if listening and now - snap.data_wall > 2.0:
         parts.append(f"no data for {now - snap.data_wall:.0f} s")
     out.append(" | " + " | ".join(parts))
     if snap.live and snap.lag_s >= BEHIND_S and snap.state == "running":   # NaN: not compared
@@ -74,6 +98,7 @@ class StatusLine(Static):
         """Re-render (also called by a timer so 'no data for N s' counts up on a silent port)."""
         if self._snap is None:
             return
-        line = describe(self._snap, self._paused, self.filter_name, time.monotonic())
+        width = self.size.width or self.app.size.width
+        line = describe(self._snap, self._paused, self.filter_name, time.monotonic(), width=width)
         self.text = line.plain
         self.update(line)

@@ -12,6 +12,9 @@ MEASUREMENTS = {
     "magnetometer": "fusion_plugins.measurement.magnetometer:Magnetometer",
     "attitude": "fusion_plugins.measurement.attitude:Attitude",
     "quat_norm": "fusion_plugins.measurement.quat_norm:QuatNorm",
+    "pose": "fusion_plugins.measurement.pose:Pose",
+    "twist": "fusion_plugins.measurement.twist:Twist",
+    "imu": "fusion_plugins.measurement.imu:Imu",
 }
 
 

@@ -5,8 +5,9 @@
     [\\alpha\\ \\beta\\ \\gamma]^T = C_b^n(q)^T \\frac{b_i - p}{|b_i - p|}
 
 (the paper's RPY^T, here the quaternion attitude q, body-to-navigation). The measured value is the unit
-normal (body frame FRD) of the receiver that heard the pulse first, one of 32 on a truncated icosahedron
-(``receiver`` 1-32 of the ``arrival_time`` simulator and its header ``# receiver N: x y z``). The error is
+normal (body frame FRD) of the receiver that heard the pulse first, receiver r of the array ``receivers``
+(the config's, else the recording header's ``# receiver N: x y z`` lines: receiver_array; the paper's is
+32 receivers on a truncated icosahedron). The error is
 the discretisation of direction: the truth is anywhere in the receiver's cell, up to ~21 deg from its
 normal (half the 41.8 deg spacing). Modelled as white noise of sd ``sd_deg`` per tangent axis, by default
 the RMS of that discretisation (:func:`discretisation_sd`: 10.2 deg per axis for this array), though in
@@ -39,8 +40,6 @@ the white model of the shipped config; see configs/ultrasonic_3d_pose.yaml.
 from __future__ import annotations
 
 from functools import lru_cache
-from typing import Literal
-
 import numpy as np
 from pydantic import Field
 
@@ -132,8 +131,10 @@ class Direction(MeasurementModel):
     carries_R = True    # R from its own arrival/direction sd params
 
     class Params(Params):
-        receivers: Literal["truncated_icosahedron"] | list[tuple[float, float, float]] = Field(
-            "truncated_icosahedron", description="receiver normals (body frame), numbered from 1")
+        receivers: str | list[tuple[float, float, float]] | None = Field(
+            None, description="receiver normals (body frame FRD), numbered from 1: a list, the name of an array "
+            "(truncated_icosahedron: the paper's, in the arrival_time simulator's numbering) or a file "
+            "(receiver_array); none: the recording header's '# receiver N: x y z' lines")
         sd_deg: float | None = Field(None, gt=0.0, description="direction sd per axis (deg; default: the RMS "
                                      "discretisation of the receivers, 10.2 for the truncated icosahedron)")
         arrival: bool = Field(False, description="also the arrival time (eq. 11): z = [t_i, direction]")
@@ -155,7 +156,7 @@ class Direction(MeasurementModel):
                                   "tangent components (rad) and sd_deg their white part")
 
     def __init__(self, params=None, context=None, bound: str | None = None, position=None,
-                 receiver: int | None = None):
+                 receiver: int | None = None, normals: tuple[np.ndarray, dict] | None = None):
         super().__init__(params, context)
         p, ctx = self.params, self.context
         lay = ctx.layout
@@ -173,10 +174,12 @@ class Direction(MeasurementModel):
                          else np.asarray(p.position, float) if p.position is not None else None)
         if self._p is None and self.position is None:
             raise ConfigError("direction: the state has no position block 'p'; give 'position: [x, y, z]'")
-        self.normals = (receiver_normals(p.receivers) if isinstance(p.receivers, str)
-                        else np.asarray(p.receivers, float) / np.linalg.norm(p.receivers, axis=1, keepdims=True))
-        if self.normals.ndim != 2 or self.normals.shape[1] != 3 or len(self.normals) < 4:
-            raise ConfigError("direction: receivers must be at least 4 normals of 3 values")
+        if normals is None:
+            from fusion_plugins.measurement.receiver_array import resolve_receivers
+
+            normals = resolve_receivers(p.receivers, ctx, "direction")
+        self.normals, self._receivers_info = normals
+        key = tuple(map(tuple, self.normals))
         names = p.beacons if p.beacons is not None else list(ctx.beacons)
         bad = [b for b in names if b not in ctx.beacons or len(ctx.beacons[b]) != 3]
         if bad or not names:
@@ -186,7 +189,7 @@ class Direction(MeasurementModel):
         if p.error_state and p.sd_deg is None:
             raise ConfigError("direction: error_state: true needs sd_deg, the white part of the direction's error "
                               "(deg per tangent axis; the discretisation itself is the state)")
-        self.sd = np.deg2rad(p.sd_deg) if p.sd_deg is not None else _default_sd(p.receivers, self.normals)
+        self.sd = np.deg2rad(p.sd_deg) if p.sd_deg is not None else _cached_sd(key)
         self.receiver = receiver
         self._M = None
         if p.cell and receiver is not None:      # inward unit normals of the cell's bisecting great circles
@@ -194,7 +197,7 @@ class Direction(MeasurementModel):
             self._M = M / np.linalg.norm(M, axis=1, keepdims=True)
         self._e = self._Tr = None
         if p.error_state:
-            colours = _colours(p.receivers if isinstance(p.receivers, str) else tuple(map(tuple, p.receivers)))
+            colours = _colours(key)
             need = 3 * (int(colours.max()) + 1)
             for b in names:
                 blk = f"dir_err_{b}"
@@ -215,11 +218,16 @@ class Direction(MeasurementModel):
         if bound is not None:
             self._b = np.asarray(ctx.beacons[bound], float)
         self._bind = lru_cache(maxsize=1024)(lambda name, receiver=None: Direction(
-            self.params, self.context, name, self.position, receiver))
+            self.params, self.context, name, self.position, receiver, normals))
 
     def at(self, position) -> "Direction":
         """This model with the robot at ``position`` (3,) m (for a state without a position block)."""
-        return Direction(self.params, self.context, self.bound, position, self.receiver)
+        return Direction(self.params, self.context, self.bound, position, self.receiver,
+                         (self.normals, self._receivers_info))
+
+    def info(self) -> dict:
+        """The summary's ``info`` (fusion.api.ReportsInfo): the receiver array used and where it came from."""
+        return {"receiver_array": dict(self._receivers_info)}
 
     def _los(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         p = x[..., self._p] if self._p is not None else self.position
@@ -315,10 +323,8 @@ def _colours(receivers) -> np.ndarray:
     return receiver_colours(normals)
 
 
-@lru_cache(maxsize=4)
-def _cached_sd(kind: str) -> float:
-    return discretisation_sd(receiver_normals(kind))
-
-
-def _default_sd(kind, normals: np.ndarray) -> float:
-    return _cached_sd(kind) if isinstance(kind, str) else discretisation_sd(normals)
+@lru_cache(maxsize=8)
+def _cached_sd(receivers) -> float:
+    """discretisation_sd of ``receivers`` (an array kind, or a tuple of unit normals), cached."""
+    normals = receiver_normals(receivers) if isinstance(receivers, str) else np.asarray(receivers, float)
+    return discretisation_sd(normals)

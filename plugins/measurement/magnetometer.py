@@ -26,7 +26,8 @@ def earth_field(declination_deg: float, inclination_deg: float, intensity: float
 
 class FieldParams(Params):
     """The local reference field: ``field_ned`` or declination / inclination / intensity (a World
-    Magnetic Model / IGRF value for the place and date)."""
+    Magnetic Model / IGRF value for the place and date); none of them: the recording's header, else the IGRF
+    at its origin and date (fusion_plugins.measurement.earth_field)."""
 
     field_ned: tuple[float, float, float] | None = Field(None, description="m_n (NED, the sensor's units, e.g. uT)")
     declination_deg: float | None = Field(None, ge=-180, le=180, description="east of true north positive")
@@ -41,19 +42,21 @@ class FieldParams(Params):
                 raise ValueError("field_source: alignment estimates the field: give no field_ned, "
                                  "declination_deg, inclination_deg or intensity")
             return self
-        if self.field_ned is None and any(a is None for a in angles):
-            raise ValueError("give field_ned, or declination_deg, inclination_deg and intensity (a World "
-                             "Magnetic Model value for the place and date), or field_source: alignment")
+        if any(a is not None for a in angles) and any(a is None for a in angles):
+            raise ValueError("give all of declination_deg, inclination_deg and intensity (a World Magnetic Model "
+                             "value for the place and date), or field_ned, or none (the recording's header, "
+                             "else the IGRF at its origin and date)")
         if self.field_ned is not None and any(a is not None for a in angles):
             raise ValueError("give field_ned or the declination/inclination/intensity, not both")
         if self.field_ned is not None and not np.any(self.field_ned):
             raise ValueError("field_ned must not be zero")
         return self
 
-    def field(self) -> np.ndarray:
-        if self.field_ned is not None:
-            return np.asarray(self.field_ned, dtype=float)
-        return earth_field(self.declination_deg, self.inclination_deg, self.intensity)  # type: ignore[arg-type]
+    def field(self) -> np.ndarray | None:
+        """m_n (3,) NED from these parameters, or None when they give none."""
+        from fusion_plugins.measurement.earth_field import config_field
+
+        return config_field(self)
 
 
 class MagnetometerParams(FieldParams):
@@ -69,7 +72,8 @@ class MagnetometerParams(FieldParams):
     align_accel_sd: float = Field(0.01, gt=0, description="sd (m/s^2) of the static mean specific force beyond "
                                   "the state's accelerometer-bias uncertainty (vibration, residual tilt)")
     field_source: Literal["config", "alignment"] = Field(
-        "config", description="config: the field above; alignment: estimated over initial.align_s as the mean "
+        "config", description="config: the field above (none given: the recording header's, else the IGRF at its "
+        "origin and date); alignment: estimated over initial.align_s as the mean "
         "sample rotated to NED by the attitude the alignment set before this sensor's turn (a sensor listed "
         "earlier, e.g. the onboard estimator's first attitude: docs/import.md); needs align: none")
     max_heading_sd_deg: float = Field(10.0, gt=0, description="field_source: alignment: the field is estimated "
@@ -119,8 +123,13 @@ class Magnetometer(MeasurementModel):
         self.n = layout.n
         self.direction_only = bool(self.params.direction_only)  # type: ignore[attr-defined]
         self.m_n: np.ndarray | None = None      # field_source: alignment: set by align_state
+        self._info: dict = {"source": "alignment"}
         if self.params.field_source == "config":  # type: ignore[attr-defined]
-            self._set_field(self.params.field())  # type: ignore[attr-defined]
+            from fusion_plugins.measurement.earth_field import resolve_field
+
+            m, self._info = resolve_field(self.params, self.context)
+            self._set_field(m)
+        self._start: str | None = None           # how align_state set the attitude
         self._aligned = False      # set by align_state: the static start is over
         self._heading_sd: float | None = None   # deg, field_source: alignment: of the attitude it rotated by
         self.events: list[Event] = []          # an alignment without samples: its warning, until take_events()
@@ -200,9 +209,14 @@ class Magnetometer(MeasurementModel):
                 self._set_field(np.mean(quat.rotate(q0, np.array([o.z for o in observations])), axis=0))
             return x0, P0
         if method == "none":
+            self._start = "attitude not aligned by the magnetometer (align: none)"
             return x0, P0
         if not observations:
+            self._start = ("roll and pitch from gravity over the static start; heading unknown (no magnetometer "
+                           "sample): from the GPS velocity once moving")
             return self._heading_unknown(x0, P0)
+        self._start = (f"roll, pitch and heading by {method} from gravity and the magnetic field over the static "
+                       f"start ({len(observations)} magnetometer samples)")
         layout = self.context.layout
         x0 = np.array(x0, dtype=float, copy=True)
         P0 = np.array(P0, dtype=float, copy=True)
@@ -260,6 +274,16 @@ class Magnetometer(MeasurementModel):
                                  "the accelerometer; the heading comes from the later magnetometer samples or "
                                  "the GPS velocity"))
         return x0, P0
+
+    def info(self) -> dict:
+        """The summary's ``info`` (fusion.api.ReportsInfo): where the reference field came from and how the
+        starting attitude was found."""
+        out = {"reference_field": dict(self._info)}
+        if self.m_n is not None and self._info.get("source") == "alignment":
+            out["reference_field"]["field_ned"] = [round(float(v), 4) for v in self.m_n]
+        if self._start is not None:
+            out["start"] = self._start
+        return out
 
     def take_events(self) -> list[Event]:
         """The events since the last call (an alignment without samples), forgotten once taken."""

@@ -8,6 +8,7 @@ PROCESSES = {
     "ins": "fusion_plugins.process.ins:Ins",
     "firing_clock": "fusion_plugins.process.firing_clock:FiringClock",
     "static_orientation": "fusion_plugins.process.static_orientation:StaticOrientation",
+    "omni": "fusion_plugins.process.omni:Omni",
 }
 
 

@@ -92,6 +92,7 @@ class Ins(InsNoise, ProcessModel):
     Params: ClassVar[type[Params]] = InsParams
     layout: StateLayout = StateLayout.parse("p:3 v:3 q:4:quaternion ba:3 bw:3")
     input_dim: int = 6
+    input_fields = ("ax", "ay", "az", "gx", "gy", "gz")   # m/s^2, rad/s, FRD body frame (a '# fields' line is checked against it)
     linear: bool = False
 
     def __new__(cls, params: InsParams | None = None, context: BuildContext | None = None):

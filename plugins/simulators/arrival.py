@@ -2,6 +2,8 @@
 reports each pulse's arrival time and its closest receiver."""
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 from pydantic import Field
 
@@ -56,6 +58,10 @@ class ArrivalParams(SimParams):
     echo_max: float = Field(3.0, ge=0, description="see echo_min (m)")
     max_range: float | None = Field(None, gt=0, description="no arrival beyond this distance (m)")
     dropout_prob: float = Field(0.0, ge=0, le=1, description="probability a pulse is missed")
+    receivers: Literal["truncated_icosahedron"] | list[tuple[float, float, float]] = Field(
+        "truncated_icosahedron", description="the receiver normals (body frame), receiver 1 first")
+    renumber_seed: int | None = Field(None, description="number the receivers in a random order drawn with this "
+                                      "seed (an array wired otherwise: the header lists the numbering)")
 
 
 class ArrivalTimeSimulator(SensorSimulator):
@@ -65,7 +71,7 @@ class ArrivalTimeSimulator(SensorSimulator):
     i fires at ``(i - 1) T + t_g`` within a cycle: paper 003 eq. 1); the pulse reaches the array when
     ``t_a = t_f + |p(t_a) - b| / c`` (solved by fixed point). The message time and the ``arrival`` value are
     the measured arrival time (s, receiver clock = log clock) with noise; an echo arrives later by its extra
-    path / c and from a random direction. ``receiver`` is the index (1-32) of the receiver whose face normal,
+    path / c and from a random direction. ``receiver`` is the index (1-32, or 1-k of ``receivers``) of the receiver whose face normal,
     rotated by the true attitude, is closest to the direction of the arriving pulse (the header lists the
     normals as ``# receiver N: x y z``, body frame). Truth adds ``T`` (the true firing period) and ``t_fire``
     (time of the latest firing). ``--noise off``: exact arrival times, no echoes.
@@ -86,8 +92,17 @@ class ArrivalTimeSimulator(SensorSimulator):
         out = [f"{s} period_s: {p.period_s:g}", f"{s} speed_of_sound: {p.speed_of_sound:g}",
                f"{s} noise_sd: {p.noise_sd if sim.noise else 0:g}",
                f"{s} firing_order: {' '.join(self._order(sim))}"]
-        out += [f"receiver {i + 1}: {n[0]:.9f} {n[1]:.9f} {n[2]:.9f}" for i, n in enumerate(RECEIVER_NORMALS)]
+        out += [f"receiver {i + 1}: {n[0]:.9f} {n[1]:.9f} {n[2]:.9f}" for i, n in enumerate(self.normals())]
         return out
+
+    def normals(self) -> np.ndarray:
+        """The receivers' unit normals (k, 3), receiver r at row r - 1 (renumbered by ``renumber_seed``)."""
+        p = self.params
+        n = RECEIVER_NORMALS if isinstance(p.receivers, str) else np.asarray(p.receivers, float)
+        n = n / np.linalg.norm(n, axis=1, keepdims=True)
+        if p.renumber_seed is not None:
+            n = n[np.random.default_rng(p.renumber_seed).permutation(len(n))]
+        return n
 
     def _order(self, sim: SimContext) -> list[str]:
         from fusion.api import ConfigError
@@ -126,7 +141,7 @@ class ArrivalTimeSimulator(SensorSimulator):
             meas += np.where(echo, r_extra.uniform(p.echo_min, p.echo_max, len(k)) / p.speed_of_sound, 0.0)
             rnd = r_dir.normal(size=(len(k), 3))
             u_b = np.where(echo[:, None], rnd / np.linalg.norm(rnd, axis=1, keepdims=True), u_b)
-        receiver = np.argmax(u_b @ RECEIVER_NORMALS.T, axis=1) + 1
+        receiver = np.argmax(u_b @ self.normals().T, axis=1) + 1
         keep &= meas <= sim.duration
         self._t_fire = t_fire
         sel = np.flatnonzero(keep)

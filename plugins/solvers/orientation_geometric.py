@@ -99,6 +99,9 @@ class OrientationParams(Params):
     output: Literal["fix", "initialise"] = Field("fix", description="fix: an attitude fix per cycle; "
                                                  "initialise: the first pose fix only (x y z, position "
                                                  "covariance, qw qx qy qz), then every arrival passed through")
+    receivers: str | list[tuple[float, float, float]] | None = Field(
+        None, description="receiver normals (body frame), as the direction model's: a list, an array's name or a "
+        "file; none: the recording header's '# receiver N' lines")
     initialise_agree: int = Field(3, ge=1, description="initialise: only once this many consecutive TDOA "
                                   "fixes agree (chi-square, 99 %): echoes cannot place the filter")
 
@@ -108,7 +111,7 @@ class OrientationGeometric(Solver):
 
     Input: ``beacon arrival receiver`` messages. A cycle of one arrival per beacon (as ``tdoa_geometric``)
     gives the robot position (the TDOA fix of the cycle, or ``position``), the unit vectors to the beacons,
-    and with the receivers' normals (truncated icosahedron, body frame) the attitude by
+    and with the receivers' normals (``receivers``, else the recording header's; body frame) the attitude by
     :func:`orientation_fix`. Output: a :class:`fusion.api.Fix` stamped at the cycle's last arrival, its
     ``attitude`` the quaternion C_b^n with ``attitude_cov`` ``attitude_sd_deg``^2 per axis (rad^2), its
     ``value`` the position used (m) with its covariance (the ``attitude`` model observes it). With
@@ -123,7 +126,7 @@ class OrientationGeometric(Solver):
 
     def __init__(self, params: OrientationParams | None = None, context: BuildContext | None = None):
         super().__init__(params, context)
-        from fusion_plugins.measurement.direction import receiver_normals
+        from fusion_plugins.measurement.receiver_array import resolve_receivers
 
         p: OrientationParams = self.params  # type: ignore[assignment]
         names = p.beacons if p.beacons is not None else list(self.context.beacons)
@@ -133,13 +136,23 @@ class OrientationGeometric(Solver):
         if p.position is None and len(names) < 4:
             raise ConfigError("orientation_geometric: without 'position' it needs 4 beacons (TDOA fix)")
         self.beacon_positions = {n: np.asarray(self.context.beacons[n], float) for n in names}
-        self.normals = receiver_normals("truncated_icosahedron")
+        self.normals, self._receivers_info = resolve_receivers(
+            p.receivers, self.context, "orientation_geometric")
         self.counters = {"cycles": 0, "fixes": 0, "too_few_beacons": 0, "degenerate": 0, "no_convergence": 0}
         self.events: list[Event] = []
         self._cycle: dict[str, tuple[float, int, Message]] = {}
         self._previous = None
         self._initialised = False
         self._agree = AgreeingFixes(p.initialise_agree)
+
+    def info(self) -> dict:
+        """The summary's ``info`` (fusion.api.ReportsInfo): the receiver array used and where it came from."""
+        out: dict = {"receiver_array": dict(self._receivers_info)}
+        if self._initialised:
+            out["start"] = (f"pose from the geometric fixes: position, firing time and period of the first "
+                            f"{self.params.initialise_agree} agreeing cycles (eqs. 1-8), attitude by the geometric "  # type: ignore[attr-defined]
+                            "orientation algorithm (eqs. 12-17) of the last")
+        return out
 
     def feed(self, message: Message) -> list[Message | Fix]:
         if self._initialised:

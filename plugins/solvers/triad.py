@@ -141,20 +141,25 @@ class TriadSolver(Solver):
 
     def __init__(self, params: TriadParams | None = None, context: BuildContext | None = None):
         super().__init__(params, context)
+        from fusion_plugins.measurement.earth_field import resolve_field
         from fusion_plugins.measurement.magnetometer import FieldParams
         p: TriadParams = self.params  # type: ignore[assignment]
         try:
-            field = FieldParams(field_ned=p.field_ned, declination_deg=p.declination_deg,
-                                inclination_deg=p.inclination_deg, intensity=p.intensity).field()
+            FieldParams(field_ned=p.field_ned, declination_deg=p.declination_deg,
+                        inclination_deg=p.inclination_deg, intensity=p.intensity)
         except ValueError as exc:
             raise ValueError(str(exc).splitlines()[-1]) from None
-        self.m_n = field
+        self.m_n, self._info = resolve_field(p, self.context)
         self.g_n = np.array([0.0, 0.0, p.gravity])
         self.events: list = []
         self._f: np.ndarray | None = None
         sa2 = p.accel_sd ** 2 + p.accel_disturbance_sd ** 2
         self.S1 = np.eye(3) * sa2
         self.S2 = np.eye(3) * p.mag_sd ** 2
+
+    def info(self) -> dict:
+        """The summary's ``info`` (fusion.api.ReportsInfo): where the reference field came from."""
+        return {"reference_field": dict(self._info)}
 
     def take_input(self, t: float, u: np.ndarray | None) -> None:
         """The held IMU sample (fusion.api.UsesInput): its specific force (m/s^2, FRD)."""

@@ -405,6 +405,15 @@ def test_recording_beacons_the_config_lacks_or_places_elsewhere_are_warned_about
     log = tmp_path / "moved.log"
     log.write_text("\n".join(lines) + "\n")
     out = tmp_path / "s.json"
+    # a config contradicting its recording is refused (fusion.header_checks), naming both values ...
+    assert main(["run", str(uwb), "--input", str(log), "--summary-json", str(out), "-o", str(tmp_path / "e.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "beacons.B2: [30, 0] in the config, [300, 0, 0] in the recording" in err and "(and 1 more)" in err
+    assert "moved.log:" in err and "prefer" in err and not out.exists()
+    # ... unless it prefers its own: then the run warns
+    preferring = tmp_path / "uwb.yaml"
+    preferring.write_text(uwb.read_text().replace("../recordings/", str(ROOT / "recordings") + "/") + "\nprefer: config\n")
+    uwb = preferring
     assert main(["run", str(uwb), "--input", str(log), "--summary-json", str(out), "-o", str(tmp_path / "e.csv")]) == 0
     err = capsys.readouterr().err
     assert "the recording declares beacon(s) B5 that the config does not define" in err

@@ -55,7 +55,7 @@ def test_unknown_scheme_and_unconverted_logs_are_exit_2_with_the_known_ones(caps
 def test_sink_by_suffix_and_unknown_suffix_lists_the_known(registry, tmp_path, capsys):
     assert sink_class("out.csv", registry).name == sink_class("out.JSONL", registry).name == "estimates"
     assert sink_class("-", registry).name == "estimates"
-    with pytest.raises(ConfigError, match=r"suffix '\.xyz'; known output suffixes: \.csv, \.jsonl, \.ndjson"):
+    with pytest.raises(ConfigError, match=r"suffix '\.xyz'; known output suffixes: \.csv, \.jsonl, \.mcap, \.ndjson"):
         sink_class("out.xyz", registry)
     with pytest.raises(ConfigError, match="no suffix"):
         sink_class(str(tmp_path / "out"), registry)

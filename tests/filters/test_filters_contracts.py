@@ -74,6 +74,11 @@ PV3 = StateLayout.parse("p:3 v:3")
 CLOCK = StateLayout([Block("p", 3), Block("T", 1), Block("t", 1)])
 CLOCK_Q = StateLayout([Block("p", 3), Block("T", 1), Block("t", 1), Block("q", 4, "quaternion")])
 MAG = {"field_ned": [20.0, 1.0, 45.0]}
+OMNI = StateLayout([Block("p", 3), Block("roll", 1, "angle"), Block("pitch", 1, "angle"), Block("yaw", 1, "angle"),
+                    Block("vb", 3), Block("w", 3), Block("ab", 3)])
+_C6 = tuple(0.01 if i == j else 0.0 for i in range(6) for j in range(i, 6))      # 6 x 6 upper triangle
+_C3 = (0.01, 0.0, 0.0, 0.01, 0.0, 0.01)
+_ODOM = (1.0, 2.0, 0.0, 0.98, 0.0, 0.0, 0.2, *_C6, 1.0, 0.1, 0.0, 0.0, 0.0, 0.2, *_C6)   # fusion import's Odometry
 
 MEASUREMENT_CASES = [
     ("range", {}, PV3, Message(1.0, "uwb", ("B1", 5.0, "B3", 9.0))),
@@ -88,9 +93,14 @@ MEASUREMENT_CASES = [
     ("arrival_time", {}, CLOCK, Message(1.0, "us", ("B2", 1.05))),
     # its default drops dh/dp from the Jacobian on purpose (position_from_direction: false): the full one here
     ("direction", {"position_from_direction": True}, CLOCK_Q, Message(1.0, "us", ("B3", 1.05, 3))),
+    ("pose", {"select": ["x", "y", "yaw", "vx", "vyaw"]}, OMNI, Message(1.0, "odom", _ODOM)),
+    ("twist", {"select": ["vx", "vy", "vyaw"]}, OMNI, Message(1.0, "tw", _ODOM[28:])),
+    ("imu", {"select": ["roll", "yaw", "vyaw", "ax"]}, OMNI,
+     Message(1.0, "imu", (0.98, 0.1, 0.0, 0.2, 0.0, 0.0, 0.1, 0.2, 0.0, -9.8, *_C3, *_C3, *_C3))),
 ]
 PROCESS_CASES = [("pv", {}), ("pv", {"dims": 3}), ("ins", {}), ("ins", {"states": 22}), ("firing_clock", {}),
-                 ("firing_clock", {"attitude_sd_deg": 1.0}), ("static_orientation", {})]
+                 ("firing_clock", {"attitude_sd_deg": 1.0}), ("static_orientation", {}), ("omni", {}),
+                 ("omni", {"two_d_mode": True})]
 
 
 def test_every_builtin_has_a_contract_case():

@@ -27,7 +27,7 @@ def process(**kw) -> FiringClock:
 def direction(proc: FiringClock, **kw) -> Direction:
     params = dict(arrival=True, error_state=True, sd_deg=2.0)
     params.update(kw)
-    return Direction(Direction.Params(**params), BuildContext(proc.layout, BEACONS, "us"))
+    return Direction(Direction.Params(**{"receivers": "truncated_icosahedron", **params}), BuildContext(proc.layout, BEACONS, "us"))
 
 
 def state(proc: FiringClock, rng, e_sd: float = 0.1) -> np.ndarray:
@@ -212,7 +212,7 @@ def test_refusals():
         FiringClock.Params(attitude_sd_deg=0.5, direction_error_sd_deg=10.0, direction_error_tau_s=0.0)
     proc = process()
     with pytest.raises(ConfigError, match="sd_deg"):
-        Direction(Direction.Params(arrival=True, error_state=True), BuildContext(proc.layout, BEACONS, "us"))
+        Direction(Direction.Params(arrival=True, error_state=True, receivers="truncated_icosahedron"), BuildContext(proc.layout, BEACONS, "us"))
     bare = FiringClock(FiringClock.Params(attitude_sd_deg=0.57), BuildContext(beacons=BEACONS))
     with pytest.raises(ConfigError, match="dir_err_B1"):
         direction(bare)

@@ -77,7 +77,7 @@ def test_orientation_solver_component():
     """A cycle of four exact arrivals: the solver's TDOA position and attitude from the closest receivers."""
     from fusion_plugins.measurement.direction import receiver_normals as _normals
     ctx = BuildContext(beacons=BEACONS, sensor="us")
-    s = testing.build("solver", "orientation_geometric", {}, ctx)
+    s = testing.build("solver", "orientation_geometric", {"receivers": "truncated_icosahedron"}, ctx)
     r, rot = np.array([1.2, 1.1, 1.4]), Rotation.from_euler("xyz", [10, -20, 30], degrees=True)
     N = _normals("truncated_icosahedron")
     out = []
@@ -95,6 +95,7 @@ def test_orientation_solver_component():
 
 # --------------------------------------------------------------------------- direction model
 def _direction(layout, **params):
+    params.setdefault("receivers", "truncated_icosahedron")    # the numbering the tests' receivers use
     return testing.build("measurement", "direction", params, BuildContext(layout=layout, beacons=BEACONS))
 
 

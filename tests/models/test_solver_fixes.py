@@ -67,7 +67,7 @@ def test_geometric_attitude_fix_is_observed_by_attitude():
     """orientation_geometric's fix: the attitude with attitude_sd_deg per axis, which the attitude model
     observes (h is zero at the fix's own attitude)."""
     r, rot = np.array([1.2, 1.1, 1.4]), Rotation.from_euler("xyz", [10, -20, 30], degrees=True)
-    s = testing.build("solver", "orientation_geometric", {"attitude_sd_deg": 5.0},
+    s = testing.build("solver", "orientation_geometric", {"attitude_sd_deg": 5.0, "receivers": "truncated_icosahedron"},
                       BuildContext(beacons=BEACONS, sensor="us"))
     (fix,) = [f for m in _cycle(r, rot) for f in s.feed(m)]
     np.testing.assert_allclose(fix.attitude_cov, np.deg2rad(5.0) ** 2 * np.eye(3), rtol=1e-12)
@@ -83,8 +83,8 @@ def test_direction_refuses_an_initial_fix_without_arrival_times():
     fix = initial_fix(np.array([1.0, 1.0, 1.0]), np.eye(3) * 1e-4, BEACONS["B4"], 1.0, C, 2e-4,
                       np.array([1.0, 0, 0, 0]), 0.2)
     with pytest.raises(MalformedMessage, match="arrival: true"):
-        testing.build("measurement", "direction", {}, ctx).observe(fix)
-    obs = testing.build("measurement", "direction", {"arrival": True}, ctx).observe(fix)
+        testing.build("measurement", "direction", {"receivers": "truncated_icosahedron"}, ctx).observe(fix)
+    obs = testing.build("measurement", "direction", {"arrival": True, "receivers": "truncated_icosahedron"}, ctx).observe(fix)
     assert obs.z.shape == (8,) and obs.R.shape == (8, 8) and np.all(np.linalg.eigvalsh(obs.R) > 0)
     bad = Fix(fix.t, fix.value, fix.cov, attitude=fix.attitude, attitude_cov=-np.eye(3))
     with pytest.raises(MalformedMessage, match="positive diagonal"):

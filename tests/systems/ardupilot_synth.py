@@ -24,6 +24,9 @@ from dataflash_builder import DataflashWriter  # noqa: E402
 ORIGIN = (-35.363262, 149.165237, 584.0)
 FIELD = {"declination_deg": 12.3, "inclination_deg": -65.8, "intensity": 57.6}
 GPS_SD = {"horizontal_sd": 0.7, "vertical_sd": 1.2, "velocity_sd": 0.1}
+#: s a fix is logged after the instant it measures: ArduPilot's default GPS lag (GPS_DELAY_MS 0: the
+#: driver's, 0.2 s; the configs model it with time_offset), as a receiver's solution reaches the autopilot
+GPS_LAG = 0.2
 
 SCENARIO = {
     "name": "ardupilot_synthetic",
@@ -102,11 +105,11 @@ def write_bin(path: str | Path, seed: int = 11) -> dict[str, np.ndarray]:
         if g is None or r is None:
             continue
         vz = float(np.interp(t, truth[:, 0], truth[:, 6]))
-        events.append((t, 1, "GPS", dict(I=0, Status=3, NSats=int(g.num_sats), HDop=float(g.horizontal_dil),
+        events.append((t + GPS_LAG, 1, "GPS", dict(I=0, Status=3, NSats=int(g.num_sats), HDop=float(g.horizontal_dil),
                                          Lat=g.latitude, Lng=g.longitude, Alt=float(g.altitude),
                                          Spd=float(r.spd_over_grnd) * 1852.0 / 3600.0,
                                          GCrs=float(r.true_course or 0.0), VZ=vz, GWk=2312, GMS=0)))
-        events.append((t, 1, "GPA", dict(I=0, VDop=1.2, HAcc=GPS_SD["horizontal_sd"], VAcc=GPS_SD["vertical_sd"],
+        events.append((t + GPS_LAG, 1, "GPA", dict(I=0, VDop=1.2, HAcc=GPS_SD["horizontal_sd"], VAcc=GPS_SD["vertical_sd"],
                                          SAcc=GPS_SD["velocity_sd"])))
     for row in truth[::10]:                                 # the "EKF" at 10 Hz: the truth
         t, p, vel, q = row[0], row[1:4], row[4:7], row[7:11]
