@@ -78,7 +78,7 @@ def _estimates(config: Path, lines: list[str], batched: bool) -> tuple[list[Esti
 
     sink = Keep()
     run = Run(load_system(config), [sink], hooks=False)
-    run.scheduler._batch = batched and run.scheduler._batch
+    run.loop.integrator.batch = batched and run.loop.integrator.batch
     run.consume(iter_messages(lines, run.parsed))
     result = run.finish()
     return sink.out, result.summary
