@@ -8,12 +8,12 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
-from fusion.api import Event
+from fusion.api import Event, InputError
 
 if TYPE_CHECKING:
     from fusion.run.stats import RunStats
 
-__all__ = ["expected_fields", "truth_warnings", "header_beacon_warnings", "fix_sensor_absent", "coverage_check",
+__all__ = ["expected_fields", "fields_warning", "truth_warnings", "header_beacon_warnings", "fix_sensor_absent", "coverage_check",
            "COARSE_TRUTH_S", "BEACON_TOLERANCE_M", "ATTITUDE_ONLY_HZ"]
 
 #: Estimates a second of a run started without its fix when the config sets no output.rate_hz (an
@@ -63,6 +63,21 @@ def expected_fields(runtime: Any, process: Any) -> tuple[tuple[str, ...] | None,
         if names:
             return tuple(names), f"{comp.kind} {comp.name!r}"
     return None, ""
+
+
+def fields_warning(runtime: Any, process: Any, names: Sequence[str], line: str) -> str | None:
+    """A ``# fields`` line's ``names`` (told as ``line``) against what the sensor's reading component declares
+    (:func:`expected_fields`): the same names in another order would be read by position, the columns silently
+    swapped, so the stream is refused (InputError); other names give a warning (read by position); None when
+    they agree or nothing is declared."""
+    expected, who = expected_fields(runtime, process)
+    if expected is None or tuple(names) == tuple(expected):
+        return None
+    if sorted(names) == sorted(expected):
+        raise InputError(f"{line} names the values in another order than {who} reads them "
+                         f"({' '.join(expected)}): they would be swapped; reorder the columns (or the "
+                         f"importer's mapping) to {' '.join(expected)}")
+    return f"{line}: {who} reads {' '.join(expected)}; the values are read in that order, by position"
 
 
 def truth_warnings(stats: RunStats, unnamed: dict[str, int], state_names: Sequence[str]) -> list[Event]:

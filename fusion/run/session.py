@@ -1,26 +1,13 @@
 """A run: a source's lines -> messages -> the loop (fusion.run.loop) -> sinks, hooks and statistics.
+``fusion run``, ``fusion tui``, the experiments and the tests all run a system through here (docs/pipeline.md):
+``run(system, source, sinks)`` over a whole source, or ``Run`` one message at a time for callers that pace it
+(``run = Run(system); for item in iter_messages(lines, run.parsed): run.push(item); result = run.finish()``).
 
-    from fusion.config import load_system
-    from fusion import pipeline
-
-    system = load_system("configs/abps_ins.yaml")
-    result = pipeline.run(system, system.recording)          # or a Source, or any iterable of lines
-    result.summary["errors"]["position_rmse_m"]
-
-``fusion run``, ``fusion tui``, the experiments and the tests all run a system through this module;
-nothing else drives a ``Loop``. A run is a stream in bounded memory: estimates go to the sinks (and
-to the ``fusion_on_estimate`` hook) and are not kept; errors against truth, NEES and NIS are accumulated
-online (``RunStats``); truth is kept as a short window for interpolation (``fusion.truth_stream``); a plot
-keeps a decimated trajectory of bounded size. The wired ``System`` is not modified: running it twice gives
-identical results.
-
-``Run`` is the same loop one message at a time, for callers that pace or interleave it (the live view):
-``run = Run(system); for item in iter_messages(lines, run.parsed): run.push(item); result = run.finish()``.
-
-Modules: this one drives the loop (``Run``, ``run``); what a run leaves is fusion.run.result (``RunResult``,
-the ``Collect`` sink), what it counts ``fusion.run.stats.RunStats`` and its summary dict ``fusion.run_summary``;
-the plugins' observers fusion.run.observers, the source's lines fusion.run.lines, the checks of a recording
-against the config fusion.run.header.
+A run is a stream in bounded memory: estimates go to the sinks (and the ``fusion_on_estimate`` hook) and are
+not kept; errors, NEES and NIS are accumulated online (fusion.run.stats); truth is a short window
+(fusion.truth_stream). The wired ``System`` is not modified: running it twice gives identical results. What a
+run leaves is fusion.run.result; the plugins' observers fusion.run.observers; the source's lines
+fusion.run.lines; the checks of a recording's header against the config fusion.run.header.
 """
 from __future__ import annotations
 
@@ -30,11 +17,11 @@ import math
 import time
 from typing import Any, Callable, Iterable, Sequence
 
-from fusion.api import Estimate, Event, FusionError, InputError, MalformedMessage, Message, ReceivesEvents, has
+from fusion.api import Estimate, Event, FusionError, MalformedMessage, Message, ReceivesEvents, has
 from fusion.config import System
 from fusion.logformat import ParsedStream, iter_messages, parse_values
 from fusion.run.clock import COMPARED
-from fusion.run.header import (coverage_check, expected_fields, fix_sensor_absent, header_beacon_warnings,
+from fusion.run.header import (coverage_check, fields_warning, fix_sensor_absent, header_beacon_warnings,
                                truth_warnings)
 from fusion.run.integrator import ProcessModelFailed
 from fusion.run.lines import SourceLost, guarded, lines_of, source_message
@@ -199,18 +186,11 @@ class Run:
                 self.imu_coverage[sensor] = facts
             if warning is not None:
                 self._dispatch(Event(math.nan, "warning", sensor, warning))
-        expected, who = expected_fields(runtime, self.system.process)
-        if expected is None or tuple(names) == tuple(expected):
-            return
-        line = f"{self.label + ' ' if self.label else ''}line {lineno}: '# fields {sensor} {' '.join(names)}'"
-        if sorted(names) == sorted(expected):
-            raise InputError(f"{line} names the values in another order than {who} reads them "
-                             f"({' '.join(expected)}): they would be swapped; reorder the columns (or the "
-                             f"importer's mapping) to {' '.join(expected)}")
-        if sensor not in self._fields_told:
+        warning = fields_warning(runtime, self.system.process, names, f"{self.label + ' ' if self.label else ''}"
+                                 f"line {lineno}: '# fields {sensor} {' '.join(names)}'")
+        if warning is not None and sensor not in self._fields_told:
             self._fields_told.add(sensor)
-            self._dispatch(Event(math.nan, "warning", sensor, f"{line}: {who} reads {' '.join(expected)}; the "
-                                 "values are read in that order, by position"))
+            self._dispatch(Event(math.nan, "warning", sensor, warning))
 
     def _header_read(self) -> None:
         """The first message: the header is read. A recording without ``initial.from_sensor``'s stream (a flight
