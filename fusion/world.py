@@ -73,11 +73,11 @@ def read_world(path: str | Path) -> RecordingWorld | None:
         fh = open(p, encoding="utf-8", errors="replace")
     except OSError:
         return None
-    with fh:
-        try:
+    try:
+        with fh:
             return read_world_lines(fh, str(path))
-        except OSError:   # unreadable past its name (/proc/self/mem: EIO): the run and validate report it
-            return None
+    except (OSError, ValueError):      # unreadable (an I/O error, a binary file): the run's source reports it
+        return None
 
 
 def read_world_lines(lines: Iterable[str], label: str) -> RecordingWorld:

@@ -1,5 +1,6 @@
-"""Helpers of the tests of a config against its recording's world: temp scenarios and configs made from the
-shipped ones with a few values changed."""
+"""Helpers of the tests of a config against its recording's world (tests/world): temp scenarios and configs
+made from the shipped ones with a few values changed. (Not conftest.py: tests/health has its own, and
+`from conftest import` would find whichever came first.)"""
 from __future__ import annotations
 
 import json
@@ -39,7 +40,6 @@ def run(config: Path, recording: Path | None, out: Path, *extra: str) -> tuple[i
     args = ["run", str(config), "-q", "--no-progress", "--summary-json", str(out), "--force", *extra]
     code = main(args + (["--input", str(recording)] if recording is not None else []))
     return code, json.loads(out.read_text()) if out.exists() else None
-
 
 
 
