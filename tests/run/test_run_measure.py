@@ -108,8 +108,14 @@ def test_a_model_whose_prediction_is_not_finite_fails_the_step_and_keeps_the_bel
     """The filter finds h NaN at a finite mean (a ModelFault): the outcome's failure, the belief given kept."""
     from fusion.errors import ModelFault
 
+    from fusion_plugins.filters.checks import checked
+
     filt, belief, plan, layout = _setup()
     R = np.array([[0.01]])
-    out = measure(filt, belief, Observation(1.0, np.array([0.8]), Direct(lambda x: x[..., :1] * np.nan), R), R,
-                  plan, layout)
+    nan_model = Direct(lambda x: x[..., :1] * np.nan)
+    # a third-party model as wiring gives it to the loop: wrapped once by the checking adapter
+    out = measure(filt, belief, Observation(1.0, np.array([0.8]), checked(nan_model), R), R, plan, layout)
     assert isinstance(out.failure, ModelFault) and out.belief is belief and out.counts == {}
+    # unwrapped, the filter's NaN result is refused by the step itself: the belief kept, counted as rejected
+    out = measure(filt, belief, Observation(1.0, np.array([0.8]), nan_model, R), R, plan, layout)
+    assert out.verdict == "nonfinite" and out.belief is belief and out.counts == {"rejected": 1}
