@@ -15,6 +15,7 @@ from cases import gps_latency, renumbered_receivers, wide_start, wrong_field
 # (case, sensor named on the last line, what the line must say, the first likely cause)
 CASES = [
     (wrong_field, "mag", "updates rejected", "the config's constants against the recording's header"),
+    (gps_latency, "gps", "dropped as late", "a latency (sensors.gps.time_offset 0 s"),
     (wide_start, "uwb", "updates rejected", "the config's constants"),
     (renumbered_receivers, "us", "errors against truth", "a receiver array of 32 in the header"),
 ]
@@ -69,12 +70,3 @@ def test_an_unknown_health_key_is_one_exit_2_line(tmp_path, capsys):
     assert main(["run", str(cfg), "-q"]) == 2
     err = capsys.readouterr().err
     assert "health.max_unused_shares" in err or "max_unused_shares" in err
-
-
-def test_a_latency_beyond_the_reorder_buffer_is_refused_before_the_run(tmp_path, capsys):
-    """A GPS time_offset of -0.3 s beyond a 0.1 s reorder buffer would drop every fix after the first as
-    late: refused at wiring (exit 2, the field and the fix named), never a run that ends degraded."""
-    cfg = gps_latency(tmp_path)
-    assert main(["run", str(cfg), "-q"]) == 2
-    err = capsys.readouterr().err
-    assert "time_offset" in err and "scheduler.max_latency (0.1 s)" in err and "dropped as late" in err
