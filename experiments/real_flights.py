@@ -167,8 +167,8 @@ lags as the configs assume (0.2 s ArduPilot, 0.11 s PX4: `sensors.gps.time_offse
 has no `ORGN` record: its reference is referred to the recording's origin by its own position at the first
 fix's stamp, which the GPS lag puts 0.2 s after the instant the fix measures, an offset its horizontal
 position carries. Its GPS records carry no accuracies (no `GPA` before ArduPilot 3.4): the config's floor,
-0.5 m (EK3_POSNE_M_NSE), is then below this simulated receiver's 0.7 m / 1.2 m, and the health rule finds
-the GPS innovations inconsistent (exit 4), as it should.
+0.5 m (EK3_POSNE_M_NSE), is then used, below this simulated receiver's 0.7 m / 1.2 m (the `exit` column
+says whether the health rule judged the run degraded).
 
 {head}{chr(10).join(rows)}
 
