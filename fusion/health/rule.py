@@ -36,13 +36,13 @@ from fusion.health.watch import DEFAULT_LOCKOUT_S
 
 __all__ = ["Finding", "Verdict", "judge", "nis_windows_beyond", "DEGRADED_EXIT"]
 
-_ORDER = {"shut_out": 0, "locked_out": 1, "nis": 2, "truth": 3, "reference": 4}
+_ORDER = {"imu_coverage": 0, "shut_out": 1, "locked_out": 2, "nis": 3, "truth": 4, "reference": 5}
 
 
 @dataclass(frozen=True)
 class Finding:
-    """One reason the estimate cannot be trusted: ``kind`` (shut_out, locked_out, nis, truth, reference),
-    the ``sensor`` it names, the ``figures`` (text) and the likely ``causes``, likeliest first."""
+    """One reason the estimate cannot be trusted: ``kind`` (imu_coverage, shut_out, locked_out, nis, truth,
+    reference), the ``sensor`` it names, the ``figures`` (text) and the likely ``causes``, likeliest first."""
 
     kind: str
     sensor: str | None
@@ -98,6 +98,7 @@ def judge(summary: dict[str, Any], watch: dict[str, dict[str, Any]] | None = Non
         if w is not None:
             found += _locked_out(name, w, spec, ctx)
             found += _nis(name, w, spec, ctx)
+    found += _coverage((summary.get("health") or {}).get("imu_coverage") or {})
     worst = _worst_sensor(summary, sensors)
     found += _agreement("truth", summary.get("errors") or {}, summary.get("consistency") or {}, spec.truth, worst, ctx)
     found += _agreement("reference", summary.get("agreement") or {}, {}, spec.reference, worst, ctx)
@@ -106,6 +107,26 @@ def judge(summary: dict[str, Any], watch: dict[str, dict[str, Any]] | None = Non
         found = [f for f in found if not (f.kind == "locked_out" and f.sensor in shut)]
     found.sort(key=lambda f: _ORDER.get(f.kind, 9))
     return Verdict(tuple(found))
+
+
+def _coverage(facts: dict[str, dict[str, Any]]) -> list[Finding]:
+    """An input sensor whose header says its samples do not describe the motion between them
+    (fusion.imu_coverage: too little of the time integrated, or too large a turn between two samples): the
+    dead reckoning is a guess there, whatever the filter."""
+    found = []
+    for name, f in facts.items():
+        if not f.get("insufficient"):
+            continue
+        parts = []
+        if f.get("fraction") is not None and f["fraction"] < f["min_coverage"]:
+            parts.append(f"its samples integrate {f['fraction']:.3g} of the time (sensors.{name}.min_coverage "
+                         f"{f['min_coverage']:g})")
+        if f.get("rotation_per_sample_deg") is not None and f["rotation_per_sample_deg"] > f["max_rotation_deg"]:
+            parts.append(f"it turns up to {f['rotation_per_sample_deg']:.3g} deg between two samples "
+                         f"(sensors.{name}.max_rotation_deg {f['max_rotation_deg']:g})")
+        found.append(Finding("imu_coverage", name, " and ".join(parts),
+                             ("the log was written at a low rate: log the IMU at its full rate",)))
+    return found
 
 
 def _pct(x: float) -> str:

@@ -143,3 +143,15 @@ def test_batch_watch_keeps_what_one_watch_a_trial_keeps():
         one, many = w.report()["gps"], batch.report(i)["gps"]
         assert repr(one) == repr(many)   # repr: NaN (a run not started) compares equal to itself
         assert one["windows"] and one["lockouts"]
+
+
+def test_an_imu_that_does_not_cover_the_motion_is_a_finding_and_one_that_does_is_not():
+    from fusion.imu_coverage import assess
+
+    low, _ = assess("imu", {"imu_coverage_fraction": "0.034", "imu_rotation_per_sample_deg": "14.9"})
+    full, _ = assess("imu", {"imu_coverage_fraction": "1.0", "imu_rotation_per_sample_deg": "0.4"})
+    bad = judge({"health": {"imu_coverage": {"imu": low}}})
+    assert bad.degraded and bad.findings[0].kind == "imu_coverage" and bad.findings[0].sensor == "imu"
+    assert "0.034 of the time" in bad.line() and "14.9 deg" in bad.line()
+    assert not judge({"health": {"imu_coverage": {"imu": full}}}).degraded
+    assert not judge({"health": {}}).degraded
