@@ -7,7 +7,7 @@ many degrees of freedom as the error has components (Bar-Shalom, Li and Kirubara
 Each step is tested against the two-sided 95% interval ``[chi2.ppf(0.025, dof), chi2.ppf(0.975, dof)]``;
 about 95% of the steps of a consistent filter fall inside, and the mean is about ``dof``.
 
-Used by fusion.metrics.ErrorTracker (issue 3, item 5); the bounds are also drawn by fusion.sinks.plot.
+Used by fusion.metrics.ErrorTracker; the bounds are also drawn by fusion.sinks.plot.
 """
 from __future__ import annotations
 

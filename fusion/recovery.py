@@ -1,4 +1,4 @@
-"""Recovery from divergence and lock-out (issue 10 item 7), per sensor, off unless configured.
+"""Recovery from divergence and lock-out, per sensor, off unless configured.
 
 A filter that has accepted one bad measurement (or drifted during an outage) can become so sure of a
 wrong state that its gate rejects every later, correct measurement: it is locked out and never

@@ -1,4 +1,4 @@
-"""Time sanity per sensor: wild stamps, clock jumps and restarts (issue 10 item 2).
+"""Time sanity per sensor: wild stamps, clock jumps and restarts.
 
 A stream's time base is the newest accepted time. A message whose stamp (after the sensor's
 ``time_offset`` and any re-synchronisation) is within ``future_s`` seconds of it, ahead or behind, is on

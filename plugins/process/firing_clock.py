@@ -62,7 +62,7 @@ Then z = n_r stays put in a cell in the model as in truth, and carries no inform
 motion there. ``none``: w independent of the state's noise, Cov w = sd^2 (1 - a^2) I. A slot resets
 (``direction_error_reset``: mean 0, variance sd^2, no correlation) when the beacon's direction enters a
 cell of the slot's colour other than the one the slot holds (the colour-c normal closest to u + e_c).
-Measured on the paper-003 walk (issue 17, experiments/pose_blocks.py): not better than the shipped
+Measured on the paper-003 walk (experiments/pose_blocks.py): not better than the shipped
 config's white model, which does not use it.
 """
 from __future__ import annotations
