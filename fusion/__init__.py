@@ -11,7 +11,7 @@ __version__ = "0.1.0"
 
 
 def __getattr__(name: str):
-    # ``hookimpl`` / ``hookspec`` on first use: importing pluggy (10-40 ms) is not needed before a command
+    # ``hookimpl`` / ``hookspec`` on first use: importing pluggy is not needed before a command
     # wires plugins, and the ``fusion`` entry (fusion.console) must start before anything heavy
     if name in ("hookimpl", "hookspec"):
         from fusion import hookspecs

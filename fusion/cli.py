@@ -15,7 +15,8 @@ from __future__ import annotations
 import os
 
 # Matrices here are at most ~50 x 16: BLAS threads only add hand-off latency (a threaded small triangular
-# solve measured ~8 ms against ~1 us single-threaded). Must be set before numpy is first imported.
+# solve is orders of magnitude slower than a single-threaded one; benchmarks/README.md). Must be set
+# before numpy is first imported.
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
@@ -107,7 +108,7 @@ def build_parser() -> argparse.ArgumentParser:
         mod.register(sub)
     for subparser in sub.choices.values():
         # a negative number in scientific notation (``--start -1e308``, ``-inf``) is a value, not an option:
-        # argparse's own test knows only -1 and -1.5 (tester6 #18)
+        # argparse's own test knows only -1 and -1.5
         subparser._negative_number_matcher = NEGATIVE_NUMBER
         # also after the subcommand (``fusion run C --debug``); SUPPRESS keeps a --debug given before it
         subparser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,

@@ -7,7 +7,7 @@ many degrees of freedom as the error has components (Bar-Shalom, Li and Kirubara
 Each step is tested against the two-sided 95% interval ``[chi2.ppf(0.025, dof), chi2.ppf(0.975, dof)]``;
 about 95% of the steps of a consistent filter fall inside, and the mean is about ``dof``.
 
-Used by fusion.metrics.ErrorTracker (issue 3, item 5); the bounds are also drawn by fusion.sinks.plot.
+Used by fusion.metrics.ErrorTracker; the bounds are also drawn by fusion.sinks.plot.
 """
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ def nees(e: np.ndarray, P: np.ndarray) -> float:
     e = np.ascontiguousarray(e, dtype=float)
     if e.size == 0:
         return math.nan
-    # LAPACK directly: ~1 us at these sizes against ~5 us through numpy.linalg (DESIGN.md, performance).
+    # LAPACK directly: numpy.linalg's wrappers dominate at these sizes (DESIGN.md, performance).
     L, info = lapack.dpotrf(P, lower=1, clean=0)
     if info != 0:
         return math.nan
@@ -59,8 +59,8 @@ class ChiSquareStat:
 
     Samples may have different ``dof`` (e.g. a sensor whose measurement size varies); each is tested
     against the interval of its own dof. ``dof`` reports the dof when it is the same for all samples, else
-    the largest; ``mean`` is then no chi-square mean of any one dof (1-dof arrivals and a 4-dof fix: tester5
-    #9), and ``per_dof_mean`` (sum of the values over the sum of their dofs, about 1 for a consistent filter,
+    the largest; ``mean`` is then no chi-square mean of any one dof (1-dof arrivals and a
+    4-dof fix), and ``per_dof_mean`` (sum of the values over the sum of their dofs, about 1 for a consistent filter,
     with its interval ``per_dof_interval``) is the comparable one. Non-finite values are counted in
     ``skipped`` and otherwise ignored."""
 
@@ -163,7 +163,7 @@ class NisTracker:
         """``{"nis_mean": {sensor: mean}, "nis_in_95_fraction": {sensor: fraction}, "nis_dof": {...},
         "nis_samples": {...}}`` over the sensors with at least one finite sample, every update tried
         (accepted or rejected, dofs mixed: ``nis_dof`` is then the largest). When the updates were told
-        accepted or not (tester5 #9), also, per sensor:
+        accepted or not, also, per sensor:
 
         - ``nis_accepted_mean``, ``nis_accepted_in_95_fraction``, ``nis_accepted_samples``,
           ``nis_accepted_dofs`` (sorted list): the accepted updates;

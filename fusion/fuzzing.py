@@ -1,4 +1,4 @@
-"""Mutations of recorded log lines, for fuzzing ``fusion run`` (issue 10 item 9).
+"""Mutations of recorded log lines, for fuzzing ``fusion run``.
 
 A mutation takes one real line of a recording (bytes, no newline) and returns what a noisy serial port,
 a cut file or a hostile user could have left there instead: bit flips, truncation, duplicated, dropped

@@ -3,8 +3,8 @@ submodules that scipy's import touches but nothing in a ``fusion`` command uses.
 
 Since scipy 1.15, ``import scipy.linalg`` runs its vendored array-api-compat, which clones numpy's
 namespace attribute by attribute (``array_api_compat._internal.clone_module``) and so imports every
-lazily loaded numpy submodule, ``numpy.testing`` and ``numpy.f2py`` among them: ~45 ms of the ~1 s that
-``fusion run configs/abps_ins.yaml`` takes, for modules no command calls. Registering them with the
+lazily loaded numpy submodule, ``numpy.testing`` and ``numpy.f2py`` among them: a visible share of the start-up
+of ``fusion run``, for modules no command calls. Registering them with the
 standard library's :class:`importlib.util.LazyLoader` first makes them real modules that execute on
 first attribute access, so code that does use them (a plugin calling ``numpy.testing``) behaves as
 before. Called by the CLI only, never on import of the library: a program that imports ``fusion`` keeps

@@ -36,8 +36,8 @@ def checksum(body: str) -> str:
 
 
 def _shown(text: str, most: int = 40) -> str:
-    """``text`` quoted for a message, cut to ``most`` characters with its length said: a 1 MiB field made a
-    1 MiB line on stderr (tester3 #18)."""
+    """``text`` quoted for a message, cut to ``most`` characters with its length said, so that a 1 MiB
+    field does not make a 1 MiB line on stderr."""
     text = text.strip()
     if len(text) <= most:
         return repr(text)
@@ -113,7 +113,7 @@ def read_header(lines: Iterable[str], max_lines: int = 10_000) -> Header:
     return header
 
 
-_GOOD_SENSORS: set[str] = set()  # names already checked against _SENSOR (the regex costs ~1 us a line)
+_GOOD_SENSORS: set[str] = set()  # names already checked against _SENSOR (the regex is not run again on every line)
 
 
 def parse_line(text: str, lineno: int | None = None) -> Message:
@@ -130,7 +130,7 @@ _BINARY = re.compile(r"[\x00-\x08\x0e-\x1f\x7f\ufffd\uffff]")  # control charact
 def _parse_stripped(line: str, lineno: int | None, head: list[str] | None = None) -> Message:
     # The hot path of every replay (one call a line): each check below is the cheapest that decides it,
     # and the message is built with tuple.__new__ (NamedTuple's own __new__ is a Python-level frame).
-    if "\ufffd" in line or (not line.isprintable() and _BINARY.search(line)):  # isprintable: ~0.1 us, no regex
+    if "\ufffd" in line or (not line.isprintable() and _BINARY.search(line)):  # isprintable: no regex
         bad = _BINARY.search(line)
         c = bad.group()  # type: ignore[union-attr]
         if c == OVERLONG:
@@ -160,8 +160,8 @@ def _parse_stripped(line: str, lineno: int | None, head: list[str] | None = None
         m = _PASS_THROUGH_CHECKSUM.search(sentence)
         if m:
             # the sentence's own *HH, then the line's (docs/tui.md recommends one on a serial line): the line
-            # checksum is checked and stripped, the sentence's left to its decoder (tester4 #9: every GPS
-            # line of such a device was malformed)
+            # checksum is checked and stripped, the sentence's left to its decoder (otherwise every GPS
+            # line of such a device would be malformed)
             body = line.rstrip()[: -3]
             if checksum(body) != m.group(1).upper():
                 raise MalformedMessage(f"bad checksum *{m.group(1)} (computed *{checksum(body)})")
@@ -289,7 +289,7 @@ def iter_messages(lines: Iterable[str], state: ParsedStream | None = None,
     ``raw_streams`` (e.g. ``{"truth"}``): a line of these streams that is certainly its ``# fields``-many
     finite numbers is yielded with its values still as text (a ``str``; :func:`parse_values` gives the
     tuple). A truth line arrives at every IMU sample and is interpolated far less often: float() of 16
-    values is ~60% of its cost. Every other line of them parses as usual (same verdicts, same errors)."""
+    values is most of its cost. Every other line of them parses as usual (same verdicts, same errors)."""
     st = state if state is not None else ParsedStream()
     fields = st.header.fields
     plain = _plain_sensors(st.header, known_sensors, raw_streams) if _FAST_PATH else {}

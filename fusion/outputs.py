@@ -46,7 +46,7 @@ def data_stdout() -> IO:
 def stdout_carries_data(carries: bool = True) -> Iterator[None]:
     """Within the block (when ``carries``: an output is ``-``), ``sys.stdout`` is ``sys.stderr``: a plugin's
     ``print()`` (a hook's debug line, a model's) goes to the terminal instead of into the CSV or JSON on
-    stdout (tester6 #15: 600 junk rows among 601); ``OutputFile("-")`` writes to the real stdout. Restored
+    stdout; ``OutputFile("-")`` writes to the real stdout. Restored
     after the block."""
     global _data_stdout
     if not carries or _data_stdout is not None:

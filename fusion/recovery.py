@@ -1,4 +1,4 @@
-"""Recovery from divergence and lock-out (issue 10 item 7), per sensor, off unless configured.
+"""Recovery from divergence and lock-out, per sensor, off unless configured.
 
 A filter that has accepted one bad measurement (or drifted during an outage) can become so sure of a
 wrong state that its gate rejects every later, correct measurement: it is locked out and never
@@ -11,8 +11,8 @@ forces a reset. Here, per sensor (``sensors.NAME.recovery`` in the config)::
 The lock-out signature is a sustained run of rejections of a sensor whose measurements agree with *each
 other* while they disagree with the belief, whatever the NIS: a filter whose error grows with its
 covariance (an INS drifting without its fixes) keeps every NIS just above the gate, and a rule on the NIS
-magnitude never fires (tester5 #1: 14 good fixes in a row refused at NIS 17.5-30.2, gate 16.3, the error
-grown to 12.7 m). So when every update of the sensor has been rejected for at least ``after_s`` seconds
+magnitude never fires (e.g. good fixes refused in a row at NIS 17.5-30.2 against a gate of 16.3 while the
+error grows past 12 m). So when every update of the sensor has been rejected for at least ``after_s`` seconds
 (and at least ``min_rejected`` of them), and the rejected measurements agree with each other, the
 measurement that completes the streak is used to recover, then fused.
 
@@ -26,8 +26,7 @@ agreement starts the streak again from itself: an echo burst, fixes scattered ar
 not reset it. Measurements that are consistently wrong the same way (one echo path repeated while the
 vehicle stands still) cannot be told from a wrong belief by this sensor alone.
 ``nis_factor`` (default 1: every rejection counts) additionally restricts the streak to rejections with a
-NIS at least that many times the gate's threshold; a smaller NIS ends the streak. (Before tester5 #1 the
-default was 2 and the only test.)
+NIS at least that many times the gate's threshold; a smaller NIS ends the streak.
 
 - ``action: reset``: the listed blocks are re-initialised from the measurement, for a sensor that
   measures them directly (a position fix: the block ``p`` from ``z``, through the model's lever arm when

@@ -20,7 +20,7 @@
     time stamp; None: no total, the bar shows only the time reached). It appears only after ``delay_s``
     seconds of wall time, so short replays print nothing, and only when ``enabled`` (default: stdout and
     the console are terminals). It is drawn on stderr and is transient: it vanishes when the block ends,
-    leaving stdout to the summary. ``tick`` costs ~0.2 us when the bar is hidden and redraws at most
+    leaving stdout to the summary. ``tick`` does almost nothing when the bar is hidden and redraws at most
     10 times a second.
 """
 from __future__ import annotations
@@ -171,7 +171,7 @@ def _consistency_table(c: dict) -> Table:
             t.add_row(_text(f"NIS {sensor}"), _num(dof.get(sensor)), _num(mean, ".3g"), _pct(frac.get(sensor)),
                       _num(n.get(sensor)))
             continue
-        # the accepted updates (tester5 #9: rejected echoes and mixed dofs made a 1-dof NIS of 0.76 read
+        # the accepted updates (rejected echoes and mixed dofs would make a 1-dof NIS of 0.76 read
         # "15.4 on 4 dof"); per dof when the dofs differ, then their sum over the sum of dofs (expected 1)
         by_dof = (c.get("nis_accepted_by_dof") or {}).get(sensor)
         if by_dof:

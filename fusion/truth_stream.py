@@ -40,7 +40,7 @@ _KEEP_BEHIND = 64  # samples kept before the oldest time still needed (estimates
 
 def _median(values: Collection[float]) -> float:
     """np.median of a few floats (the same number: the middle one, or the mean of the middle two) without
-    np.median, whose first call imports numpy.ma (~10 ms of a run's start-up)."""
+    np.median, whose first call imports numpy.ma (slow, at a run's start-up)."""
     v = sorted(values)
     n = len(v)
     return float(v[n // 2]) if n % 2 else float((v[n // 2 - 1] + v[n // 2]) / 2.0)
@@ -138,7 +138,7 @@ class TruthWindow:
         if t > self.newest:
             self.newest = t
         n = self.received = self.received + 1
-        if n <= 64 or not n & 255:   # every 256th sample (the median of the intervals costs ~20 us)
+        if n <= 64 or not n & 255:   # every 256th sample (the median of the intervals is not free)
             self.period = _median(self._intervals) if self._intervals else 0.0
         if len(ts) > self.max_samples:
             self._drop(len(ts) - self.max_samples)

@@ -163,7 +163,7 @@ class Belief:
     belief it keeps. Empty almost always.
 
     The constructor writes the fields directly: a frozen dataclass's own ``__init__`` (one
-    ``object.__setattr__`` a field) costs ~2 us, and filters build one or two beliefs a step."""
+    ``object.__setattr__`` a field) is slow, and filters build one or two beliefs a step."""
 
     t: float
     x: np.ndarray
@@ -190,7 +190,7 @@ class Belief:
         if self.S is not None and self.P is None:
             return np.sqrt(np.einsum("ij,ij->i", self.S, self.S))
         # np.clip(d, 0.0, None) is np.maximum(d, 0.0) (numpy's _methods._clip with no upper bound), without its
-        # three Python-level wrappers (~9 us of ~13 a call; called per estimate by the run's statistics and sinks)
+        # three Python-level wrappers (most of its cost; called per estimate by the run's statistics and sinks)
         return np.sqrt(np.maximum(np.diagonal(self.P), 0.0))  # type: ignore[arg-type]
 
     def with_(self, **changes: Any) -> "Belief":

@@ -3,10 +3,9 @@
 A batched step allocates and frees temporaries of megabytes (1000 filters x 33 sigma points x 16
 states is 4.2 MB an array). With glibc's defaults such blocks are either mmapped or trimmed off the top of
 the heap when freed, so the next step's arrays are fresh pages: every element written first costs a page
-fault. Measured on the 16-state INS UKF over 1000 filters (benchmarks/bench_batch.py, CPU time): a predict
-19.3 ms with the defaults, 9.1 ms with both thresholds raised (either alone: 12-15 ms); the filter-step
-rate 74k -> 100k. The cost: the process keeps its peak heap (it is not returned to the system until exit),
-which for a sweep or a benchmark is the working set it needs again at the next step anyway.
+fault; raising both thresholds avoids those faults (benchmarks/bench_batch.py measures the gain on the
+16-state INS UKF over 1000 filters). The cost: the process keeps its peak heap (it is not returned to the
+system until exit), which for a sweep or a benchmark is the working set it needs again at the next step anyway.
 """
 from __future__ import annotations
 

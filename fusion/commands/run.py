@@ -48,7 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 class Once(argparse.Action):
     """An option that takes one value and may be given once: a second ``-o b.csv`` (``--plot``, ``--filter``,
     ``--input``) is refused (exit 2) where argparse would keep the last and drop the first request without a
-    word (tester6 #16). One run writes one output of each kind; run it again for another."""
+    word. One run writes one output of each kind; run it again for another."""
 
     def __call__(self, parser, namespace, values, option_string=None):
         before = getattr(namespace, self.dest, None)

@@ -152,8 +152,8 @@ def build_app(args: argparse.Namespace):
 @contextmanager
 def _exit_on_stop_signals(app):
     """SIGTERM, SIGHUP and SIGINT (``timeout``, ``kill``, a dropped ssh session) close the view as 'q' does: Textual
-    handles neither, and a process they killed left the terminal in the alternate screen with mouse
-    tracking on (tester4 #11). The handler asks the app's event loop to exit (``call_soon_threadsafe`` is
+    handles neither, and a process they killed would leave the terminal in the alternate screen with mouse
+    tracking on. The handler asks the app's event loop to exit (``call_soon_threadsafe`` is
     safe in a signal handler); before the loop runs or after, the signal stops the command as Ctrl-C does.
     Yields the list of the signals received."""
     import asyncio

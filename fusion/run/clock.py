@@ -1,4 +1,4 @@
-"""Time sanity per sensor: wild stamps, clock jumps and restarts (issue 10 item 2).
+"""Time sanity per sensor: wild stamps, clock jumps and restarts.
 
 A stream's time base is the newest accepted time. A message whose stamp (after the sensor's
 ``time_offset`` and any re-synchronisation) is within ``future_s`` seconds of it, ahead or behind, is on
@@ -251,7 +251,7 @@ class ClockGuard:
             # Messages agree on a new base when each is ahead of the previous by at most future_s; or, when no
             # other stream has said anything since the first was held, when each is ahead of the previous at
             # all: a sensor slower than 1 / future_s alone in the stream (a fix every 8 s) steps on as a pause
-            # of the whole stream does; before, each of its messages was dropped as a wild stamp (tester4 #15)
+            # of the whole stream does, rather than each of its messages being dropped as a wild stamp
             alone = not self._spoken_since(sensor, held)
             if not (0.0 <= t - last_t <= fut or (alone and t > last_t)):   # the earlier ones were wild
                 # alone, the held stamps step forward: those before this message still agree with it, and

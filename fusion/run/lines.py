@@ -15,7 +15,7 @@ __all__ = ["lines_of", "source_text", "SourceLost", "guarded", "source_message"]
 def lines_of(source: Any, given: str | None = None) -> tuple[Iterable[str], str, Callable[[], Any] | None]:
     """(lines, label, close) of a path, a Source or an iterable of text lines. A source without a ``label`` of
     its own is named by ``given`` (the text the user typed, ``gen://5``) rather than by the default label, its
-    first parameter's value (tester6 #14: "5.0"). A plugin's source's lines are checked to be text."""
+    first parameter's value ("5.0"). A plugin's source's lines are checked to be text."""
     if isinstance(source, (str, Path)):
         from fusion.sources.select import open_source
 
@@ -35,7 +35,7 @@ def lines_of(source: Any, given: str | None = None) -> tuple[Iterable[str], str,
 def source_text(lines: Iterable[Any], source: Source, label: str) -> Iterable[str]:
     """A plugin's source's ``lines()`` checked to be text: one that yields bytes or anything else (a socket's
     datagrams undecoded) ends the input with an InputError naming the source and what it yielded, where the
-    parser would fail on it as an internal error (tester6 #14). fusion's own sources are not re-checked."""
+    parser would fail on it as an internal error. fusion's own sources are not re-checked."""
     if is_own(source):
         return lines
     return text_only(lines, source, label)

@@ -24,7 +24,7 @@ PASSED_ON = (FusionError, BrokenPipeError)
 class Observers:
     """The implementations of one observation hook, called one by one in pluggy's order (the last
     registered first): one that raises is named in the run's ``plugin_errors`` and not called again, the
-    others and the run go on (an observer cannot end the run, nor lose its outputs: tester6 #10)."""
+    others and the run go on (an observer cannot end the run, nor lose its outputs)."""
 
     def __init__(self, name: str, impls: list[tuple[Callable, tuple[str, ...] | None, str]], run: "Run"):
         self.name = name
@@ -112,8 +112,8 @@ def frozen(a: Any) -> Any:
 def read_only(estimate: Estimate) -> Estimate:
     """A copy of ``estimate`` whose arrays (the belief's x, P or S; the update's innovation and S) are
     read-only: what an observation hook or a plugin's sink is given (docs/writing-plugins.md: the objects
-    are immutable). A hook that wrote into ``estimate.belief.x`` wrote into the filter's own state, and every
-    later estimate started from it (tester3 #13: RMSE 0.11 m -> 693 km, exit 0); now it raises
+    are immutable). A hook that writes into ``estimate.belief.x`` would write into the filter's own state, and every
+    later estimate would start from it; instead it raises
     ``ValueError: assignment destination is read-only`` in the plugin, named by the run."""
     b = estimate.belief
     belief = Belief(b.t, frozen(b.x), P=frozen(b.P), S=frozen(b.S), events=b.events)

@@ -327,7 +327,7 @@ class Run:
             summary["component_error"] = component_error
         if self._hook_end is not None:
             # a copy: an observer that edits the dict it is given (pops a key to upload the rest) must not
-            # change the table printed and the --summary-json written after it (tester6 #2)
+            # change the table printed and the --summary-json written after it
             self._hook_end(summary=copy.deepcopy(summary), system=self.system)
         if self.plugin_errors:
             summary["plugin_errors"] = list(self.plugin_errors)

@@ -133,7 +133,7 @@ class RunStats:
 
     def add_update(self, sensor: str, t: float, accepted: bool) -> None:
         """One update of ``sensor`` at ``t``: tracks the longest time without an accepted one and the longest
-        run of updates rejected in a row (a lock-out, tester5 #1)."""
+        run of updates rejected in a row (a lock-out)."""
         u = self._updates.get(sensor)
         if u is None:
             u = self._updates[sensor] = [t, math.nan, 0.0, t]

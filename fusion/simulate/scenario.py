@@ -93,7 +93,7 @@ class WhiteAccelerationTrajectory(_Model):
     """The constant-velocity (white-acceleration) model's own motion: per axis, position and velocity driven
     by white acceleration of power spectral density ``spectral_density`` (q, m^2/s^3), the ``pv`` process's
     model, drawn exactly on a grid of ``step`` s (Q = q [[h^3/3, h^2/2], [h^2/2, h]]). A matched truth for a
-    filter that states this model (issue 17's controls). ``bounds`` keep it in an area: ``redraw`` draws
+    filter that states this model (a control for experiments). ``bounds`` keep it in an area: ``redraw`` draws
     the whole walk again until it stays inside (the model conditioned on staying in), ``reflect`` folds it
     at the walls (an elastic bounce: the velocity's normal component flips, an impulse the model lacks)."""
 

@@ -85,8 +85,8 @@ def _hint(port: str, exc: BaseException) -> str:
 def _read_chunk(port) -> bytes:
     """What has arrived on ``port``, up to _CHUNK bytes, waiting up to the port's timeout for a first byte.
     A device port's ``in_waiting`` counts the bytes waiting; a ``socket://`` port's says only 0 or 1
-    ("readable"), so reading ``in_waiting`` bytes took one byte a read (three system calls a byte: a 1 kHz
-    IMU was more than such a view could read, tester2 #8): there the first byte is read as pyserial
+    ("readable"), so reading ``in_waiting`` bytes would take one byte a read (three system calls a byte: a 1 kHz
+    IMU would be more than such a view could read): there the first byte is read as pyserial
     reads it, then what else the socket holds in one ``recv``."""
     waiting = port.in_waiting
     sock = getattr(port, "_socket", None) if waiting <= 1 else None
@@ -110,8 +110,8 @@ def _read_chunk(port) -> bytes:
 def _open_keeping_input(port):
     """``port.open()`` without the ``reset_input_buffer()`` that pyserial's open ends with: it discards what
     has already arrived, and for a ``socket://`` device that talks first (a TCP bridge, ``ncat -l < log``)
-    that is the stream's beginning, often all of it (tester4 #3: 0 of 2684 lines in 10 of 12 sessions, the
-    ``--record`` file empty too). Nothing the device sent is dropped; a partial first line from a tty is
+    that is the stream's beginning, often all of it (and the
+    ``--record`` file would be empty too). Nothing the device sent is dropped; a partial first line from a tty is
     counted malformed like any other."""
     port.reset_input_buffer = lambda: None   # an instance attribute: shadows the method during open only
     try:

@@ -118,7 +118,7 @@ def sweep(trials: list[Trial], out: str | Path, engine: str = "auto", jobs: int 
     from fusion.simulate.engine import build_simulators
     for t in variants.values():       # every variant wires and its scenario validates: bad input before any run
         system = system_of(t)
-        # the sensor simulators' parameters too (sensors.uwb.rate_hz=0 was an error row in every trial)
+        # the sensor simulators' parameters too (sensors.uwb.rate_hz=0 would be an error row in every trial)
         build_simulators(scenario_of(t), where=f"{t.scenario}"
                          + (" (with --param)" if any(k.startswith("scenario.") for k, _ in t.params) else ""))
         for n, s in system.sensors.items():

@@ -181,7 +181,7 @@ class LiveFeed:
         """Read until the end of the input, a lost port, or stop(); returns the final snapshot. The run is
         finished (``result``; its sinks closed, ``fusion_on_run_end`` called) however reading ended: at the
         end of the input, a lost source (``source_error``), or ``stop()`` (``q``: ``interrupted``, as Ctrl-C
-        in ``fusion run``; a live session can end no other way: tester6 #11); not after an internal error."""
+        in ``fusion run``; a live session can end no other way); not after an internal error."""
         try:
             return self._run()
         finally:
@@ -245,8 +245,8 @@ class LiveFeed:
         time (a wild stamp, which the guard drops, or a clock jump, which it re-synchronises) is not
         waited for; the stream's time only moves on when the scheduler accepts it. And no single wait is
         longer than ``scheduler.max_predict_s`` / speed (the longest gap the scheduler predicts over): a
-        longer one is cut, with a ``replay`` event (tester2 #12: one stamp 100,000 s ahead froze the view
-        for hours)."""
+        longer one is cut, with a ``replay`` event (one stamp 100,000 s ahead would otherwise freeze the
+        view for hours)."""
         t0 = wall0 = None
         sched = self.run_.scheduler
         future = sched.clock.future_s

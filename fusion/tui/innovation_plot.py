@@ -4,7 +4,7 @@ and one innovation element with +-sqrt(S) (its 1-sigma band), over the last upda
 Drawn with textual-plotext (Plotext in a Textual widget): it draws several series, a horizontal gate line
 and labelled axes, which the view needs; Textual's own Sparkline draws one series of bars scaled to its
 own min/max, with no reference line, so it cannot show the gate or the +-sqrt(S) band. Plotext builds
-its canvas in Python (~15 ms for 2 x 300 points measured here), so the panels redraw at most
+its canvas in Python, so the panels redraw at most
 ``plot_hz`` times a second and only while visible (a widget in a hidden tab is not rendered).
 """
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """Aligned plain-text tables as rich Text: far cheaper to re-render 10-20 times a second than a DataTable
-(whose per-cell rendering cost ~10 ms a frame here), and all the live tables need."""
+(which renders cell by cell), and all the live tables need."""
 from __future__ import annotations
 
 from typing import Sequence

@@ -191,8 +191,8 @@ class NmeaDecoder(Decoder):
                 self.counters["incomplete"] += 1  # the previous epoch never completed
                 self._epoch = {}
             # else only sentences without a time wait (a VTG or GSA sent before this epoch's GGA or RMC, as a
-            # u-blox receiver orders them): they belong to this epoch; dropping them made every fix of an
-            # [GGA, VTG] epoch wait for the next second's VTG, 1 s late (tester3 #5)
+            # u-blox receiver orders them): they belong to this epoch; dropping them would make every fix of
+            # a [GGA, VTG] epoch wait for the next second's VTG, 1 s late
         if key is not None:
             self._key = key
         self._epoch[kind] = sentence
@@ -222,7 +222,7 @@ class NmeaDecoder(Decoder):
     def _ned(self, pymap3d, lat: float, lon: float, h: float) -> tuple[float, float, float]:
         """NED (m) of a fix (deg, deg, m ellipsoidal) from the origin: pymap3d.geodetic2ned's own steps
         (geodetic2ecef of both, uvw2enu of the difference), the origin's ECEF computed once (the same
-        numbers, ~40% of the call saved), with the WGS-84 ellipsoid object made once."""
+        numbers, much of the call saved), with the WGS-84 ellipsoid object made once."""
         if self._origin_ecef is None or self._origin_ecef[0] != self.origin:
             # pymap3d's default ellipsoid, built once (geodetic2ecef builds it at every call without ell=)
             self._wgs84 = pymap3d.Ellipsoid.from_name("wgs84")

@@ -6,7 +6,7 @@
   srukf; :func:`linear_predict` its covariance ``F P F^T + Q``.
 * :func:`linearised_update`: the Kalman update about a linearisation point, the step the EKF does once
   and the IEKF iterates. One iteration (kf, ekf) runs in C when the kernel is built
-  (``fusion_plugins.filters._kalman_kernel``, _kalman_kernel.c: ~3 us against ~40 us of numpy calls at
+  (``fusion_plugins.filters._kalman_kernel``, _kalman_kernel.c: no per-call numpy overhead, which dominates at
   n = 22, m = 3); :func:`linearised_update_numpy` is the reference and runs otherwise.
 
 Notation (FilterPy / textbook): x, P the belief; F, Q process; H, R measurement; y the innovation;
@@ -41,7 +41,7 @@ _float64 = np.dtype(float)
 
 
 def as_vector(z) -> np.ndarray:
-    """z as a flat float64 array (the array itself when it already is one: ~0.1 us against ~0.7 us for
+    """z as a flat float64 array (the array itself when it already is one, without
     ``np.asarray(z, dtype=float).reshape(-1)``)."""
     if type(z) is _ndarray and z.ndim == 1 and z.dtype == _float64:
         return z

@@ -62,7 +62,7 @@ def trusted(model) -> bool:
 def frozen(x: np.ndarray) -> np.ndarray:
     """A read-only view of ``x`` (no copy): what a model is given of the filter's own arrays."""
     v = x.view()
-    v.setflags(write=False)      # ~0.2 us less than through v.flags
+    v.setflags(write=False)      # cheaper than through v.flags
     return v
 
 
@@ -94,7 +94,7 @@ def all_finite(*arrays: np.ndarray | None) -> bool:
 def finite(out: np.ndarray, what: str, given: str, *inputs: np.ndarray | None) -> None:
     """ModelFault when ``out`` holds NaN or inf while every one of ``inputs`` (what the model was given)
     is finite: at a finite state a model that returns NaN is at fault; at a NaN state it is not.
-    The test on the way through is one dot product (~0.5 us, a third of a sum's; its overflow, beyond
+    The test on the way through is one dot product (cheaper than a sum; its overflow, beyond
     1e154, only sends the value to the exact test)."""
     s = _vdot(out, out)
     if s - s != 0.0:
@@ -111,7 +111,7 @@ class QCheck:
     """The test of a process noise Q (n, n): on every call its shape and finiteness (one dot product); on the
     first call of each source (``"Q"``, ``"Q_inputs"``) also a non-negative diagonal (a sign slip), symmetry
     and positive semi-definiteness within :data:`SYMMETRY_RTOL` / :data:`PSD_RTOL` (an eigen-decomposition,
-    ~10 us, once: every call would cost a singular Q, the INS's, ~5% of a prediction). One per filter: the
+    once: on every call it would weigh on every prediction with a singular Q, the INS's). One per filter: the
     memory of which sources it has fully checked."""
 
     def __init__(self) -> None:

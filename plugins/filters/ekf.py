@@ -43,9 +43,9 @@ class ExtendedKalmanFilter(KalmanBase):
         """A run of input samples: when the process model linearises the whole run in one call
         (LinearisesInputRuns: the INS's means, F_j and Q_j vectorised over the samples), the covariance
         is propagated through them, ``P <- F_j P F_j^T + Q_j`` sample by sample (symmetrised once, at the
-        end of the run: ~2 us a sample less), the same numbers as k calls of :meth:`predict` to rounding;
+        end of the run), the same numbers as k calls of :meth:`predict` to rounding;
         otherwise k calls of :meth:`predict`. The chain runs in C when the kernel is built (_kalman_kernel.c:
-        F's nonzeros only, the upper triangle; ~1 us a sample against ~5 us), else :func:`propagate_run`."""
+        F's nonzeros only, the upper triangle), else :func:`propagate_run`."""
         run = process.linearise_inputs(belief.x, us, dts) if has(process, LinearisesInputRuns) else None
         if run is None:
             return super().predict_inputs(belief, process, us, dts)

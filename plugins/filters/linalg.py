@@ -3,9 +3,9 @@
 Matrices here are tiny (n <= ~20), so the time goes to Python and per-call overhead, not to flops
 (DESIGN.md "Performance notes"). Hence:
 
-* LAPACK is called directly (``scipy.linalg.lapack.dpotrf/dpotrs/dtrtrs/dgeqrfp``): ~2 us a call
-  against 10-30 us for ``scipy.linalg.cho_factor``/``solve_triangular``/``qr`` with their checks.
-* Triangular masks are cached per size (``np.triu`` alone costs ~10 us).
+* LAPACK is called directly (``scipy.linalg.lapack.dpotrf/dpotrs/dtrtrs/dgeqrfp``), without
+  ``scipy.linalg.cho_factor``/``solve_triangular``/``qr`` and their checks, which dominate at these sizes.
+* Triangular masks are cached per size (``np.triu`` is slow at these sizes).
 * The rank-1 Cholesky update/downdate is written without a Python loop over columns (see
   :func:`cholupdate`); we write our own because neither numpy nor scipy ships one.
 
@@ -52,7 +52,7 @@ def symmetrise(P: np.ndarray) -> np.ndarray:
 def cholesky_lower(P: np.ndarray) -> tuple[np.ndarray, bool]:
     """Lower Cholesky factor of the (symmetric) P, read from its lower triangle; ``ok`` False when P is
     not numerically positive definite (then the factor is garbage and must not be used)."""
-    L, info = _dpotrf(P, 1, 1)               # lower=1, clean=1 (positional: ~0.5 us less)
+    L, info = _dpotrf(P, 1, 1)               # lower=1, clean=1 (positional: cheaper than keywords)
     return L, info == 0
 
 
@@ -90,7 +90,7 @@ def psd_sqrt_rows(Q: np.ndarray) -> np.ndarray:
     """A row square root ``B`` (n, n) with ``B^T B = Q`` for a symmetric positive semi-definite Q.
 
     Cholesky when Q is definite; for a singular Q (a process noise with nothing along some direction,
-    e.g. the norm of a quaternion) the pivoted Cholesky (LAPACK dpstrf, ~3 us) with the rows past the
+    e.g. the norm of a quaternion) the pivoted Cholesky (LAPACK dpstrf) with the rows past the
     numerical rank set to 0, ``B = U P^T``; the eigen-decomposition (negative rounding clipped to 0)
     only if that fails."""
     L, ok = cholesky_lower(Q)
@@ -119,7 +119,7 @@ def qr_lower(A: np.ndarray, overwrite: bool = False) -> np.ndarray:
     if _dgeqrfp is not None:
         # dgeqrfp: Householder reflections chosen so that R has a non-negative diagonal, at the cost of
         # dgeqrf; then only the upper triangle is kept (below it LAPACK stores the Householder vectors):
-        # one product with the cached mask, ~1.5 us less than fixing the signs afterwards
+        # one product with the cached mask, cheaper than fixing the signs afterwards
         R = _dgeqrfp(A, n, int(overwrite))[0][:n]   # lwork=n: unblocked, fastest when small
         return (R * _consts(n)[0]).T
     R = _dgeqrf(A, lwork=n, overwrite_a=int(overwrite))[0][:n]
@@ -158,7 +158,7 @@ def cholupdate(L: np.ndarray, v: np.ndarray, weight: float = 1.0) -> tuple[np.nd
         M_jj = sqrt(t_{j+1} / t_j),   M_ij = p_i p_j / (t_j M_jj)  (i > j),   M_ij = 0 (i < j)
 
     so ``L1 = L M`` costs one triangular solve, one cumulative sum (a product with a triangle of
-    ones) and a handful of element-wise products: ~10 numpy calls whatever n, against 20-90 us for the
+    ones) and a handful of element-wise products: ~10 numpy calls whatever n, fewer than the
     loop over columns at n = 4-16.
 
     Returns ``(L1, ok)``; ``ok`` is False when the result would not be positive definite (a downdate
@@ -193,8 +193,8 @@ def solve_lower(L: np.ndarray, b: np.ndarray, trans: int = 0) -> np.ndarray:
 
     A vector goes to LAPACK dtrtrs, a matrix to BLAS dtrsm. Not dtrtrs for a matrix: OpenBLAS
     replaces it by a threaded version with no small-size cut-off, and after any numpy matmul (numpy
-    ships its own OpenBLAS, whose idle threads spin) one 4x4 solve took ~8 ms instead of ~1 us on a
-    2-core machine (measured; benchmarks/README.md)."""
+    ships its own OpenBLAS, whose idle threads spin) one 4x4 solve is orders of magnitude slower on a
+    2-core machine (benchmarks/README.md)."""
     if b.ndim == 1:
         return _dtrtrs(L, b, 1, trans)[0]          # lower=1 (f2py parses positional arguments faster)
     return _dtrsm(1.0, L, b, 0, 1, trans)           # side=0 (left), lower=1, trans_a

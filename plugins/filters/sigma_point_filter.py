@@ -20,7 +20,7 @@ class SigmaPointFilter(KalmanBase):
     def __init__(self, params=None, context=None):
         super().__init__(params, context)
         self._sp: dict[int, SigmaPoints] = {}
-        # read once: a missing pydantic attribute costs ~5 us through its AttributeError
+        # read once: a missing pydantic attribute is slow through its AttributeError
         self._mode = self.params.linear_prediction
         self._augmented = bool(getattr(self.params, "augmented", False))
         self._batch_inputs = bool(self.params.batch_inputs)

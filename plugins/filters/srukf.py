@@ -59,7 +59,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         y^ = Y_0 + sum_{i>=1} W^i (Y_i - Y_0)
 
     so for beta >= alpha^2 (beta = 2: always) every weight is positive and the zeroth point joins the QR
-    as one more row: no downdate, one QR per step, ~25% faster, and never a negative weight times a
+    as one more row: no downdate, one QR per step, and never a negative weight times a
     large one (at alpha = 1e-3, W_c^0 ~ -1e6); both agree with the ukf to 1e-8 (tests) and with an
     extended-precision reference to the same ~1e-8 at alpha = 1e-3, where the loss comes from the
     sigma points themselves (differences of h over steps of alpha sigma; benchmarks/README.md).

@@ -13,7 +13,7 @@ from .linalg import psd_sqrt_rows, symmetrise
 from .sigma_point_filter import SigmaPointFilter
 from .sigma_points import UnscentedParams
 
-__all__ = ["UnscentedKalmanFilter", "SigmaPointFilter"]   # SigmaPointFilter: import shim, now in sigma_point_filter.py
+__all__ = ["UnscentedKalmanFilter", "SigmaPointFilter"]   # SigmaPointFilter: re-exported from sigma_point_filter.py
 
 _dtrsm = blas.dtrsm
 

@@ -34,7 +34,7 @@ process, optionally coupled to the attitude noise and reset on entering a new ce
 module's docstring), c(r) the colour of receiver r in a proper colouring of the cells
 (:func:`receiver_colours`): adjacent cells get different slots, so crossing a cell edge moves to another
 slot and crossing back finds the error that cell left. ``sd_deg`` is then the white part only (what one
-pulse adds afresh). Measured on the paper-003 walk (experiments/pose_blocks.py, issue 17): not better than
+pulse adds afresh). Measured on the paper-003 walk (experiments/pose_blocks.py): not better than
 the white model of the shipped config; see configs/ultrasonic_3d_pose.yaml.
 """
 from __future__ import annotations

@@ -39,7 +39,7 @@ class Gps(MeasurementModel):
     ``v + C_b^n(q) (w x r)``, w the body rate (rad/s, FRD) from the latest gyro sample (fusion.api.UsesInput)
     corrected by the state's gyro bias ``bw`` and scale ``sw`` where the state has them (the INS's
     ``(u - bw) / sw``): an antenna 2 m ahead moves 0.87 m/s sideways in a 25 deg/s turn, far beyond a
-    receiver's 0.1 m/s (tester3 #17). An epoch without velocity (no RMC/VTG, or ``use_velocity: false``) is
+    receiver's 0.1 m/s. An epoch without velocity (no RMC/VTG, or ``use_velocity: false``) is
     a position-only observation.
     R is diagonal, built per fix: ``horizontal_sd``, ``vertical_sd``, ``velocity_sd`` scaled by the
     dilution of precision when ``hdop_scaling`` (the receiver's own accuracy figure), divided by N for a

@@ -1,7 +1,7 @@
 """Measurement ``magnetometer``: the Earth's field seen in the body frame, ``h = C_n^b(q) m_n`` (paper 002 sec. 2.3).
 
 For one state (the EKF) h and its Jacobian run in C when the kernel is built (_magnetometer_kernel.c, setup.py
-KERNELS; ~0.5 us against ~8-12 us of numpy calls), the same formulas to the last bit or two; the numpy code
+KERNELS; no per-call numpy overhead), the same formulas to the last bit or two; the numpy code
 is the reference and runs otherwise (``FUSION_PURE_PYTHON=1``, fusion/kernels.py)."""
 from __future__ import annotations
 
@@ -150,7 +150,7 @@ class Magnetometer(MeasurementModel):
                     return out
                 except (TypeError, ValueError):      # not a contiguous float64 x: the numpy code below
                     pass
-            # One state (the EKF): quat.rotate's own operations on (4,), without its broadcasting (~2x faster,
+            # One state (the EKF): quat.rotate's own operations on (4,), without its broadcasting (cheaper,
             # the same numbers: C = q q^T K / |q|^2, then C m_n).
             q = x[self._q] * _FLIP
             qq = (q[:, None] * q).reshape(16)

@@ -20,10 +20,10 @@ the model expects the robot to wander, not to go somewhere. The paper (sec. 4.2)
 order as the maximum movement anticipated in each axis in one time step", but it is not a bound: a robot
 moving steadily at v m/s moves v T every firing in the same direction, and a random-walk filter follows a
 ramp with a steady lag of v T over its gain per firing, many steps' worth at the small gains of a noisy
-arrival time (tester5, finding 4: 2 cm/s with 5 mm, 316 mm RMSE, NEES 56 on 3 dof, and the echo gate then
-rejects ~1/3 of the genuine arrivals of the lagging filter as echoes). Raising position_sd covers steady motion at a price when the robot stands still
-(measured 27 -> 91 mm at 0.05 m): one per-step sd cannot serve both. The attitude walk
-(``attitude_sd_deg``) is the same: it covers an attitude that jitters, not one that turns steadily.
+arrival time (e.g. 2 cm/s with 5 mm: 316 mm RMSE, NEES 56 on 3 dof, and the echo gate then rejects
+~1/3 of the genuine arrivals of the lagging filter as echoes). Raising position_sd covers steady motion
+at a price when the robot stands still (27 -> 91 mm RMSE at 0.05 m): one per-step sd cannot serve both. The
+attitude walk (``attitude_sd_deg``) is the same: it covers an attitude that jitters, not one that turns steadily.
 
 ``motion: constant_velocity`` (not in the paper; the random walk stays the default) adds the velocity
 ``v:3`` (m/s, the beacons' frame) after ``t`` and before the attitude, the standard PV model of white
@@ -62,7 +62,7 @@ Then z = n_r stays put in a cell in the model as in truth, and carries no inform
 motion there. ``none``: w independent of the state's noise, Cov w = sd^2 (1 - a^2) I. A slot resets
 (``direction_error_reset``: mean 0, variance sd^2, no correlation) when the beacon's direction enters a
 cell of the slot's colour other than the one the slot holds (the colour-c normal closest to u + e_c).
-Measured on the paper-003 walk (issue 17, experiments/pose_blocks.py): not better than the shipped
+Measured on the paper-003 walk (experiments/pose_blocks.py): not better than the shipped
 config's white model, which does not use it.
 """
 from __future__ import annotations

@@ -22,7 +22,7 @@ _KERNEL = kernels.load("fusion_plugins.process._ins_batch_kernel")   # input_fro
 #: The alignment's stillness test (Ins.stillness): significance of each test, and the factor on the noise
 #: density's sd that a window's spread must exceed. Data-sheet densities are typical values: a static unit on
 #: a standing vehicle (fans, an idling engine) reads up to a few times them, a driven one tens of times
-#: (tester5 #5: 10x on the gyro z and the accelerometer x of a vehicle driving a bend), so 3x is "clearly
+#: (10x on the gyro z and the accelerometer x of a vehicle driving a bend), so 3x is "clearly
 #: not static", not "noisier than the sheet".
 STILL_ALPHA = 1e-6
 STILL_SD_FACTOR = 3.0
@@ -348,11 +348,11 @@ class Ins(InsNoise, ProcessModel):
         wrong count or a non-number, RejectedMessage (a MalformedMessage) for a non-finite value or one
         beyond ``max_specific_force`` / ``max_rate``: the sample is counted, never integrated."""
         vals = message.values
-        if _KERNEL is not None and _KERNEL.imu_ok(vals, self._lim_f, self._lim_w):   # the usual sample, ~0.1 us
+        if _KERNEL is not None and _KERNEL.imu_ok(vals, self._lim_f, self._lim_w):   # the usual sample, in C
             return np.array(vals)
         if len(vals) != 6:
             raise MalformedMessage(f"process 'ins' expects 6 IMU values (ax ay az gx gy gz), got {len(vals)}")
-        # plain floats first (the parser's tuple): these checks cost ~1 us, numpy's ~10, and the array is
+        # plain floats first (the parser's tuple): these checks are cheaper than numpy's, and the array is
         # made once, at the end
         ax, ay, az, gx, gy, gz = vals
         if not (ax.__class__ is float and ay.__class__ is float and az.__class__ is float

@@ -31,8 +31,8 @@ K10 = np.concatenate([quat.ROTATION_FORM, np.eye(16)[:, quat.NORM_TERMS].sum(axi
 K10T = np.ascontiguousarray(K10.T)          # (10, 16): [R(q) rows (9), |q|^2] = K10T @ outer(q, q)
 T16T = np.ascontiguousarray(quat.PRODUCT_FORM.T)     # (4, 16):  p (x) q = T16T @ outer(p, q)
 # 4-point Gauss-Legendre on [-1, 1], mapped to [0, 1] below: numpy.polynomial.legendre.leggauss(4) to the
-# last bit (tests/models/test_ins_batch_constants.py), tabulated because importing numpy.polynomial costs
-# ~7 ms of every run's start-up
+# last bit (tests/models/test_ins_batch_constants.py), tabulated because importing numpy.polynomial slows
+# every run's start-up
 _GL_NODES = np.array([-0.8611363115940526, -0.33998104358485626, 0.33998104358485626, 0.8611363115940526])
 _GL_WEIGHTS = np.array([0.34785484513745357, 0.6521451548625464, 0.6521451548625464, 0.34785484513745357])
 _GL_NODES, _GL_WEIGHTS = 0.5 * (_GL_NODES + 1.0), 0.5 * _GL_WEIGHTS

@@ -1,7 +1,7 @@
 """The EKF's run of IMU samples for the paper-002 state sets (10 and 22 states, Euler, no eta or Earth rate):
 means, Jacobians and process noise of k samples in one vectorised pass (``InsStates.linearise_inputs``).
 
-Why not k calls of ``InsStates._step``: one scalar step costs ~40 us of Python, most of a 50 Hz replay.
+Why not k calls of ``InsStates._step``: one scalar step is Python overhead, most of a 50 Hz replay's time.
 Within a run between two measurements the biases and scale factors do not change (their mean is kept by
 the prediction), so every sample's corrected input, its rotation increment ``dq`` and the blocks of F that
 depend on it are known at once and computed over the whole run; only the attitude chain
@@ -11,7 +11,7 @@ position follow by running sums in the same order as the per-sample additions. T
 
 Compiled: when the C kernel ``fusion_plugins.process._ins_run_kernel`` (_ins_run_kernel.c, setup.py KERNELS)
 is built and not disabled (``FUSION_PURE_PYTHON=1``, fusion/kernels.py), :func:`linearise_run` runs it: the
-same operations sample by sample in C (~2 us a run of 9 samples against ~35 us of numpy calls), the same
+same operations sample by sample in C (no per-call numpy overhead), the same
 numbers to the last bit or two (tests/models/test_ins_run_kernel.py). :func:`linearise_run_numpy` is the
 reference and the fallback.
 """

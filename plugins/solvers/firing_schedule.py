@@ -242,7 +242,7 @@ class FiringSchedule:
             if len(gaps) < 2:
                 return False
             m = gaps.min()
-            # np.median without its numpy.ma import (~10 ms of a run's start-up): the middle one, or the
+            # np.median without its numpy.ma import (slow at a run's start-up): the middle one, or the
             # mean of the middle two, of the sorted periods
             per = np.sort(gaps / np.maximum(np.round(gaps / m), 1.0))
             h = len(per) // 2

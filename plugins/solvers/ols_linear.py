@@ -9,7 +9,7 @@ import numpy as np
 from fusion.lapack import lapack
 from fusion_plugins.solvers.range_fix import Cycle, Fit, NoFix, range_cov
 
-_dpotrf, _dpotrs, _dtrtrs = lapack.dpotrf, lapack.dpotrs, lapack.dtrtrs   # no checks: ~2 us a call
+_dpotrf, _dpotrs, _dtrtrs = lapack.dpotrf, lapack.dpotrs, lapack.dtrtrs   # no argument checks
 
 
 def condition(D: np.ndarray, dim: int, degenerate_condition: float) -> float:
@@ -17,7 +17,7 @@ def condition(D: np.ndarray, dim: int, degenerate_condition: float) -> float:
     ``degenerate`` above ``degenerate_condition`` (collinear beacons in 2-D, coplanar in 3-D)."""
     A = D[:, :dim]
     AtA = A.T @ A
-    if dim == 2:                       # eigenvalues of the symmetric 2 x 2 A^T A in closed form (an SVD: ~10 us)
+    if dim == 2:                       # eigenvalues of the symmetric 2 x 2 A^T A in closed form (cheaper than an SVD)
         h = 0.5 * (AtA[0, 0] + AtA[1, 1])
         e = math.sqrt(max(h * h - (AtA[0, 0] * AtA[1, 1] - AtA[0, 1] * AtA[1, 0]), 0.0))
         lo, hi = h - e, h + e
@@ -47,7 +47,7 @@ def solve_linear(B: np.ndarray, r: np.ndarray, dim: int, z: float, ref: int,
     cond = condition(D, dim, degenerate_condition)
     M = None
     if cond <= qr_condition:                                  # eq. 32 by Cholesky of the normal equations
-        c, info = _dpotrf(AtA, lower=1)                        # LAPACK directly: ~2 us, scipy's wrappers ~20
+        c, info = _dpotrf(AtA, lower=1)                        # LAPACK directly, without scipy's checking wrappers
         if info == 0:
             M = _dpotrs(c, A.T, lower=1)[0]
             method = "ols"

@@ -41,7 +41,7 @@ import numpy as np
 from fusion.chisquare import chi2
 from fusion.lapack import lapack
 
-_dpotrf, _dpotrs, _dtrtrs = lapack.dpotrf, lapack.dpotrs, lapack.dtrtrs   # no checks: ~2 us a call
+_dpotrf, _dpotrs, _dtrtrs = lapack.dpotrf, lapack.dpotrs, lapack.dtrtrs   # no argument checks
 
 
 class NoFix(ValueError):
@@ -55,7 +55,7 @@ class NoFix(ValueError):
 
 @lru_cache(maxsize=256)
 def chi2_limit(probability: float, dof: int) -> float:
-    """``chi2.ppf(probability, dof)`` (cached: ~20 us a call)."""
+    """``chi2.ppf(probability, dof)`` (cached: chi2.ppf is slow)."""
     return float(chi2.ppf(probability, dof))
 
 

@@ -77,7 +77,7 @@ def test_the_absorbed_column_is_shown_only_when_some_sensor_has_any():
 
 def test_lines_the_parser_refuses_are_received_and_malformed():
     """A line of a known sensor that the log parser refuses (wrong field count, a bad number) is a message of
-    that sensor: received and malformed, so the sensor's row still adds up (it used to be malformed only:
+    that sensor: received and malformed, so the sensor's row still adds up (never malformed only:
     received 49 of 51 lines, or received 0 and malformed 60). Lines of a sensor the config lacks too."""
     from fusion import pipeline
     from fusion.config import load_system

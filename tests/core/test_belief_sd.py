@@ -1,5 +1,5 @@
 """Belief.sd: sqrt of the covariance's diagonal with negative variances (rounding) read as 0, the same bits as
-``np.sqrt(np.clip(np.diagonal(P), 0.0, None))`` (what it computed before; now without np.clip's wrappers),
+``np.sqrt(np.clip(np.diagonal(P), 0.0, None))`` (without np.clip's wrappers),
 signed zeros, NaN, inf and integer covariances included."""
 import numpy as np
 import pytest

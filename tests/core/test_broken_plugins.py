@@ -190,8 +190,8 @@ def test_a_registration_hook_that_raises(broken):
 
 
 def test_a_plugin_claiming_a_builtin_scheme_or_suffix(broken, tmp_path):
-    """A source claiming file:// and socket://, a sink claiming .csv (tester2 #9: before, the source silently
-    took over file:// inputs, the run read nothing and exited 0): refused like a name registered twice, the
+    """A source claiming file:// and socket://, a sink claiming .csv (such a source would silently
+    take over file:// inputs, the run read nothing and exit 0): refused like a name registered twice, the
     built-ins keep theirs, and fusion plugins says so."""
     listed = broken("hijack", "plugins")
     assert listed.returncode == 2

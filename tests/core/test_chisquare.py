@@ -93,8 +93,8 @@ def test_upper_tail_quantiles(k):
 
 @pytest.mark.parametrize("k", [0.5, 1, 2, 3, 5, 10, 30, 103, 500, 1000, 10_000, 100_000])
 def test_far_lower_tail_quantiles(k):
-    """p down to 1e-300: Newton on P itself went astray from ~1e-30 (ppf(1e-100, 103) was 1.6e124, ppf(1e-200,
-    1) a bare ValueError; tester4 #8); solved on ln P there."""
+    """p down to 1e-300: Newton on P itself goes astray from ~1e-30 (ppf(1e-100, 103) would be 1.6e124,
+    ppf(1e-200, 1) a bare ValueError); solved on ln P there."""
     p = np.array([1e-15, 1e-21, 1e-30, 1e-50, 1e-100, 1e-200, 1e-300])
     np.testing.assert_allclose(chi2.ppf(p, k), stats.chi2.ppf(p, k), rtol=1e-12)
 

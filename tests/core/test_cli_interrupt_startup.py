@@ -1,5 +1,5 @@
-"""Ctrl-C while the ``fusion`` command is still importing its modules (tester4 #4: a KeyboardInterrupt
-traceback and exit 1 in the first ~60 ms) is one line and exit 130, as later in a run."""
+"""Ctrl-C while the ``fusion`` command is still importing its modules (not a KeyboardInterrupt
+traceback and exit 1) is one line and exit 130, as later in a run."""
 import subprocess
 import sys
 

@@ -1,4 +1,4 @@
-"""`fusion run` with a plugin that observes the run badly (tester6 #2, #10, #14, #15, #16, #18): a hook or a
+"""`fusion run` with a plugin that observes the run badly: a hook or a
 plugin's sink that raises, a hook that prints, a source that yields bytes; and the command line's repeated
 or clashing options."""
 import csv
@@ -28,7 +28,7 @@ def with_plugin(monkeypatch):
 
 
 def test_a_run_end_hook_that_raises_keeps_the_summary_and_exits_2(tmp_path, capsys, with_plugin):
-    """Before: internal error, exit 1, --summary-json never written after a complete run."""
+    """Exit 2 and the --summary-json written after a complete run, not an internal error, exit 1."""
     class Uploader:
         @hookimpl
         def fusion_on_run_end(self, summary):
@@ -48,7 +48,7 @@ def test_a_run_end_hook_that_raises_keeps_the_summary_and_exits_2(tmp_path, caps
 
 
 def test_a_hook_that_prints_does_not_go_into_the_csv_on_stdout(capsys, with_plugin):
-    """Before: `fusion run -o -` with a hook printing a debug line gave 1201 rows, 600 of them junk."""
+    """`fusion run -o -` with a hook printing a debug line: the CSV holds only its rows."""
     class Chatty:
         @hookimpl
         def fusion_on_estimate(self, estimate):
@@ -101,8 +101,8 @@ class Sources:
 
 @pytest.mark.parametrize("url, what", [("bytes://5", "bytes b'"), ("ints://5", "int 42")])
 def test_a_source_yielding_non_text_is_named_exit_2(url, what, tmp_path, capsys, with_plugin):
-    """Before: internal error (`a bytes-like object is required`), exit 1, the source not named, labelled by
-    its first parameter's value ('5') instead of the URL typed."""
+    """Not an internal error (`a bytes-like object is required`), exit 1: the source is named, by the URL
+    typed rather than its first parameter's value ('5')."""
     with_plugin(Sources())
     js = tmp_path / "s.json"
     assert main(["run", str(CONFIG), "-q", "--input", url, "--summary-json", str(js)]) == 2
@@ -114,7 +114,7 @@ def test_a_source_yielding_non_text_is_named_exit_2(url, what, tmp_path, capsys,
 
 @pytest.mark.parametrize("option", ["--output", "--plot", "--filter", "--summary-json", "--input"])
 def test_an_option_given_twice_is_refused(option, tmp_path, capsys):
-    """Before: the last kept, the first request dropped without a word, exit 0."""
+    """Not the last kept and the first request dropped without a word: exit 2."""
     values = {"--plot": ("a.png", "b.png"), "--filter": ("ukf", "ekf")}.get(option, ("a.csv", "b.csv"))
     with pytest.raises(SystemExit) as stop:
         main(["run", str(CONFIG), option, str(tmp_path / values[0]) if "." in values[0] else values[0],
@@ -125,20 +125,20 @@ def test_an_option_given_twice_is_refused(option, tmp_path, capsys):
 
 
 def test_csv_and_json_both_on_stdout_are_refused(capsys):
-    """Before: `-o - --summary-json -` gave the CSV followed by the JSON on stdout, exit 0."""
+    """`-o - --summary-json -` would put the CSV followed by the JSON on stdout: exit 2."""
     assert main(["run", str(CONFIG), "-o", "-", "--summary-json", "-"]) == 2
     out, err = capsys.readouterr()
     assert out == "" and "--summary-json -: standard output already carries --output" in err
 
 
 def test_a_negative_number_in_scientific_notation_is_a_value():
-    """Before: `--start -1e308` was taken for an option (`expected one argument`)."""
+    """`--start -1e308` is a value, not an option (`expected one argument`)."""
     args = build_parser().parse_args(["import", "x.ulg", "-o", "x.log", "--start", "-1e308"])
     assert args.start == -1e308
     assert build_parser().parse_args(["tui", "c.yaml", "--speed", "-1E-3"]).speed == -1e-3
 
 
 def test_a_sweep_with_a_filter_twice_is_refused(tmp_path, capsys):
-    """Before: `--filter ukf,ukf` ran 4 trials and wrote 2 ("2 trial(s) (... 4 run)")."""
+    """`--filter ukf,ukf` is refused (it would run 4 trials and write 2)."""
     assert main(["sweep", str(CONFIG), "--seeds", "2", "--filter", "ukf,ukf", "-o", str(tmp_path / "r.csv")]) == 2
     assert "ukf given twice" in capsys.readouterr().err and not (tmp_path / "r.csv").exists()

@@ -62,8 +62,8 @@ def test_a_wild_stamp_is_dropped_and_nothing_else_is_lost(reference, stamp):
 
 def test_the_whole_recording_jumping_a_million_seconds_is_a_gap_and_keeps_its_stamps(reference):
     """Every stream (truth too) jumping together is a pause of the recording, however long: there is no old
-    time left to re-synchronise to (tester3 #2: a pause >= max_predict_s used to be renumbered, the output
-    times fabricated). The prediction over it is bounded (scheduler.max_predict_s); every estimate with truth
+    time left to re-synchronise to (renumbering a pause >= max_predict_s would fabricate the output
+    times). The prediction over it is bounded (scheduler.max_predict_s); every estimate with truth
     near it is scored."""
     s = _run(_retime(LINES, lambda t: t + 1e6 if t > 30.0 else t))
     assert s["events"]["clock"] == 1 and s["sensors"]["uwb"]["used"] == reference["sensors"]["uwb"]["used"]
@@ -75,11 +75,11 @@ def test_the_whole_recording_jumping_a_million_seconds_is_a_gap_and_keeps_its_st
 
 @pytest.mark.parametrize("pause", [8.0, 50.0, 60.5, 100.0])
 def test_a_pause_of_every_stream_keeps_the_stamps_and_scores_every_estimate(pause):
-    """tester3 #2 and #3: every stream (truth too) stops at 20 s and goes on ``pause`` s later (the lines from
+    """Every stream (truth too) stops at 20 s and goes on ``pause`` s later (the lines from
     20 s on are stamped ``pause`` later: the walk goes on where it stopped). The stamps after it are kept
-    (pauses from max_predict_s = 60 s on used to be re-synchronised: the output ended 60 s early, RMSE 337 m)
-    and the first truth rows after it are compared (they were dropped as 'far from the stream's time', so
-    the largest errors, right after the pause, were missing from the summary)."""
+    (re-synchronising pauses from max_predict_s = 60 s on would end the output 60 s early) and the first
+    truth rows after it are compared (dropped as 'far from the stream's time', the largest errors, right
+    after the pause, would be missing from the summary)."""
     lines = _retime(LINES, lambda t: t + pause if t >= 20.0 else t)
     system = load_system(EXAMPLE)
     from fusion.pipeline import Collect
@@ -146,7 +146,7 @@ def test_cli_never_exits_1_on_stamps(tmp_path):
 
 
 def test_a_plugin_failing_on_one_message_is_counted_and_the_run_goes_on(reference, monkeypatch):
-    """Issue 10 item 1: an unknown beacon used to end the run with exit 1; whatever a plugin raises on one
+    """An unknown beacon does not end the run with exit 1: whatever a plugin raises on one
     message, that message is malformed and the rest is used."""
     from fusion_plugins.measurement.range import RangeModel as RangeMeasurement
 
@@ -308,7 +308,7 @@ def abps_reference(abps_lines):
 
 @pytest.mark.parametrize("k, ahead", [(0, 1.0), (300, 1.0), (300, 0.4), (700, 3.0)])
 def test_cadence_abps_a_range_stamped_ahead_loses_no_imu_sample(abps_lines, abps_reference, k, ahead):
-    """Issue 10 item 9 (k 0: the fuzz case, the first range): IMU samples after it used to be late."""
+    """Issue 10 item 9 (k 0: the fuzz case, the first range): no IMU sample after it is late."""
     s = _run(_abps(abps_lines, "abps", k, lambda t: t + ahead), ABPS)
     ref = abps_reference["sensors"]
     assert s["sensors"]["imu"]["used"] == ref["imu"]["used"] and s["sensors"]["imu"]["late"] == 0
@@ -366,8 +366,8 @@ def test_fewer_messages_than_the_start_waits_for_still_run():
 
 
 def test_a_lone_sensor_slower_than_future_s_is_not_dropped_as_wild():
-    """A fix every 8 s, alone in the stream (future_s 5 s): each stamp is past the bound, and the next was
-    8 s on, so 'the messages after it do not agree' dropped every one but the first (tester4 #15). Alone,
+    """A fix every 8 s, alone in the stream (future_s 5 s): each stamp is past the bound, and the next is
+    8 s on, so 'the messages after it do not agree' would drop every one but the first. Alone,
     messages stepping forward agree; a wild stamp among them (going back) is still dropped."""
     slow = [("uwb", 8.0 * k) for k in range(12)]
     fed, events = _feed(slow, inputs=())

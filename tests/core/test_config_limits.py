@@ -72,13 +72,13 @@ def test_non_finite_values_are_refused_with_file_line_field(tmp_path, capsys, te
     ("on_update: true ", "on_update: true\n  rate_hz: 1.0e+9 ", "output.rate_hz: Input should be less than or equal "
      "to 1000", "rate_hz:"),
     ("on_update: true ", "on_update: false ", "output: Value error, on_update: false and no rate_hz: the run would "
-     "emit no estimate", "output:"),   # validate said ok, the run 'never initialised' (tester3 #21)
+     "emit no estimate", "output:"),   # not ok from validate and a run that never initialises
     ("late_policy: drop", "late_policy: drop\n  history: 1000000000", "scheduler.history: Input should be less than "
      "or equal to 100000", "history:"),
     ("noise: {sd: 0.1}", "noise: {sd: 0.1, R: [[0.01]]}", "sensors.uwb.noise: Value error, give sd or R, not both",
      "noise:"),
     ("sd: {p: 1.0, v: 0.5}", "sd: {p: 1.0, v: 0.5}\n  P: [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]",
-     "initial: Value error, give sd or P, not both", "initial:"),   # sd was silently ignored (tester4 #6)
+     "initial: Value error, give sd or P, not both", "initial:"),   # sd is not silently ignored
     ("noise: {sd: 0.1}", "noise: {R: [[1, 0.5], [0.5, 1]]}", "sensors.uwb.noise.R: must be 1 x 1", "noise:"),
     ("noise: {sd: 0.1}", "noise: {R: [[1, 2], [3]]}", "sensors.uwb.noise.R: rows of different lengths [1, 2]", "noise:"),
     ("sd: {p: 1.0, v: 0.5}", "P: [[1, 0, 0, 0], [0, 1, 0], [0, 0, 1, 0], [0, 0, 0, 1]]",

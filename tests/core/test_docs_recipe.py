@@ -1,4 +1,4 @@
-"""docs/writing-plugins.md's measurement-model recipe runs as written (tester6 #17): its blocks are written
+"""docs/writing-plugins.md's measurement-model recipe runs as written: its blocks are written
 to files by the path on their first line, its shell steps are run in order — `pip install ./fusion-baro`
 (really through pip when the build backend can build offline, else the dist-info pip leaves), the author's
 tests (the kit), `fusion plugins`, `fusion simulate walk.yaml` with its simulator and `fusion run` with its

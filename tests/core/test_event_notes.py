@@ -1,5 +1,5 @@
 """The first events of each kind a user should see are printed while a run goes: a wild time stamp dropped
-by the clock guard names its line (it used to be only counted in the summary)."""
+by the clock guard names its line (not only counted in the summary)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -67,7 +67,7 @@ def test_a_scenario_too_large_to_simulate_is_refused_naming_the_field(tmp_path, 
 
 
 def test_a_folder_as_config_or_scenario_is_one_line_exit_2(tmp_path, capsys):
-    """Before: 'internal error: IsADirectoryError: ... Is a directory: 3', exit 1 (tester2 #11)."""
+    """One line naming the folder, exit 2 (not 'internal error: IsADirectoryError: ...', exit 1)."""
     folder = tmp_path / "d.yaml"
     folder.mkdir()
     for argv in (["run", str(folder)], ["validate", str(folder)], ["simulate", str(folder), "-o", str(tmp_path / "s.log")],

@@ -3,7 +3,7 @@ and a source that fails": a component that fails on a message only loses that me
 h or jacobian: the update is lost, counted malformed for its sensor, one event naming the sensor, the model
 and the exception (and the count at the end), the belief kept, the run goes on. A process model that fails on
 every prediction: the run stops with exit 2 and a message naming it, the summary written. ``fusion validate``
-finds an h of the wrong shape. (All of these used to be an internal error, exit 1, no summary.)"""
+finds an h of the wrong shape. (None of these is an internal error, exit 1, without a summary.)"""
 import json
 import textwrap
 from pathlib import Path

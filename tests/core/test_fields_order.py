@@ -1,4 +1,4 @@
-"""``# fields`` lines against what a sensor's components read (tester2 #10): the same names in another order
+"""``# fields`` lines against what a sensor's components read: the same names in another order
 would be read by position, the columns silently swapped (position RMSE 0.05 -> 2.5 m, attitude 78 deg on
 the ABPS recording), so the run refuses the stream at that line (exit 2); other names get a warning and are
 read by position; the names the components read pass silently."""

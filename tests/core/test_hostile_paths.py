@@ -62,7 +62,7 @@ def test_validate_does_not_read_a_terminal_recording(tmp_path):
 @pytest.mark.parametrize("command", ["validate", "run"])
 def test_a_path_the_system_refuses_is_one_config_line(tmp_path, capsys, make, said, command):
     cfg = config_with(tmp_path, make(tmp_path))
-    assert main([command, str(cfg), *(["-q"] if command == "run" else [])]) == 2   # was 1 (OSError, ValueError)
+    assert main([command, str(cfg), *(["-q"] if command == "run" else [])]) == 2   # not 1 (OSError, ValueError)
     err = capsys.readouterr().err
     assert f"{cfg}:5: recording:" in err and said in err and len(err.strip().splitlines()) == 1, err
 
@@ -71,7 +71,7 @@ def test_a_symlink_loop_recording_is_one_config_line(tmp_path, capsys):
     (tmp_path / "a.log").symlink_to(tmp_path / "b.log")
     (tmp_path / "b.log").symlink_to(tmp_path / "a.log")
     cfg = config_with(tmp_path, str(tmp_path / "a.log"))
-    assert main(["validate", str(cfg)]) == 2   # was 1: RuntimeError: Symlink loop
+    assert main(["validate", str(cfg)]) == 2   # not 1: RuntimeError: Symlink loop
     assert "Too many levels of symbolic links" in one_error_line(capsys, cfg)
     assert main(["run", str(cfg), "-q"]) == 2
     assert "internal error" not in capsys.readouterr().err
@@ -80,7 +80,7 @@ def test_a_symlink_loop_recording_is_one_config_line(tmp_path, capsys):
 @pytest.mark.skipif(not Path("/proc/self/mem").exists(), reason="no /proc")
 def test_an_unreadable_recording_is_one_config_line(tmp_path, capsys):
     cfg = config_with(tmp_path, "/proc/self/mem")
-    assert main(["validate", str(cfg)]) == 2   # was 1: OSError: Input/output error
+    assert main(["validate", str(cfg)]) == 2   # not 1: OSError: Input/output error
     assert "cannot read /proc/" in one_error_line(capsys, cfg)
 
 
@@ -115,7 +115,7 @@ def offset_config(tmp_path: Path, offset: float, latency: float, other: float = 
 def test_a_negative_offset_beyond_max_latency_is_refused(tmp_path, capsys):
     cfg = offset_config(tmp_path, -0.5, 0.2)
     for command in (["validate", str(cfg)], ["run", str(cfg), "-q"]):
-        assert main(command) == 2   # was 0, with every uwb message dropped as late
+        assert main(command) == 2   # not 0 with every uwb message dropped as late
         err = one_error_line(capsys, cfg)
         assert "sensors.uwb.time_offset: -0.5 s puts uwb's messages 0.5 s behind other's" in err, err
         assert "scheduler.max_latency (0.2 s)" in err and "max_latency >= 0.5" in err
@@ -145,7 +145,7 @@ def test_an_output_that_is_the_standard_input_file_is_refused(tmp_path, output):
                               timeout=300)
     assert done.returncode == 2, done.stderr
     assert "is an input of this run (standard input (--input -))" in done.stderr
-    assert log.read_bytes() == RECORDING.read_bytes()   # was replaced by the summary or the CSV
+    assert log.read_bytes() == RECORDING.read_bytes()   # not replaced by the summary or the CSV
 
 
 def test_an_output_hard_linked_to_the_input_is_refused(tmp_path, capsys):
@@ -165,7 +165,7 @@ def test_quiet_hides_the_table_but_not_the_warnings(tmp_path, capsys):
     main(["run", str(CONFIG), "--input", str(log), "-q"])
     out, err = capsys.readouterr()
     assert out == ""
-    assert "sensor 'uwbx' is not in the config; its messages are ignored" in err   # was hidden by -q
+    assert "sensor 'uwbx' is not in the config; its messages are ignored" in err   # not hidden by -q
 
 
 @pytest.mark.parametrize("make, said", [(lambda d: "/tmp/" + "a" * 5000, "File name too long"),
@@ -173,6 +173,6 @@ def test_quiet_hides_the_table_but_not_the_warnings(tmp_path, capsys):
 def test_an_input_path_the_system_refuses_is_one_line(tmp_path, capsys, make, said):
     (tmp_path / "a.log").symlink_to(tmp_path / "b.log")
     (tmp_path / "b.log").symlink_to(tmp_path / "a.log")
-    assert main(["run", str(CONFIG), "--input", make(tmp_path), "-q"]) == 2   # was 1 (OSError) for the long one
+    assert main(["run", str(CONFIG), "--input", make(tmp_path), "-q"]) == 2   # not 1 (OSError) for the long one
     err = capsys.readouterr().err
     assert "cannot open the recording: " + said in err and len(err.strip().splitlines()) == 1, err

@@ -1,7 +1,7 @@
 """The initial belief from a first fix that carries more than a position (a GPS fix with velocity, the
 ``gps_fields`` decoder of an imported log with ``position_only_s: 0``): the position from the fix, the
-velocity from the rows of h that select it, their covariance from R. Before, such a fix ended the run
-("could not broadcast (3,) into (5,)")."""
+velocity from the rows of h that select it, their covariance from R (not an end of the run,
+"could not broadcast (3,) into (5,)")."""
 from __future__ import annotations
 
 from pathlib import Path

@@ -1,10 +1,10 @@
-"""The initial position from the fixes of a static alignment window (tester5 #7) and the alignment's
-stillness test (tester5 #5).
+"""The initial position from the fixes of a static alignment window and the alignment's
+stillness test.
 
-#7: the initial position was the LAST fix of ``initial.align_s`` (docs: "the first fix"): one echo-corrupted
-fix there started the filter 1.6 m off. Now a window judged static combines its fixes robustly
-(fusion.run.startup.combine_fixes). #5: the window was averaged as static with no check; a
-moving one is now a warning (and the summary's health), the gyro-bias prior is kept."""
+Taken from one fix of ``initial.align_s``, the initial position would be off by as much as one echo-corrupted
+fix (1.6 m here); a window judged static combines its fixes robustly
+(fusion.run.startup.combine_fixes). A window that is not static is not averaged as static: it is a
+warning (and the summary's health), and the gyro-bias prior is kept."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -108,8 +108,8 @@ def test_a_moving_start_is_told_and_its_mean_rate_not_taken_as_bias(tmp_path):
     warned = [e for e in events if e.kind == "warning" and "alignment" in e.detail]
     assert len(warned) == 1 and "not static" in warned[0].detail and " sd " in warned[0].detail
     assert "IMU samples" in result.summary["health"]["alignment_not_static"]
-    assert result.summary["errors"]["position_rmse_m"] < 0.2          # before: ~0.8 m (tester5 #5)
-    assert result.summary["errors"]["attitude_max_deg"] < 10.0        # before: ~40 deg
+    assert result.summary["errors"]["position_rmse_m"] < 0.2          # averaged as static: ~0.8 m
+    assert result.summary["errors"]["attitude_max_deg"] < 10.0        # averaged as static: ~40 deg
 
 
 def test_a_static_start_is_no_false_alarm(tmp_path):

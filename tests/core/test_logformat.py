@@ -112,7 +112,7 @@ def test_well_formed_lines_are_never_dropped(records, noise):
 
 def test_a_line_checksum_after_a_passed_through_sentence_is_checked_and_stripped():
     """docs/tui.md recommends a line checksum on a serial line; on an NMEA pass-through line it follows the
-    sentence's own: '$GPGGA,...*53*21'. It made every GPS line malformed (tester4 #9)."""
+    sentence's own: '$GPGGA,...*53*21'. Left in, it would make every GPS line malformed."""
     import pynmea2
 
     nmea = "GPGGA,000000.00,3724.5000,N,12206.0000,W,1,08,0.9,10.0,M,0.0,M,,"
@@ -126,7 +126,7 @@ def test_a_line_checksum_after_a_passed_through_sentence_is_checked_and_stripped
 
 
 def test_a_huge_bad_field_is_quoted_cut():
-    """A 1 MiB number made a 1 MiB line on stderr (tester3 #18): the message quotes 40 characters and says
+    """A 1 MiB number does not make a 1 MiB line on stderr: the message quotes 40 characters and says
     how long the field was."""
     for line, what in ((f"1.0,uwb,B1,{'1' * 1_000_000}", "non-finite value"), (f"1.0,uwb,B1,{'x' * 500}!", "bad number"),
                        (f"{'1' * 100_000},uwb,B1,2", "non-finite time"), (f"{'z' * 100_000},uwb,B1,2", "bad time")):

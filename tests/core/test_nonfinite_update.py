@@ -1,8 +1,8 @@
 """An update whose prediction is not finite is refused, gate or no gate, for every filter: the belief is
-kept, the message counted malformed (the model's fault: tester6 #5; was rejected) with an event naming the
+kept, the message counted malformed (the model's fault, not a rejection) with an event naming the
 model, and the run goes on (DESIGN: never a
-NaN propagated silently). Before, an ungated sensor whose h was NaN at the initial state made the belief
-NaN at t = 0 and every later measurement was rejected."""
+NaN propagated silently): an ungated sensor whose h is NaN at the initial state would otherwise make the
+belief NaN at t = 0 and every later measurement rejected."""
 from __future__ import annotations
 
 import math
@@ -68,12 +68,12 @@ def test_a_nan_prediction_is_refused_and_the_run_goes_on(filter_type):
     s = result.summary
     assert result.stats.last_finite
     assert s["health"]["nonfinite_estimates"] == 0
-    # a model that is NaN at a finite state is at fault (tester6 #5): the message is lost, counted malformed,
-    # the model named once (plugins/filters/checks.py; was: counted rejected)
+    # a model that is NaN at a finite state is at fault: the message is lost, counted malformed (not
+    # rejected), the model named once (plugins/filters/checks.py)
     refused = [e for e in events if e.kind == "malformed" and e.sensor == "odo" and "NaN" in e.detail]
     assert len(refused) == 1 and "speed_nan_test" in refused[0].detail and "returned NaN" in refused[0].detail
     assert s["sensors"]["odo"]["malformed"] > 0
-    # the ranges go on being used (before: every one rejected after the NaN) and the track is good
+    # the ranges go on being used (not every one rejected after the NaN) and the track is good
     assert s["sensors"]["uwb"]["used"] > 0.95 * s["sensors"]["uwb"]["received"]
     assert s["errors"]["position_rmse_m"] < 0.5
     # a refused update never enters the NIS statistics (a NaN would spoil them)

@@ -192,8 +192,8 @@ def test_observation_hooks_see_every_estimate_event_and_the_end(tmp_path):
 
 
 def test_a_failing_hook_is_named_and_dropped_and_the_run_goes_on(capsys):
-    """tester6 #10: a hook that raised ended the run as an internal error (the summary never written, a cut
-    output renamed as if complete). Now the failing implementation is named (the plugin, where), not called
+    """A hook that raises does not end the run as an internal error (the summary never written, a cut
+    output renamed as if complete): the failing implementation is named (the plugin, where), not called
     again, and the run, the other implementations and the summary go on complete."""
     class Broken:
         calls = 0
@@ -219,8 +219,8 @@ def test_a_failing_hook_is_named_and_dropped_and_the_run_goes_on(capsys):
 
 
 def test_a_run_end_hook_gets_a_copy_of_the_summary():
-    """tester6 #2: a fusion_on_run_end hook that edited the dict it was given (popped 'errors', set used = -1)
-    rewrote the table printed and the --summary-json written after it."""
+    """A fusion_on_run_end hook that edits the dict it is given (pops 'errors', sets used = -1) does not
+    rewrite the table printed and the --summary-json written after it."""
     class Editing:
         @hookimpl
         def fusion_on_run_end(self, summary):
@@ -236,8 +236,8 @@ def test_a_run_end_hook_gets_a_copy_of_the_summary():
 
 
 def test_a_failing_plugin_sink_is_dropped_its_file_discarded_and_the_run_goes_on(tmp_path):
-    """tester6 #10: a plugin's sink whose on_event (or on_estimate, or close) raised ended the run, its cut
-    file renamed over the target (or its .tmp left behind). Now it is named, gets nothing more, its
+    """A plugin's sink whose on_event (or on_estimate, or close) raises does not end the run, nor is its cut
+    file renamed over the target (or its .tmp left behind): it is named, gets nothing more, its
     OutputFile is discarded, and fusion's own sinks and the summary are complete."""
     from fusion.api import OutputFile
 
@@ -272,8 +272,8 @@ def test_a_failing_plugin_sink_is_dropped_its_file_discarded_and_the_run_goes_on
 
 
 def test_hooks_and_plugin_sinks_cannot_write_into_the_filter(capsys):
-    """The estimate a hook or a plugin's sink is given is read-only: a hook that did estimate.belief.x[0] +=
-    1000 wrote into the filter's own state (tester3 #13: RMSE 0.11 m -> 693 km, exit 0). Now the write raises
+    """The estimate a hook or a plugin's sink is given is read-only: a hook that does estimate.belief.x[0] +=
+    1000 would write into the filter's own state; the write raises
     in the plugin; a hook that only reads sees the same numbers as the run's own sinks."""
     class Mutating:
         @hookimpl

@@ -1,5 +1,5 @@
 """What an installed plugin declares is checked when it registers, and a component that fails while it is
-built is named (tester6 #12, #13, #18). Refused at registration, as a name registered twice is (the plugin's
+built is named. Refused at registration, as a name registered twice is (the plugin's
 other names still work, ``fusion plugins`` lists it as broken, exit 2, and a config using it is exit 2 with
 that line): a ``Params`` that is not a fusion.api.Params (a plain pydantic model accepted misspelt keys), a
 ``Params = None``, a default that is not a valid value of its field, a name that is no identifier (a module
@@ -249,8 +249,8 @@ def test_params_default_errors_reads_only_plain_defaults():
 
 
 def test_a_gate_whose_initial_state_raises_is_named_with_its_config_line(fusion):
-    """tester6 leftover: a stateful gate whose initial_state() raises was an exception out of the run (exit 1);
-    now one config error at wiring, as a component that fails while built, from validate and run alike."""
+    """A stateful gate whose initial_state() raises is not an exception out of the run (exit 1) but
+    one config error at wiring, as a component that fails while built, from validate and run alike."""
     for cmd in ("validate", "run"):
         proc = fusion("state_raise", cmd, "strict.yaml")
         assert proc.returncode == 2, proc.stderr

@@ -4,7 +4,7 @@ only loses that message): counted malformed for its sensor, one event naming the
 count at the end), the run going on with the other sensors. A model's ``observe`` returning an unusable
 Observation (a NaN time, z or R of the wrong shape, an R that is negative, NaN or not symmetric), a gate whose
 ``check`` raises or returns something else than ``(GateDecision, state)``, a decoder returning something else
-than a Message (tester6 #7, #9: these were an internal error, exit 1, nothing named, or a silent "rejected")."""
+than a Message (each named, not an internal error, exit 1, nor a silent "rejected")."""
 import textwrap
 
 import numpy as np

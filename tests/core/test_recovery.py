@@ -101,7 +101,7 @@ def test_health_reports_a_non_finite_end():
     assert h["nonfinite_estimates"] == 2 and h["final_estimate_finite"] is False and h["diverged_s"] == 2.0
 
 
-# ---------------------------------------------------------------- the trigger (tester5 #1)
+# ---------------------------------------------------------------- the trigger
 from fusion.recovery import LockoutWatch, RecoverySpec
 
 
@@ -129,13 +129,13 @@ def _fix_lines(noise, n=200, dt=0.1, seed=1, bad=None):
 
 
 def test_a_lockout_with_every_nis_just_over_the_gate_is_recovered():
-    """tester5 #1: every fix refused with a NIS between the gate (13.8 on 2 dof) and twice it, so "each NIS
-    at least nis_factor x threshold" never fired; the fixes agree with each other: a lock-out, reset."""
+    """Every fix refused with a NIS between the gate (13.8 on 2 dof) and twice it, so "each NIS at least
+    nis_factor x threshold" would never fire; the fixes agree with each other: a lock-out, reset."""
     # belief 23 mm off with a 5 mm sd, fixes 1 mm: NIS ~ 0.023^2 / 2.6e-5 ~ 20, between 13.8 and 27.6
     lines = _fix_lines(0.001)
     rec = {"after_s": 1.0, "min_rejected": 3, "action": "reset", "blocks": ["p"]}
     system, _ = _fix_system(lines, 0.001, (1.023, 1.0), 0.005, {**rec, "nis_factor": 2.0})
-    old = pipeline.run(system, lines).summary   # the rule of before: no reset, every fix refused
+    old = pipeline.run(system, lines).summary   # nis_factor 2: no reset, every fix refused
     assert old["health"]["resets"] == 0 and old["sensors"]["fix"]["used"] == 0
     assert old["health"]["locked_out"]["fix"]["rejected"] == 200   # and the summary says so
     system, _ = _fix_system(lines, 0.001, (1.023, 1.0), 0.005, rec)

@@ -107,7 +107,7 @@ def test_belief_at_predicts_to_the_asked_time_and_fixes_are_used_at_their_time()
 
 
 class BadFlush(Probe):
-    """A probe whose flush fails in the way ``how`` names (tester6: a preprocessor's flush was not checked)."""
+    """A probe whose flush fails in the way ``how`` names (a preprocessor's flush is checked)."""
 
     name: ClassVar[str] = "bad_flush_test"
     how = "raise"

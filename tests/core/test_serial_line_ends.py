@@ -1,6 +1,6 @@
 """A live serial stream is split into lines as the recording reader splits the same bytes in a file: CR,
-CRLF and LF line ends (tester2 #3: a device ending lines with CR alone fused nothing and counted nothing
-live, while its --record file replayed fine), whatever the reads' chunking; an over-long line is one
+CRLF and LF line ends (a device ending lines with CR alone is fused live as its --record file is
+replayed), whatever the reads' chunking; an over-long line is one
 malformed line, as in a file."""
 import os
 import threading

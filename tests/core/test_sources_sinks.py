@@ -117,8 +117,8 @@ def test_third_party_source_and_sink_from_the_cli(installed_example, tmp_path):
 
 
 def test_a_percent_encoded_file_url_reads_the_file(tmp_path, capsys):
-    """RFC 8089: Path.as_uri() writes a space as %20 and UTF-8 as %C3%BC; such a URL was taken literally
-    and read as 'no such recording' (tester4 #17)."""
+    """RFC 8089: Path.as_uri() writes a space as %20 and UTF-8 as %C3%BC; such a URL taken literally
+    would read as 'no such recording'."""
     odd = tmp_path / "with space ü.log"
     odd.write_bytes(RECORDING.read_bytes())
     out = tmp_path / "o.json"

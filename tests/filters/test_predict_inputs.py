@@ -182,7 +182,7 @@ class PlainWithRunNoise(Plain):
 def test_generic_process_without_batched_methods(name):
     """A process without Q_inputs (InputRunNoise): predict_inputs is k calls of predict, the same
     numbers (one Q of the whole interval added at the end would leave out the early samples' noise
-    carried through the later dynamics; tester4 #7)."""
+    carried through the later dynamics)."""
     proc, x0, P0, us, dts = belief_and_inputs(8)
     plain = Plain(proc)
     f = flt(name)
@@ -212,9 +212,10 @@ def test_generic_process_with_run_noise_only(name):
 
 @pytest.mark.parametrize("name", ["ukf", "srukf"])
 def test_nonlinear_input_driven_model_without_run_noise(name):
-    """tester4 #7: the unicycle of tests/smoothing (wheel odometry: non-linear, input-driven, no
+    """The unicycle of tests/smoothing (wheel odometry: non-linear, input-driven, no
     Q_inputs), 100 samples of (2 m/s, 0.2 rad/s) at 100 Hz in one predict_inputs (batch_inputs default):
-    the covariance within 1% of the EKF's (it was 25% too small: sd py 0.183 m against 0.210 m)."""
+    the covariance within 1% of the EKF's (one Q added at the end leaves it 25% too small: sd py 0.183 m
+    against 0.210 m)."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "smoothing"))
     from smoothing_models import Unicycle
 

@@ -155,8 +155,8 @@ def test_iso_times_naive_are_utc_and_zero_by_date(tmp_path):
                                   "1688212800", "2023-07-01 12:00:00"])
 def test_a_date_time_zero_for_numeric_epoch_times_quoted_or_not(tmp_path, zero):
     """time.zero as a date-time for a column of Unix-epoch nanoseconds; YAML reads an unquoted one as a
-    date-time object, which was refused as 'not a valid string', and a quoted one was refused unless the
-    column itself was ISO text (tester3 #9). Every spelling of the same instant gives the same times."""
+    date-time object (not refused as 'not a valid string'), and a quoted one is accepted though the column
+    itself is not ISO text. Every spelling of the same instant gives the same times."""
     t0 = 1688212800  # 2023-07-01T12:00:00Z
     csv = _write(tmp_path, "e.csv", f"""
         t_ns,v
@@ -228,9 +228,9 @@ def test_pairs_with_sentinels_and_per_beacon_scale(tmp_path):
 
 @pytest.mark.parametrize("n_rows", [1, 5, 20])
 def test_a_short_file_with_one_ragged_row_is_read_by_its_header_delimiter(tmp_path, n_rows):
-    """csv.Sniffer gives up on a short sample with one ragged row; the reader then split on whitespace and
-    blamed the mapping ('no column time in ... columns: time,ax,...'; tester4 #12). The header's delimiter
-    is used instead."""
+    """csv.Sniffer gives up on a short sample with one ragged row; splitting on whitespace would then
+    blame the mapping ('no column time in ... columns: time,ax,...'). The header's delimiter is used
+    instead."""
     rows = "\n".join(f"{0.01 * k:.2f},1,0,0,0,0,0" + (",9" if k == 0 else "") for k in range(n_rows))
     csv = _write(tmp_path, "s.csv", "time,ax,ay,az,gx,gy,gz\n" + rows + "\n")
     mp = _write(tmp_path, "m.yaml", """
@@ -243,7 +243,7 @@ def test_a_short_file_with_one_ragged_row_is_read_by_its_header_delimiter(tmp_pa
 
 
 def test_a_mapped_name_twice_in_the_header_is_refused(tmp_path, capsys):
-    """Two columns of one name: the first was taken silently (tester4 #13)."""
+    """Two columns of one name are refused, not the first taken silently."""
     csv = _write(tmp_path, "d.csv", "time,ax,ay,ax\n0,1,0,99\n0.01,1,0,99\n")
     mp = _write(tmp_path, "m.yaml", """
         time: {column: time}

@@ -231,8 +231,8 @@ def test_earth_field_from_att(imported):
 
 
 def test_a_missing_gpa_record_costs_only_its_own_fix(tmp_path, capsys):
-    """One GPS sample without its GPA (a logger that dropped the record) used to remove the receiver
-    accuracies of the whole log (tester4 #5): now each fix has its own GPA's, a missing one the previous
+    """One GPS sample without its GPA (a logger that dropped the record) does not remove the receiver
+    accuracies of the whole log: each fix has its own GPA's, a missing one the previous
     GPA's (within 1.5 s), and none within 1.5 s is 0: unknown (the gps measurement's floor)."""
     w = DataflashWriter()
     for name in ("IMU", "GPS"):
@@ -259,8 +259,8 @@ def test_a_missing_gpa_record_costs_only_its_own_fix(tmp_path, capsys):
 
 
 def test_two_d_fixes_are_not_exported_as_nmea(tmp_path, capsys):
-    """A GGA cannot say that a height is unsolved: 2-D fixes (Status 2) written as NMEA reached the nmea
-    decoder as ordinary fixes, one of them its origin at the unsolved altitude (tester4 #10). They are left
+    """A GGA cannot say that a height is unsolved: 2-D fixes (Status 2) written as NMEA would reach the nmea
+    decoder as ordinary fixes, one of them its origin at the unsolved altitude. They are left
     out, with a note, as the numeric route's min_fix 3 leaves them out."""
     import pynmea2
 

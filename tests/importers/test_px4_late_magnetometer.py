@@ -1,7 +1,7 @@
 """The PX4 config on a log whose magnetometer starts after the 0.2 s alignment window (a late or slow
 magnetometer, a log cut with --start): every magnetometer sample is rejected with the reason and the run
-goes on with the GPS, as docs/import.md says, ending degraded (exit 4: a sensor unused) unless allowed (tester2 #14: before, the first magnetometer update aborted the
-run with exit 2, no summary, and a message that align_s must be > 0)."""
+goes on with the GPS, as docs/import.md says, ending degraded (exit 4: a sensor unused) unless allowed (the first
+magnetometer update does not abort the run with exit 2 and a message that align_s must be > 0)."""
 from __future__ import annotations
 
 import json

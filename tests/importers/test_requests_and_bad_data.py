@@ -1,4 +1,4 @@
-"""``fusion import`` on requests it cannot meet and on damaged or odd data (tester2's findings): a sensor
+"""``fusion import`` on requests it cannot meet and on damaged or odd data: a sensor
 asked for by name that the importer cannot write is one exit-2 line, never a silent drop; corrupt samples
 are skipped with a warning naming them; row order and the time span do not change what a CSV gives."""
 from __future__ import annotations
@@ -65,7 +65,7 @@ def _ulog(path, n: int = 20, valid_from: dict | None = None, flags: dict | None 
     w.save(path)
 
 
-# ----------------------------------------------------------------------------- finding 4: --sensors
+# ----------------------------------------------------------------------------- --sensors
 def test_ulog_numbered_sensor_is_one_error_alone_and_in_a_list(tmp_path, capsys):
     _ulog(tmp_path / "a.ulg")
     for names in (["imu2"], ["gps", "imu9"], ["mag2"]):
@@ -97,7 +97,7 @@ def test_dataflash_instance_not_in_the_log_is_one_error_alone_and_in_a_list(tmp_
     assert set(Recording(tmp_path / "x.log").t) == {"gps", "imu2"}
 
 
-# ----------------------------------------------------------------------------- finding 1: ULog validity flags
+# ----------------------------------------------------------------------------- ULog validity flags
 def _reference_of(tmp_path, capsys, **kw):
     _ulog(tmp_path / "r.ulg", **kw)
     assert fusion_import(tmp_path / "r.ulg", "-o", tmp_path / "r.log", "--force") == 0
@@ -176,7 +176,7 @@ def test_csv_end_keeps_a_row_inside_the_span_written_after_a_later_one(tmp_path,
     assert "rows not in time order (line 10" in capsys.readouterr().err
 
 
-# ----------------------------------------------------------------------------- finding 6: DataFlash damage
+# ----------------------------------------------------------------------------- DataFlash damage
 def _ap(n: int = 40, mark: int | None = None):
     """A 10 Hz DataFlash log of IMU + GPS; returns (bytes, offset of IMU message ``mark``)."""
     w = DataflashWriter()

@@ -299,8 +299,8 @@ def test_full_disk_is_one_error_and_leaves_no_file(tmp_path, capsys):
 
 
 def test_a_velocity_the_receiver_flags_invalid_is_not_fused(tmp_path, capsys):
-    """vel_ned_valid was only checked for 'ever true': the velocities of the samples flagged invalid were
-    written and fused (tester4 #16). They are written with vok 0 (the 13-value gps layout) and the
+    """vel_ned_valid is checked per sample, not for 'ever true' (which would write and fuse the
+    velocities of the samples flagged invalid). They are written with vok 0 (the 13-value gps layout) and the
     gps_fields decoder makes those epochs position only; the NMEA route writes them as GGA alone."""
     from ulog_builder import UlogWriter
 

@@ -1,4 +1,4 @@
-"""The age of an ABPS fix (tester5 #3): a cycle closes at its last heard slot, the compensation and the
+"""The age of an ABPS fix: a cycle closes at its last heard slot, the compensation and the
 bridge carry the acceleration over the age, and the opt-in second-order bridge from the IMU.
 
 A fix is of the cycle's mean range time t_m; the filter may have integrated inputs past t_m, so the fix is

@@ -1,8 +1,8 @@
 """ABPS after a logger blackout: every sensor silent for 8 s while the vehicle drives on. The belief comes
-back metres and m/s off; its velocity spoils the motion compensation of the fixes, and before, every cycle
-was refused as inconsistent for the rest of the run (the fix that would correct the belief refused because
-of the belief: not one estimate after the gap). Now, after three cycles refused in a row, a cycle is
-solved without the belief (tester2 #2)."""
+back metres and m/s off; its velocity spoils the motion compensation of the fixes, so every cycle could
+be refused as inconsistent for the rest of the run (the fix that would correct the belief refused because
+of the belief: not one estimate after the gap). After three cycles refused in a row, a cycle is
+solved without the belief."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -38,7 +38,7 @@ def _run_cut(config: Path):
 
 
 def test_fixes_are_used_at_once_after_a_blackout():
-    """Past hold_after the state coasts (the last IMU sample is not integrated over the 8 s: tester3 #4),
+    """Past hold_after the state coasts (the last IMU sample is not integrated over the 8 s),
     so the belief comes back near enough for the first cycle's fix to be accepted: no cycle refused."""
     events, after = _run_cut(CONFIG)
     assert after.size >= 40 and after[0] < 58.5
@@ -67,8 +67,8 @@ def test_no_reacquiring_on_the_uncut_recording():
 
 
 def test_an_input_that_dies_is_reported_once_while_the_others_go_on():
-    """The IMU stops at 40 s, the ranges go on to 60 s: one gap event (tester2 #15: none before, as the gap
-    event came only with the next sample, which never came)."""
+    """The IMU stops at 40 s, the ranges go on to 60 s: one gap event (not one that waits for the next sample,
+    which never comes)."""
     lines = [ln for ln in _lines(end=60.0) if not (",imu," in ln and float(ln.split(",", 1)[0]) > 40.0)]
     events = []
     pipeline.run(load_system(CONFIG), lines, on_event=events.append)

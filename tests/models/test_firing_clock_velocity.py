@@ -1,4 +1,4 @@
-"""firing_clock ``motion: constant_velocity`` (tester5 finding 4): the velocity block after the clock, the
+"""firing_clock ``motion: constant_velocity``: the velocity block after the clock, the
 transition p + v dt and the white-acceleration noise against Van Loan's integral of the continuous model;
 vectorised over sigma points; the attitude and direction-error blocks keep working behind it; the random
 walk stays the default (layout and numbers unchanged)."""

@@ -1,7 +1,7 @@
-"""The firing schedule against second reports of one pulse (tester5 #2): a line repeated 1 mm longer, an echo
-stamped with the direct pulse's time, an exact repeat. Before the fix one such line in the first 2 s made
-the learnt period 2.9 us (the emission gap of the two reports) and every range its own cycle: no fix for
-the whole run. Generator: the seven-beacon mine schedule (as tests/models/test_abps_fix_stage.py: beacon j of
+"""The firing schedule against second reports of one pulse: a line repeated 1 mm longer, an echo
+stamped with the direct pulse's time, an exact repeat. Taken as a firing, one such line in the first 2 s would
+make the learnt period 2.9 us (the emission gap of the two reports) and every range its own cycle: no fix
+for the whole run. Generator: the seven-beacon mine schedule (as tests/models/test_abps_fix_stage.py: beacon j of
 cycle n fires at t0 + n 0.4 + j 0.05 s, the pulse arrives after |p - B| / c from a known route)."""
 from __future__ import annotations
 

@@ -49,7 +49,7 @@ def test_gps_h_and_jacobian_with_lever_arm():
 
 def test_gps_velocity_of_an_offset_antenna_turns_with_the_body():
     """With a lever arm the velocity rows are the antenna's, v + C (w x r), w = (u_gyro - bw) / sw from the
-    latest IMU sample (tester3 #17: a 2 m arm in a 25 deg/s turn is 0.87 m/s the model ignored). Checked
+    latest IMU sample (a 2 m arm in a 25 deg/s turn is 0.87 m/s). Checked
     against scipy's rotation and a central-difference Jacobian (q, bw, sw included)."""
     from fusion.api import UsesInput
 
@@ -123,8 +123,8 @@ def test_magnetometer_params():
 
 
 def test_an_alignment_without_magnetometer_samples_leaves_the_heading_unknown():
-    """tester3 #11: no magnetometer sample in initial.align_s (none, later, or late): the filter started from
-    the config's yaw guess at its sd 0.02 rad (a 90 deg error held at 1.1 deg) and diverged. Now the heading
+    """No magnetometer sample in initial.align_s (none, later, or late): started from the config's yaw
+    guess at its sd 0.02 rad (a 90 deg error held at 1.1 deg) the filter would diverge. The heading
     sd is that of an unknown heading, roll and pitch keep the accelerometer's levelling sd, and one warning
     says so."""
     from fusion_plugins.measurement.attitude import error_to_quaternion

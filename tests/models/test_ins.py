@@ -381,7 +381,7 @@ def test_input_from_out_of_range_is_a_rejection():
 
 
 def test_stillness_tells_a_static_window_from_a_moving_one():
-    """tester5 #5: the alignment averaged a driving vehicle's IMU as a static one, without a check."""
+    """The alignment does not average a driving vehicle's IMU as a static one."""
     m = make(gravity=G)
     rng = np.random.default_rng(4)
     k, dt = 900, 0.01

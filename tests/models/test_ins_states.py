@@ -167,8 +167,8 @@ def test_state_sets_report_the_eta_clamp_as_the_16_state_model(states):
 
 @pytest.mark.parametrize("states", [10, 16, 22])
 def test_a_sample_held_past_hold_after_is_integrated_over_hold_after_then_the_state_coasts(states):
-    """tester3 #4: a 10 s pause of every stream during a turn was predicted by integrating the last IMU
-    sample (the turn's yaw rate) over the 10 s: 27-40 deg of attitude error, every GPS fix gated out. Past
+    """A 10 s pause of every stream during a turn, predicted by integrating the last IMU sample (the
+    turn's yaw rate) over the 10 s, would give 27-40 deg of attitude error and every GPS fix gated out. Past
     hold_after the sample is no estimate of the input: attitude, velocity and sensor states are kept and
     p += v e over the excess e; F agrees (numerical Jacobian) and a run of samples with the gap too."""
     rng = np.random.default_rng(8)

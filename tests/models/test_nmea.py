@@ -95,8 +95,8 @@ def test_lost_fix_is_rejected_once_per_epoch():
 
 
 def test_a_vtg_sent_before_its_gga_is_of_that_epoch():
-    """u-blox order (VTG, then GGA): the time-less VTG of second k waited while GGA_k dropped it as an
-    incomplete epoch, so every fix was emitted with the next second's VTG, 1 s late (tester3 #5)."""
+    """u-blox order (VTG, then GGA): the time-less VTG of second k belongs to GGA_k's epoch; dropping it as
+    an incomplete epoch would emit every fix with the next second's VTG, 1 s late."""
     d = dec(origin=ORIGIN, epoch=["GGA", "VTG"])
     fixes = []
     for k in range(4):
@@ -206,7 +206,7 @@ def test_bad_params_are_config_errors():
 def test_bad_fixes_in_the_static_window_do_not_move_it_into_the_drive():
     """The origin's window is the first origin_s seconds of GPS messages, valid or not: when every fix in it
     is bad (checksums), the first valid fix after it is the origin on its own, and origin_source says so.
-    (Before, the window opened at the first valid fix and averaged the drive that followed.)"""
+    (A window opened at the first valid fix would average the drive that followed.)"""
     lat0, lon0, h0 = 35.0, 139.0, 40.0
     drive = np.array([[0.0, 0.0, 0.0]] * 10 + [[10.0 * k, 0.0, 0.0] for k in range(1, 11)])
     sentences = _fixes(lat0, lon0, h0, drive)
@@ -238,7 +238,7 @@ def _epoch_with_quality(d: NmeaDecoder, q: int):
 @pytest.mark.parametrize("min_quality", [1, 4])
 def test_dead_reckoning_manual_and_simulated_fixes_are_refused(q, min_quality):
     # GGA quality is a code: 6 (dead reckoning), 7 (manual), 8 (simulation) are no measurement, whatever
-    # min_quality is (tester4 #2: they passed min_quality 4, "RTK only", as better than RTK)
+    # min_quality is (an ordinal test would pass them at min_quality 4, "RTK only", as better than RTK)
     d = dec(origin=ORIGIN, min_quality=min_quality)
     with pytest.raises(RejectedMessage, match=f"quality {q} .*not a measured fix"):
         _epoch_with_quality(d, q)
@@ -271,9 +271,9 @@ def _drive(d: NmeaDecoder, sentences, t0: float = 0.0):
 
 
 def test_a_gps_stream_starting_late_ends_the_window_at_the_first_moving_fix():
-    """tester3 #8: the GPS stream starts 30 s after the IMU, 10 s before the drive; the window of origin_s
-    (39 s) of GPS messages ran 29 s into the drive, averaged it into the origin (76 m off) and started the
-    filter there at rest. Now the first moving fix (RMC speed) ends the window: the origin is the mean of
+    """The GPS stream starts 30 s after the IMU, 10 s before the drive; a window of origin_s (39 s) of GPS
+    messages would run 29 s into the drive, average it into the origin (76 m off) and start the filter
+    there at rest. The first moving fix (RMC speed) ends the window: the origin is the mean of
     the static fixes, and that fix is emitted with its velocity (the filter starts where the car is)."""
     lat0, lon0, h0 = 35.1, 139.1, 40.0
     rng = np.random.default_rng(2)

@@ -309,7 +309,7 @@ def test_stationary_initialiser_keeps_the_wait():
 @pytest.mark.parametrize("true_T", [0.2251, 0.2255, 0.226, 0.2239])
 @pytest.mark.parametrize("stationary", [False, True])
 def test_initial_fix_with_the_period_off_its_nominal_value(true_T, stationary):
-    """tester5 #6: beacons whose period is up to 0.5 % off period_s (a ceramic resonator's tolerance). Fixed
+    """Beacons whose period is up to 0.5 % off period_s (a ceramic resonator's tolerance). Fixed
     at period_s the three agreeing cycles all put the robot ~0.5 m off (0.2 %) with an sd of ~45 mm; the
     period estimated from them starts it right, T in the fix within 3 sd of the truth, the position error
     within 3 sd of its covariance (0.2 ms noise; 10 seeds)."""

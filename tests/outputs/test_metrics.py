@@ -115,7 +115,7 @@ def test_rmse_by_hand_2d():
 
 def test_nonfinite_estimates_are_left_out_and_counted():
     """A diverged filter's NaN estimates: RMSE, max, element RMSE and samples over the finite ones, the
-    others counted in nonfinite_samples (tester3 #15: a finite max next to a None RMSE, samples counting
+    others counted in nonfinite_samples (never a finite max next to a None RMSE, nor samples counting
     the NaN ones); all NaN: no error value at all, the count."""
     lay = StateLayout.parse("p:2 v:2")
     ts = np.arange(0.0, 10.0, 0.5)
@@ -295,8 +295,8 @@ def test_nis_per_sensor():
 
 
 def test_nis_of_accepted_updates_apart_from_rejected_and_per_dof():
-    """tester5 #9: 1-dof arrivals (accepted mean ~1), one 4-dof fix and rejected echoes (NIS ~230) read
-    'mean 15.4 on 4 dof' in one running mean; the accepted ones, per dof, are given apart now."""
+    """1-dof arrivals (accepted mean ~1), one 4-dof fix and rejected echoes (NIS ~230) would read
+    'mean 15.4 on 4 dof' in one running mean; the accepted ones, per dof, are given apart."""
     rng = np.random.default_rng(5)
     tr = ErrorTracker(StateLayout.parse("p:2"), None)
     ones = rng.chisquare(1, 3000)

@@ -59,7 +59,7 @@ def test_progress_hidden_by_default_delay_and_shown_when_forced():
 
 
 def test_nis_rows_are_the_accepted_updates_per_dof_and_the_rejected_apart():
-    """tester5 #9: 'NIS us | 4 | 15.4' for 1-dof arrivals whose accepted mean is 0.76."""
+    """Not 'NIS us | 4 | 15.4' for 1-dof arrivals whose accepted mean is 0.76."""
     c = {"nis_mean": {"us": 15.4}, "nis_in_95_fraction": {"us": 0.926}, "nis_dof": {"us": 4},
          "nis_samples": {"us": 1322}, "nis_accepted_mean": {"us": 0.761}, "nis_accepted_samples": {"us": 1238},
          "nis_accepted_in_95_fraction": {"us": 0.968}, "nis_accepted_dofs": {"us": [1, 4]},
@@ -78,7 +78,7 @@ def test_nis_rows_are_the_accepted_updates_per_dof_and_the_rejected_apart():
 
 
 def test_a_long_rejection_run_is_said_even_without_a_reset():
-    """tester5 #1: 14 fixes in a row refused, 'resets: 0', and nothing else said."""
+    """14 fixes in a row refused and 'resets: 0': the run of rejections is said."""
     health = {"resets": 0, "locked_out": {"abps": {"rejected": 14, "from_s": 13.14, "for_s": 6.38}}}
     out = render({**SUMMARY, "health": health})
     assert "abps: 14 updates in a row rejected over 6.38 s from t 13.14 s" in out

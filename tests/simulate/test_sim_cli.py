@@ -132,7 +132,7 @@ def test_a_scenario_error_and_a_config_error_are_formatted_alike(tmp_path, capsy
 
 def test_a_trajectory_too_long_to_hold_is_refused_before_sampling(tmp_path, capsys):
     """max_accel 1e-9 m/s^2 makes the example's route last 11.7 days: 2e7 lines, refused at once naming the
-    cause (tester2 #16: before, memory grew to 6 GB without a word). In a subprocess with a timeout, so a
+    cause (rather than memory growing to gigabytes without a word). In a subprocess with a timeout, so a
     regression fails instead of filling the machine."""
     import subprocess
     import sys

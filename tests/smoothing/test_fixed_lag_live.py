@@ -53,7 +53,7 @@ def test_a_late_noted_estimate_is_placed_at_its_own_node():
 
 
 def test_smooth_and_smooth_lag_together_are_refused(capsys):
-    """Before, the fixed-lag smoother ran silently whichever order they came in (tester2 #17)."""
+    """--smooth and --smooth-lag together are refused, whichever order they come in (not one of them run silently)."""
     from pathlib import Path
 
     from fusion.cli import main

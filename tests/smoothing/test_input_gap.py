@@ -2,7 +2,7 @@
 ``max_gap`` breaks the chain (G = 0), as a recovery reset does, so what comes after the gap cannot corrupt
 the smoothed estimates before it.
 
-The case (tester3's finding 7): configs/imu_gps_mag_ekf.yaml on the shipped car recording with a pause of
+The case: configs/imu_gps_mag_ekf.yaml on the shipped car recording with a pause of
 every stream during the first corner (80 <= t < 85 s, the car turning at ~0.3 rad/s). The INS predicts the
 pause by holding the last IMU sample (``hold_after``, hold noise); the linearised transition over those 5 s
 kept one direction of the attitude noise-free, and the backward pass carried the attitude correction after
@@ -84,8 +84,8 @@ def test_smoothed_before_a_pause_is_not_corrupted_by_it(paused, truth):
     att_f, nees_f = _score(filtered, truth)
     att_s, nees_s = _score(full, truth)
     assert att_f < 0.5 and nees_f < 6.0                 # the filter is good there
-    assert att_s < att_f + 0.1                           # before the fix: 26 deg
-    assert nees_s < 6.0                                  # within its covariance; before the fix: 2300
+    assert att_s < att_f + 0.1                           # a chain unbroken at the gap: 26 deg
+    assert nees_s < 6.0                                  # within its covariance; unbroken: 2300
     assert summary["smoothed"]["breaks"] == 1 and summary["smoothed"]["input_gap_breaks"] == 1
 
 

@@ -39,9 +39,9 @@ def test_interrupt_while_smoothing_leaves_no_cut_output_and_a_summary(tmp_path, 
     out, summary = tmp_path / "smoothed.csv", tmp_path / "summary.json"
     code = main(["run", str(CONFIG), *option, "-o", str(out), "--summary-json", str(summary), "-q"])
     assert code == 130
-    assert not out.exists()                                  # was: a cut CSV under the final name
+    assert not out.exists()                                  # no cut CSV under the final name
     assert sorted(p.name for p in tmp_path.iterdir()) == ["summary.json"]   # no temporary file left either
-    data = json.loads(summary.read_text())                  # was: no summary
+    data = json.loads(summary.read_text())                  # the summary is written
     assert data["interrupted"] is True and "smoothed output is incomplete" in data["smoothed"]["interrupted"]
     assert data["sensors"]["uwb"]["used"] > 0               # the forward run's figures are there
     err = capsys.readouterr().err

@@ -2,8 +2,8 @@
 innovation) breaks the smoothing chain there, as a recovery reset does (G = 0): the smoothed estimates
 before it are those of the run cut at the divergence, finite, for the full and the fixed-lag smoother;
 the estimates after it stay the filter's NaN. The summary's errors are over the finite estimates, with
-their count (tester3 #15: before, ``--smooth`` gave NaN for all 1200 estimates of a run whose filter had
-658 finite, and every summary had a finite position max next to a None RMSE)."""
+their count (not NaN for every smoothed estimate of a run whose filter diverged part-way, nor a finite
+position max next to a None RMSE)."""
 from __future__ import annotations
 
 import math
@@ -79,7 +79,7 @@ def test_smoothed_before_the_divergence_is_the_run_cut_there(name, where):
     ok = [_finite(b) for b in filtered]
     assert ok[:cut + 1] == [True] * (cut + 1) and not any(ok[cut + 1:])   # the filter diverged at cut
     assert len(ref) == cut + 1
-    for a, b in zip(smoothed[:cut + 1], ref):                  # before: the run cut there, exactly
+    for a, b in zip(smoothed[:cut + 1], ref):                  # the run cut there, exactly
         np.testing.assert_array_equal(a.x, b.x)
         np.testing.assert_array_equal(cov(a), cov(b))
     np.testing.assert_array_equal(smoothed[cut].x, filtered[cut].x)   # at the break: the filtered one
@@ -87,7 +87,7 @@ def test_smoothed_before_the_divergence_is_the_run_cut_there(name, where):
 
 
 class NanPv(ConstantVelocity):
-    """pv whose f returns NaN once the mean px passes ``nan_above`` m (tester3's t3_cv fault nan_f)."""
+    """pv whose f returns NaN once the mean px passes ``nan_above`` m (a constant-velocity model that diverges)."""
 
     name: ClassVar[str] = "pv_nan_test"
 
@@ -136,7 +136,7 @@ def test_a_run_that_diverges_keeps_its_smoothed_estimates_before(lines, filter_t
     fin = np.array([bool(np.isfinite(e.belief.x).all()) for e in fw.estimates])
     assert 20 < fin.sum() < len(fin) - 20 and not fin[fin.argmin():].any()   # finite, then NaN to the end
     sfin = np.array([bool(np.isfinite(e.belief.x).all() and np.isfinite(e.belief.sd).all()) for e in sm.estimates])
-    assert np.array_equal(sfin, fin)               # before: all 0 finite (full smoother), 40 fewer (lag 2 s)
+    assert np.array_equal(sfin, fin)               # not all NaN (full smoother), nor 40 fewer (lag 2 s)
     assert s["smoothed"]["breaks"] == s["smoothed"]["nonfinite_breaks"] == 1
     for errors in (s["errors"], s["smoothed"]["errors"]):
         # over the finite estimates, with their count; never a finite max next to a None RMSE

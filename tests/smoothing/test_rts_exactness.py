@@ -187,7 +187,7 @@ def test_run_of_inputs_composes_exactly(name, params):
     """A run of k samples in one predict_inputs (one recorded transition, composed gains) smooths to
     the same numbers as the samples predicted one node each. Also with batch_inputs (the default): the
     unicycle has no Q_inputs, so the sigma-point filters predict it sample by sample and the recorder
-    composes the per-sample transitions (tester4 #7)."""
+    composes the per-sample transitions."""
     x0, P0 = np.array([3.0, 2.0, 0.3]), np.diag([0.3, 0.3, 0.1])
     proc, steps_b = _unicycle_steps(6, batched=True)
     _, steps_s = _unicycle_steps(6, batched=False)

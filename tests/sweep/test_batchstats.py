@@ -151,7 +151,7 @@ def test_edge_cases_of_the_truth_stream(seed):
 
 
 def test_nan_estimates_covariances_and_nis():
-    """A NaN mean (left out of the errors, RMSE and max over the others, as ErrorTracker: tester3 #15), a
+    """A NaN mean (left out of the errors, RMSE and max over the others, as ErrorTracker), a
     covariance that is not positive definite and one with a NaN (NEES skipped), NaN NIS (not counted)."""
     rng = np.random.default_rng(5)
     tt = np.arange(0, 20, 0.05)

@@ -114,7 +114,7 @@ def test_cli_end_to_end(tmp_path, capsys):
 @pytest.mark.parametrize("extra,needle", [
     (["--param", "process.spectral_density"], "--param 'process.spectral_density': expected KEY=V1,V2"),
     (["--param", "process.spectral_density=-1"], "spectral_density"),
-    # a sensor simulator's parameter is checked before any trial too (it was an error row in each: tester3 #10)
+    # a sensor simulator's parameter is checked before any trial too (not an error row in each)
     (["--param", "scenario.sensors.uwb.rate_hz=0"], "(with --param): sensors.uwb.rate_hz: Input should be greater"),
     (["--filter", "nosuch"], "nosuch"),
     (["--seeds", "x"], "--seeds 'x'"),

@@ -52,7 +52,7 @@ def test_headline_run_meets_the_accuracy_bar(srukf_run):
     assert el["bwz"] < 1e-3 and el["baz"] < 0.02
     c = s["consistency"]
     assert c["nees_dof"] == 15
-    assert c["nees_mean"] < 1.5 * 15                         # not overconfident (30 before the fix age model)
+    assert c["nees_mean"] < 1.5 * 15                         # not overconfident (~30 without the fix age model)
     assert c["nees_in_95_fraction"] > 0.8                    # inside its 95% bounds most of the time
     sensors = s["sensors"]
     assert sensors["imu"]["used"] == sensors["imu"]["received"] == 14717

@@ -1,10 +1,10 @@
-"""configs/abps_ins.yaml on a fast vehicle (tester5 #3): 12 beacons along a straight drift, 3 m/s with hard
+"""configs/abps_ins.yaml on a fast vehicle: 12 beacons along a straight drift, 3 m/s with hard
 braking (3 m/s^2) into two stops, simulated here.
 
 A fix is of its cycle's mean range time; the filter may have integrated inputs past it and bridges the
-difference (the age) with the state's velocity. The cycle used to close only at a range of the next cycle,
-so with a dozen beacons the fix was applied up to ~0.4 s after its mean time and the bridge p - v age was off
-by a age^2 / 2 (0.2 m with the true state). Now the cycle closes at its last heard slot: the fix is applied
+difference (the age) with the state's velocity. Closed only at a range of the next cycle,
+a cycle of a dozen beacons would have its fix applied up to ~0.4 s after its mean time and the bridge p - v
+age off by a age^2 / 2 (0.2 m with the true state). The cycle closes at its last heard slot: the fix is applied
 no later than its last range (the fallback of a beacon that just left reach aside).
 """
 from __future__ import annotations
@@ -79,9 +79,9 @@ def _replay(data, log, monkeypatch):
 
 def test_fixes_are_applied_no_later_than_their_last_range_and_the_bridge_holds(fast, monkeypatch):
     """Noise off (the fix stage is then exact to millimetres, so what is left is the timing and the bridge).
-    Before: 20 of 43 fixes applied after their cycle's last range (up to 0.33 s), the bridged fix against the
-    true state 0.049 m RMS (max 0.21 m), the filter 0.043 m RMS (max 0.105 m). Now: one (the cycle after a
-    beacon left reach), 0.018 m RMS, the filter 0.018 m (max 0.058 m)."""
+    One fix applied after its cycle's last range (the cycle after a beacon left reach), the bridged fix
+    against the true state 0.018 m RMS, the filter 0.018 m (max 0.058 m); closing at the next cycle's range
+    would apply 20 of 43 late (up to 0.33 s), 0.049 m RMS."""
     logs, data = fast
     s, fixes, truth = _replay(data, logs["off"], monkeypatch)
     after_last, bridged = 0, []

@@ -1,6 +1,6 @@
 """configs/abps_ins.yaml on a small purpose-built route (issue 11): an L-bend in a drift, simulated here.
 
-The end of the input (finding 6: the last fix was counted ``late``), every cycle compensated through the
+The end of the input (the last fix is not counted ``late``), every cycle compensated through the
 scheduler's belief (ReadsBelief), the noise-free fix stage and filter, and the accuracy bar with noise.
 """
 from __future__ import annotations

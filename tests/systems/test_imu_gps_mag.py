@@ -78,9 +78,9 @@ def test_bad_nmea_lines_are_counted_not_fatal(tmp_path):
 
 
 def test_a_gps_stream_starting_after_the_imu_still_starts_the_filter_on_the_car(tmp_path):
-    """tester3 #8: with the GPS sentences starting TTFF s after the IMU, the origin window (origin_s of GPS
-    messages) ran into the drive; the filter started at the origin at rest while the car moved (4 m/s, sd
-    0.05) and diverged to km, exit 0. Now the first moving fix ends the window and starts the filter."""
+    """With the GPS sentences starting TTFF s after the IMU, the origin window (origin_s of GPS messages)
+    would run into the drive and start the filter at the origin at rest while the car moved (4 m/s, sd
+    0.05), diverging to km. The first moving fix ends the window and starts the filter."""
     lines = (ROOT / "recordings" / "car_gps_mag.log").read_text().splitlines()
     for ttff in (5.0, 30.0):
         keep = [ln for ln in lines if ln.startswith("#") or ",gps," not in ln or float(ln.split(",")[0]) >= ttff]
@@ -93,10 +93,10 @@ def test_a_gps_stream_starting_after_the_imu_still_starts_the_filter_on_the_car(
 
 
 def test_without_magnetometer_samples_in_the_alignment_the_heading_is_left_to_the_gps(tmp_path):
-    """tester3 #11: no magnetometer line reaches the alignment; the filter started from the config's yaw
-    guess (here 90 deg off the truth) held at its sd 0.02 rad and every GPS fix was gated out (1655 m,
-    exit 0). The heading is now unknown (sd ~104 deg) and a sigma-point filter takes it from the GPS
-    velocity. (The EKF's linearisation cannot bridge a 90 deg heading error: tester3 #11's report.)"""
+    """No magnetometer line reaches the alignment: starting from the config's yaw guess (here 90 deg off
+    the truth) held at its sd 0.02 rad, every GPS fix would be gated out. The heading is unknown (sd ~104 deg)
+    and a sigma-point filter takes it from the GPS
+    velocity. (The EKF's linearisation cannot bridge a 90 deg heading error.)"""
     lines = (ROOT / "recordings" / "car_gps_mag.log").read_text().splitlines()
     log = tmp_path / "nomag.log"
     log.write_text("\n".join(ln for ln in lines if ",mag," not in ln) + "\n")
@@ -129,9 +129,9 @@ def test_the_decoder_and_the_aligning_model_say_so_in_the_run():
 
 @pytest.mark.parametrize("filter_name", ["ekf", "ukf"])
 def test_a_pause_of_every_stream_in_a_corner_is_bridged(tmp_path, filter_name):
-    """tester3 #4: all streams silent for 10 s from 80 s, in the first corner (~90 deg at 0.33 rad/s). The
-    held sample (the corner's rate) was integrated over the 10 s: the attitude 100+ deg off, every later
-    fix gated out, 50-107 km RMSE, exit 0. Now the state coasts past hold_after with a bounded hold noise,
+    """All streams silent for 10 s from 80 s, in the first corner (~90 deg at 0.33 rad/s). Integrating the
+    held sample (the corner's rate) over the 10 s would put the attitude 100+ deg off and gate out every
+    later fix; the state coasts past hold_after with a bounded hold noise,
     and the gps recovery re-sets a filter that is locked out all the same (the UKF, once)."""
     lines = (ROOT / "recordings" / "car_gps_mag.log").read_text().splitlines()
     log = tmp_path / "pause.log"
@@ -145,9 +145,9 @@ def test_a_pause_of_every_stream_in_a_corner_is_bridged(tmp_path, filter_name):
 @pytest.mark.parametrize("start,filter_name", [(80.0, "ekf"), (160.0, "ekf"), (160.0, "ukf")])
 def test_an_imu_dropout_while_gps_and_magnetometer_go_on(tmp_path, start, filter_name):
     """The IMU alone silent for 10 s (in the first corner at 80 s; at 160 s), GPS and magnetometer going on:
-    the magnetometer's 6 Hz cut the gap into ~60 predictions, and the hold noise restarted at each (~1/30
-    of its sd after 5 s), so the filter was sure of an attitude it had lost: from 160 s, 12.9 m RMSE
-    (max 122 m, GPS refused for 13 s, a reset) for a 5 s gap, 7.5 m for 10 s. Now each prediction knows how
+    the magnetometer's 6 Hz cuts the gap into ~60 predictions; a hold noise restarted at each (~1/30 of
+    its sd after 5 s) would leave the filter sure of an attitude it had lost (from 160 s, 12.9 m RMSE, max
+    122 m, GPS refused for 13 s, a reset, for a 5 s gap). Each prediction knows how
     long the sample has been held (fusion.api.HoldsInput) and adds what accrued over its stretch."""
     from fusion.testing.faults import cut_recording
 

@@ -54,8 +54,8 @@ def test_gps_fields_rejects_weak_fixes_and_refuses_other_layouts():
 
 @pytest.mark.parametrize("fix", [7, 8])
 def test_gps_fields_fix_types_7_and_8_are_not_measured_fixes(fix):
-    # PX4's fix_type 8 is "extrapolated" (the receiver's dead reckoning): it passed min_fix 3 as better than
-    # RTK (tester4 #2, the same ordinal test as the nmea decoder's GGA quality)
+    # PX4's fix_type 8 is "extrapolated" (the receiver's dead reckoning): an ordinal test would pass it at
+    # min_fix 3 as better than RTK (as the nmea decoder's GGA quality)
     dec = GpsFieldsDecoder(GpsFieldsDecoder.Params())
     with pytest.raises(RejectedMessage, match=f"fix type {fix} .*no measured fix"):
         dec.decode(_fix(LAT, LON, ALT, fix=fix))

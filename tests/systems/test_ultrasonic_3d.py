@@ -171,8 +171,8 @@ def test_initialiser_at_the_far_position_over_seeds(tmp_path):
 @pytest.mark.parametrize("config", [IEKF, POSE])
 def test_a_log_stamped_in_unix_time_gives_the_same_estimate(tmp_path, config):
     """Every time of the walk (stamps, arrival values, truth t_fire) shifted by 1.8e9 s, exactly in decimal:
-    the geometric initial fix was gated against the config's prior t 0 +- 1e5 s and refused, and the
-    RMSE doubled (tester3 #9). The initial fix now replaces the prior ungated: the same numbers."""
+    gated against the config's prior t 0 +- 1e5 s the geometric initial fix would be refused and the
+    RMSE double. The initial fix replaces the prior ungated: the same numbers."""
     from decimal import Decimal
 
     lines = (ROOT / "recordings" / "ultrasonic_3d_walk.log").read_text().splitlines()[:1500]

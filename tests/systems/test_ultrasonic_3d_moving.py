@@ -1,4 +1,4 @@
-"""Paper 003 on a robot that travels (tester5 finding 4): the paper's random walk of 5 mm per firing
+"""Paper 003 on a robot that travels: the paper's random walk of 5 mm per firing
 (ultrasonic_3d_iekf.yaml) lags a robot driving steadily at 2 cm/s (4.5 mm per firing, under that "largest
 move") by decimetres, over-confident, the echo gate throwing away genuine arrivals; the constant-velocity
 option of firing_clock (ultrasonic_3d_moving.yaml) follows it, consistent."""

@@ -39,9 +39,9 @@ def test_80x24_keeps_its_key_bar_and_a_one_line_status(tab):
         assert len(lines) == 24
         keys = lines[-1]
         for shown in ("q quit", "p pause", "n step", "r reset", "s sensor", "? help", "^p palette"):
-            assert shown in keys, keys          # was: "s plo▏^p palette", the help key cut off
+            assert shown in keys, keys          # not "s plo▏^p palette", the help key cut off
         status = app.query_one(StatusLine)
-        assert status.size.height == 1, status.text   # was two lines ("8424 lines" wrapped)
+        assert status.size.height == 1, status.text   # not two lines ("8424 lines" wrapped)
         assert "PAUSED" in status.text and "OK" in status.text and "t = 40.000 s" in status.text
         assert lines[-2].startswith(status.text.rstrip()[:40])
     held("abps_ins.yaml", (80, 24), 40.0, check, (tab,))
@@ -51,7 +51,7 @@ def test_120x40_abps_state_and_health_fit_the_left_column():
     def check(app):
         left = app.query_one("#left")
         health = app.query_one(HealthPanel)
-        assert health.region.bottom <= left.region.bottom   # was: its bottom border hidden below the column
+        assert health.region.bottom <= left.region.bottom   # its bottom border not hidden below the column
         assert left.region.bottom <= app.query_one("EventLog").region.y
         box = app.query_one("#state-scroll")
         table = app.query_one(StateTable)

@@ -1,5 +1,5 @@
-"""A live view that cannot keep up with its device says so (tester2 #8: a 1 kHz IMU left the view minutes
-behind with nothing shown): ``FeedSnapshot.lag_s`` is how far the wall clock has got ahead of the
+"""A live view that cannot keep up with its device says so (a 1 kHz IMU can leave the view minutes
+behind): ``FeedSnapshot.lag_s`` is how far the wall clock has got ahead of the
 stream's time beyond its least so far, and the status line shows ``BEHIND by N s``. The feed's clock is
 virtual: a line "takes" a set wall time, so the lag is exact and nothing waits."""
 import asyncio

@@ -49,7 +49,7 @@ def test_a_port_silent_since_it_was_opened_is_lost(clock):
     box.append(feed)
     feed.run()
     during = [s for s in snaps if s.state != "finished"]
-    last = during[-1]                              # was: the first snapshot only, "waiting" and OK
+    last = during[-1]                              # not only the first snapshot, "waiting" and OK
     assert last.wall - 1000.0 >= 7.0
     assert last.health.state == "LOST" and last.health.reason.startswith("no data for")
     line = describe(last, False, "ukf", last.wall).plain
@@ -77,5 +77,5 @@ def test_after_a_replug_the_lag_restarts_from_the_reopened_port(clock):
     box.append(feed)
     feed.run()
     after = [s.lag_s for s in snaps if s.state == "running" and s.lines > 210 and not math.isnan(s.lag_s)]
-    assert after and max(after) == pytest.approx(0.0, abs=1e-6)   # was 34.4 to the end
+    assert after and max(after) == pytest.approx(0.0, abs=1e-6)   # not 34.4 to the end
     assert all("BEHIND" not in describe(s, False, "ukf", s.wall).plain for s in snaps if s.lines > 210)

@@ -1,6 +1,6 @@
 """A replay in the live view is paced by the stream's time as the scheduler keeps it (after the clock
-guard), not by raw stamps: one wild stamp that the guard drops does not freeze the view (tester2 #12: a
-stamp 100,000 s ahead held it for (100000 - 5) / speed seconds), and no single wait is longer than
+guard), not by raw stamps: one wild stamp that the guard drops does not freeze the view (a
+stamp 100,000 s ahead would hold it for (100000 - 5) / speed seconds), and no single wait is longer than
 ``scheduler.max_predict_s`` / speed. The clock is virtual: waits are measured exactly, without waiting."""
 from pathlib import Path
 

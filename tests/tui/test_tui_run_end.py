@@ -1,4 +1,4 @@
-"""The live view finishes its run however reading ends (tester6 #11, #14): `q` before the input ends (the only
+"""The live view finishes its run however reading ends: `q` before the input ends (the only
 way a live session ends) and a source's lost link (an OSError, as docs/writing-plugins.md section 8 allows)
 both call `fusion_on_run_end`; the lost link is a "lost" state (exit 2), as in `fusion run`, not an internal
 error."""
@@ -29,7 +29,7 @@ def _system(watcher):
 
 
 def test_q_before_the_end_of_the_input_still_ends_the_run():
-    """Before: stop() ('q') only closed the sinks; fusion_on_run_end was never called."""
+    """stop() ('q') does not only close the sinks: fusion_on_run_end is called."""
     watcher = Ends()
     feed = None
 
@@ -47,7 +47,7 @@ def test_q_before_the_end_of_the_input_still_ends_the_run():
 
 
 def test_a_source_that_loses_its_link_is_lost_not_an_internal_error():
-    """Before: `fusion tui: internal error: OSError: gen link dropped`, exit 1 (exit 2 in `fusion run`)."""
+    """Exit 2 as in `fusion run`, not `fusion tui: internal error: OSError: gen link dropped`, exit 1."""
     watcher = Ends()
 
     def lines():

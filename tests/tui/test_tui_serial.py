@@ -189,8 +189,8 @@ def test_a_port_that_never_sends_a_newline_gives_one_malformed_line_not_a_full_m
 
 
 def test_a_socket_port_is_read_in_chunks_not_a_byte_a_read():
-    """pyserial's socket:// says only 0 or 1 for in_waiting: reading that many bytes took one read a byte
-    (tester2 #8: three system calls a byte, a 1 kHz IMU more than the view could read). Counted reads,
+    """pyserial's socket:// says only 0 or 1 for in_waiting: reading that many bytes would take one read a
+    byte (three system calls a byte, a 1 kHz IMU more than the view could read). Counted reads,
     not a timing. A peer that closes after its last bytes is a lost port after they are delivered."""
     import socket
 
@@ -223,7 +223,7 @@ def test_a_socket_port_is_read_in_chunks_not_a_byte_a_read():
 
 def test_what_a_socket_device_sends_before_the_port_is_open_is_kept(monkeypatch):
     """pyserial's open() ends by discarding the bytes already received (reset_input_buffer): a socket://
-    device that sends as soon as it is connected lost its first burst or all of it (tester4 #3). The open
+    device that sends as soon as it is connected would lose its first burst or all of it. The open
     is slowed here so that the whole stream is waiting before it ends: every line must still be read."""
     import socket
 
@@ -262,7 +262,7 @@ def test_what_a_socket_device_sends_before_the_port_is_open_is_kept(monkeypatch)
 @pytest.mark.parametrize("signame,code", [("SIGTERM", 143), ("SIGHUP", 129), ("SIGINT", 130)])
 def test_a_stop_signal_closes_the_view_and_restores_the_terminal(signame, code):
     """kill / timeout / a dropped ssh session while the live view runs: Textual handles none of them, and the
-    process died with the terminal in the alternate screen and mouse tracking on (tester4 #11). The view now
+    process would die with the terminal in the alternate screen and mouse tracking on. The view
     closes as by 'q' (the escape sequences that leave the alternate screen are written) and exits 128 + the
     signal. Event-driven: the signal is sent once the view has drawn, whatever the machine's speed."""
     import pty

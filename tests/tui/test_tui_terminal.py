@@ -1,6 +1,6 @@
 """``fusion tui`` without the terminal (issue 28 item 3): started in a background process group (GNU
-``timeout`` without ``--foreground``) it was stopped by the terminal (SIGTTOU) and never drew nor ended on
-SIGTERM; with standard error redirected it drew into the file. Now each is one exit-2 line, at once."""
+``timeout`` without ``--foreground``) it would be stopped by the terminal (SIGTTOU), and with standard
+error redirected it would draw into the file: each is one exit-2 line, at once."""
 import os
 import shutil
 import subprocess
@@ -59,7 +59,7 @@ def fusion_tui(extra: str = "") -> str:
 @pytest.mark.skipif(shutil.which("timeout") is None or not Path("/bin/bash").exists(), reason="needs GNU timeout")
 def test_the_view_in_a_background_process_group_says_so_and_ends(tmp_path):
     err = tmp_path / "err.txt"
-    code, out = in_a_terminal(f"timeout 600 {fusion_tui()}; echo rc=$?")   # was: stopped until killed
+    code, out = in_a_terminal(f"timeout 600 {fusion_tui()}; echo rc=$?")   # not stopped until killed
     assert code == 0, out[-400:]
     assert b"rc=2" in out, out[-400:]
     assert b"not in the terminal's foreground process group" in out and b"timeout --foreground" in out
@@ -73,7 +73,7 @@ def test_the_view_in_a_background_process_group_says_so_and_ends(tmp_path):
 @pytest.mark.skipif(not Path("/bin/bash").exists(), reason="needs bash")
 def test_the_view_with_standard_error_redirected_says_so(tmp_path):
     err = tmp_path / "err.txt"
-    code, out = in_a_terminal(f"{fusion_tui(f'2>{err}')}; echo rc=$?")   # was: drew the view into the file
+    code, out = in_a_terminal(f"{fusion_tui(f'2>{err}')}; echo rc=$?")   # the view not drawn into the file
     assert code == 0 and b"rc=2" in out, out[-400:]
     text = err.read_text()
     assert text.startswith("fusion tui: error: the live view needs the terminal: standard error is not a terminal")
