@@ -1,0 +1,119 @@
+"""Process ``gyro_attitude``: the attitude and gyro bias of an AHRS, driven by the IMU's rates.
+
+State ``q:4 bw:3``: q the attitude (Hamilton, scalar first, body-to-navigation C_b^n, NED / FRD), bw the gyro
+bias (rad/s, FRD). Input ``u = [ax ay az gx gy gz]`` (m/s^2, rad/s, FRD; the IMU line as the ``ins`` process
+reads it): only the rates drive the state; the specific force is left to a ``gravity`` measurement (and to
+the static alignment's levelling, :meth:`GyroAttitude.align`). Over dt, with ``w = u_g - bw`` held::
+
+    q(k+1) = q(k) (x) exp(w dt / 2),   bw(k+1) = bw(k)
+
+Noise from the data sheet's densities (as the ``ins`` process's q and bw blocks): the angle random walk N_w
+enters q through ``dq/dw = Xi(q) dt / 2``, ``Q_qq = (dt / 4) Xi(q) N_w^2 Xi(q)^T`` (+ ``norm_sd^2 q q^T``
+for a positive-definite P along the unobservable norm), the bias random walk ``Q_bw = N_bw^2 dt``.
+Jacobian (exact): ``dq'/dq = R(exp(w dt / 2))``, ``dq'/dbw = -(dt / 2) L(q) d exp(a) / da`` at ``a = w dt / 2``.
+Earth rate is neglected (15 deg/h, below a MEMS gyro's bias instability).
+"""
+from __future__ import annotations
+
+import math
+from typing import ClassVar
+
+import numpy as np
+from pydantic import Field
+
+from fusion import quaternion as quat
+from fusion.api import Params, ProcessModel, StateLayout
+
+# MPU-9250 (InvenSense PS-MPU-9250A-01 rev 1.1, table 1): gyro rate noise spectral density 0.01 deg/s/sqrt(Hz)
+MPU9250_GYRO_ND = 0.01 * math.pi / 180.0          # rad/s/sqrt(Hz)
+Density = float | tuple[float, float, float]
+
+
+class GyroAttitudeParams(Params):
+    """YAML parameters of ``gyro_attitude`` (SI units, FRD body frame)."""
+
+    gyro_noise_density: Density = Field(MPU9250_GYRO_ND, description="gyro white noise (rad/s/sqrt(Hz)); "
+                                        "= angle random walk (deg/sqrt(h)) / 60 * pi / 180")
+    gyro_bias_rw: Density = Field(1e-5, description="gyro bias random walk (rad/s^2/sqrt(Hz))")
+    norm_sd: float = Field(1e-6, gt=0, description="sd along q itself per step (keeps P positive definite)")
+    align_gyro_bias: bool = Field(True, description="the static start's mean rate becomes the gyro bias")
+
+
+def _var(d: Density) -> np.ndarray:
+    v = np.broadcast_to(np.asarray(d, dtype=float), (3,))
+    if np.any(v < 0):
+        raise ValueError(f"noise densities must be >= 0, got {d}")
+    return v * v
+
+
+class GyroAttitude(ProcessModel):
+    """Attitude (q) and gyro bias (bw) driven by the gyro rates (module docstring)."""
+
+    name: ClassVar[str] = "gyro_attitude"
+    Params: ClassVar[type[Params]] = GyroAttitudeParams
+    layout: StateLayout = StateLayout.parse("q:4:quaternion bw:3")
+    input_dim: int = 6
+    input_fields = ("ax", "ay", "az", "gx", "gy", "gz")   # m/s^2, rad/s, FRD body frame
+    linear: bool = False
+
+    def __init__(self, params: GyroAttitudeParams | None = None, context=None):
+        super().__init__(params, context)
+        self._nw = np.diag(_var(self.params.gyro_noise_density))       # type: ignore[attr-defined]
+        self._nbw = np.diag(_var(self.params.gyro_bias_rw))            # type: ignore[attr-defined]
+        self._norm_var = self.params.norm_sd ** 2                       # type: ignore[attr-defined]
+
+    @staticmethod
+    def _delta(w: np.ndarray, dt: float) -> np.ndarray:
+        """exp(w dt / 2) (..., 4) for body rates w (..., 3) rad/s."""
+        a = np.asarray(w, dtype=float) * (0.5 * dt)
+        s = np.sqrt(np.einsum("...i,...i->...", a, a))
+        k = np.where(s > 1e-12, np.sin(s) / np.where(s > 1e-12, s, 1.0), 1.0 - s * s / 6.0)
+        return np.concatenate([np.cos(s)[..., None], k[..., None] * a], axis=-1)
+
+    def f(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        """States (..., 7) after dt s with the held rates ``u[3:6]`` (rad/s, FRD) minus the bias."""
+        x = np.asarray(x, dtype=float)
+        y = np.array(x, copy=True)
+        if u is None or dt == 0.0:
+            return y
+        w = np.asarray(u, dtype=float)[3:6] - x[..., 4:7]
+        y[..., 0:4] = quat.multiply(x[..., 0:4], self._delta(w, dt))
+        return y
+
+    def jacobian(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        """F (7, 7) at x (7,)."""
+        F = np.eye(7)
+        if u is None or dt == 0.0:
+            return F
+        x = np.asarray(x, dtype=float)
+        a = (np.asarray(u, dtype=float)[3:6] - x[4:7]) * (0.5 * dt)
+        s = math.sqrt(float(a @ a))
+        k = math.sin(s) / s if s > 1e-6 else 1.0 - s * s / 6.0
+        c = (math.cos(s) - k) / (s * s) if s > 1e-6 else -1.0 / 3.0 + s * s / 30.0
+        D = np.vstack([-k * a, k * np.eye(3) + c * np.outer(a, a)])      # d exp(a) / da (4, 3)
+        F[0:4, 0:4] = quat.right_matrix(np.concatenate([[math.cos(s)], k * a]))
+        F[0:4, 4:7] = (-0.5 * dt) * (quat.left_matrix(x[0:4]) @ D)
+        return F
+
+    def Q(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
+        """Discrete process noise (7, 7) over dt s at x (7,) (module docstring)."""
+        dt = max(float(dt), 0.0)
+        q = np.asarray(x, dtype=float)[0:4]
+        q = q / math.sqrt(float(q @ q))
+        X = quat.xi(q)
+        Qm = np.zeros((7, 7))
+        Qm[0:4, 0:4] = (0.25 * dt) * (X @ self._nw @ X.T) + self._norm_var * np.outer(q, q)
+        Qm[4:7, 4:7] = self._nbw * dt
+        return Qm
+
+    def align(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Static start (``initial.align_s``): roll and pitch from the mean specific force ``u_mean[:3]``
+        (a static accelerometer reads ``-C_n^b g_n``), yaw kept from x0 (a magnetometer's ``align`` sets it
+        after this); with ``align_gyro_bias`` the mean rate becomes bw. P0 unchanged."""
+        x0 = np.array(x0, dtype=float, copy=True)
+        u_mean = np.asarray(u_mean, dtype=float)
+        yaw = float(quat.to_euler(x0[0:4])[2]) if np.any(x0[0:4]) else 0.0
+        x0[0:4] = quat.from_gravity(u_mean[:3], yaw)
+        if self.params.align_gyro_bias:  # type: ignore[attr-defined]
+            x0[4:7] = u_mean[3:6]
+        return x0, np.array(P0, dtype=float, copy=True)
