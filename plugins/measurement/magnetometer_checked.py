@@ -54,7 +54,7 @@ class MagnetometerChecked(Magnetometer):
         """The held IMU sample (fusion.api.UsesInput): its specific force (m/s^2, FRD)."""
         self._f = None if u is None else np.asarray(u, dtype=float)[:3]
 
-    def check(self, z: np.ndarray) -> str | None:
+    def why_disturbed(self, z: np.ndarray) -> str | None:
         """Why the sample z (3,) (field units, FRD) fails a check, or None when it passes (or m_n is unknown)."""
         if self.m_n is None or self.direction_only:
             return None
@@ -80,7 +80,7 @@ class MagnetometerChecked(Magnetometer):
         obs = super().observe(message)
         if obs is None:
             return None
-        why = self.check(np.asarray(message.floats(), dtype=float))
+        why = self.why_disturbed(np.asarray(message.floats(), dtype=float))
         if why is not None:
             raise RejectedMessage(f"magnetometer_checked: {why}")
         return obs

@@ -10,7 +10,10 @@ the static alignment's levelling, :meth:`GyroAttitude.align`). Over dt, with ``w
 Noise from the data sheet's densities (as the ``ins`` process's q and bw blocks): the angle random walk N_w
 enters q through ``dq/dw = Xi(q) dt / 2``, ``Q_qq = (dt / 4) Xi(q) N_w^2 Xi(q)^T`` (+ ``norm_sd^2 q q^T``
 for a positive-definite P along the unobservable norm), the bias random walk ``Q_bw = N_bw^2 dt``.
-Jacobian (exact): ``dq'/dq = R(exp(w dt / 2))``, ``dq'/dbw = -(dt / 2) L(q) d exp(a) / da`` at ``a = w dt / 2``.
+The input is held over each interval (a sample's rate until the next one): when the rate changes by
+``alpha dt`` a step, the held rate errs by up to that, the angle by ``alpha dt^2 / 2``; ``angular_accel_sd``
+(sd of alpha, the body's angular acceleration) adds that variance, ``(alpha_sd dt^2 / 2)^2`` a step and axis,
+to the angle noise (0 for a body that turns steadily). Jacobian (exact): ``dq'/dq = R(exp(w dt / 2))``, ``dq'/dbw = -(dt / 2) L(q) d exp(a) / da`` at ``a = w dt / 2``.
 Earth rate is neglected (15 deg/h, below a MEMS gyro's bias instability).
 """
 from __future__ import annotations
@@ -35,6 +38,9 @@ class GyroAttitudeParams(Params):
     gyro_noise_density: Density = Field(MPU9250_GYRO_ND, description="gyro white noise (rad/s/sqrt(Hz)); "
                                         "= angle random walk (deg/sqrt(h)) / 60 * pi / 180")
     gyro_bias_rw: Density = Field(1e-5, description="gyro bias random walk (rad/s^2/sqrt(Hz))")
+    angular_accel_sd: float = Field(0.0, ge=0, description="rad/s^2: sd of the body's angular acceleration; "
+                                    "covers the error of holding a sample's rate over its interval (a rate "
+                                    "that changes by alpha dt per step errs by alpha dt^2 / 2 in angle)")
     norm_sd: float = Field(1e-6, gt=0, description="sd along q itself per step (keeps P positive definite)")
     align_gyro_bias: bool = Field(True, description="the static start's mean rate becomes the gyro bias")
 
@@ -61,6 +67,7 @@ class GyroAttitude(ProcessModel):
         self._nw = np.diag(_var(self.params.gyro_noise_density))       # type: ignore[attr-defined]
         self._nbw = np.diag(_var(self.params.gyro_bias_rw))            # type: ignore[attr-defined]
         self._norm_var = self.params.norm_sd ** 2                       # type: ignore[attr-defined]
+        self._alpha_var = self.params.angular_accel_sd ** 2              # type: ignore[attr-defined]
 
     @staticmethod
     def _delta(w: np.ndarray, dt: float) -> np.ndarray:
@@ -80,31 +87,72 @@ class GyroAttitude(ProcessModel):
         y[..., 0:4] = quat.multiply(x[..., 0:4], self._delta(w, dt))
         return y
 
+    def _parts(self, q: np.ndarray, a: np.ndarray, dts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """F (k, 7, 7) and Q (k, 7, 7) of k steps from unit attitudes q (k, 4) with half rotation vectors
+        a = (u_g - bw) dt / 2 (k, 3) over dts (k,) (module docstring), vectorised over the steps."""
+        k = len(dts)
+        s = np.sqrt(np.einsum("ki,ki->k", a, a))
+        small = s < 1e-6
+        ss = np.where(small, 1.0, s)
+        sk = np.where(small, 1.0 - s * s / 6.0, np.sin(s) / ss)
+        c = np.where(small, -1.0 / 3.0 + s * s / 30.0, (np.cos(s) - sk) / (ss * ss))
+        D = np.empty((k, 4, 3))                                          # d exp(a) / da
+        D[:, 0, :] = -sk[:, None] * a
+        D[:, 1:, :] = sk[:, None, None] * np.eye(3) + c[:, None, None] * a[:, :, None] * a[:, None, :]
+        d = np.concatenate([np.cos(s)[:, None], sk[:, None] * a], axis=1)
+        L = quat.left_matrix(q)
+        F = np.broadcast_to(np.eye(7), (k, 7, 7)).copy()
+        F[:, 0:4, 0:4] = quat.right_matrix(d)
+        F[:, 0:4, 4:7] = (-0.5 * dts)[:, None, None] * (L @ D)
+        X = L[:, :, 1:]
+        var = self._nw[None] * dts[:, None, None] + self._alpha_var * (dts ** 4 / 4.0)[:, None, None] * np.eye(3)
+        Q = np.zeros((k, 7, 7))
+        Q[:, 0:4, 0:4] = 0.25 * (X @ var @ np.swapaxes(X, 1, 2)) + self._norm_var * q[:, :, None] * q[:, None, :]
+        Q[:, 4:7, 4:7] = self._nbw[None] * dts[:, None, None]
+        return F, Q
+
     def jacobian(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
-        """F (7, 7) at x (7,)."""
-        F = np.eye(7)
+        """F (7, 7) at x (7,) (exact)."""
         if u is None or dt == 0.0:
-            return F
+            return np.eye(7)
         x = np.asarray(x, dtype=float)
         a = (np.asarray(u, dtype=float)[3:6] - x[4:7]) * (0.5 * dt)
-        s = math.sqrt(float(a @ a))
-        k = math.sin(s) / s if s > 1e-6 else 1.0 - s * s / 6.0
-        c = (math.cos(s) - k) / (s * s) if s > 1e-6 else -1.0 / 3.0 + s * s / 30.0
-        D = np.vstack([-k * a, k * np.eye(3) + c * np.outer(a, a)])      # d exp(a) / da (4, 3)
-        F[0:4, 0:4] = quat.right_matrix(np.concatenate([[math.cos(s)], k * a]))
-        F[0:4, 4:7] = (-0.5 * dt) * (quat.left_matrix(x[0:4]) @ D)
-        return F
+        q = x[0:4] / math.sqrt(float(x[0:4] @ x[0:4]))
+        F, _ = self._parts(q[None], a[None], np.array([float(dt)]))
+        F[0, 0:4, 4:7] *= math.sqrt(float(x[0:4] @ x[0:4]))            # L(x_q), not L(q / |q|)
+        return F[0]
 
     def Q(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
         """Discrete process noise (7, 7) over dt s at x (7,) (module docstring)."""
         dt = max(float(dt), 0.0)
-        q = np.asarray(x, dtype=float)[0:4]
-        q = q / math.sqrt(float(q @ q))
-        X = quat.xi(q)
-        Qm = np.zeros((7, 7))
-        Qm[0:4, 0:4] = (0.25 * dt) * (X @ self._nw @ X.T) + self._norm_var * np.outer(q, q)
-        Qm[4:7, 4:7] = self._nbw * dt
-        return Qm
+        x = np.asarray(x, dtype=float)
+        q = x[0:4] / math.sqrt(float(x[0:4] @ x[0:4]))
+        w = np.zeros(3) if u is None else np.asarray(u, dtype=float)[3:6] - x[4:7]
+        return self._parts(q[None], (0.5 * dt) * w[None], np.array([dt]))[1][0]
+
+    def linearise_inputs(self, x: np.ndarray, us: np.ndarray, dts: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(x_k, F (k, 7, 7), Q (k, 7, 7)) of a run of input samples (fusion.api.LinearisesInputRuns): the
+        attitudes chained sample by sample (normalised after each, as the filter does), F and Q vectorised."""
+        x = np.asarray(x, dtype=float)
+        dts = np.asarray(dts, dtype=float)
+        a = (np.asarray(us, dtype=float)[:, 3:6] - x[4:7]) * (0.5 * dts)[:, None]
+        s = np.sqrt(np.einsum("ki,ki->k", a, a))
+        sk = np.where(s < 1e-6, 1.0 - s * s / 6.0, np.sin(s) / np.where(s < 1e-6, 1.0, s))
+        ds = np.concatenate([np.cos(s)[:, None], sk[:, None] * a], axis=1).tolist()
+        q = x[0:4] / math.sqrt(float(x[0:4] @ x[0:4]))
+        w, b, c, e = q.tolist()
+        qs = []
+        for d0, d1, d2, d3 in ds:                       # q (x) d, renormalised (a serial chain: plain floats)
+            qs.append((w, b, c, e))
+            w, b, c, e = (w * d0 - b * d1 - c * d2 - e * d3, w * d1 + b * d0 + c * d3 - e * d2,
+                          w * d2 - b * d3 + c * d0 + e * d1, w * d3 + b * d2 - c * d1 + e * d0)
+            n = math.sqrt(w * w + b * b + c * c + e * e)
+            w, b, c, e = w / n, b / n, c / n, e / n
+        F, Q = self._parts(np.array(qs), a, dts)
+        x1 = x.copy()
+        x1[0:4] = (w, b, c, e)
+        return x1, F, Q
 
     def align(self, x0: np.ndarray, P0: np.ndarray, u_mean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Static start (``initial.align_s``): roll and pitch from the mean specific force ``u_mean[:3]``
