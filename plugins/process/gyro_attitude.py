@@ -68,6 +68,7 @@ class GyroAttitude(ProcessModel):
         self._nbw = np.diag(_var(self.params.gyro_bias_rw))            # type: ignore[attr-defined]
         self._norm_var = self.params.norm_sd ** 2                       # type: ignore[attr-defined]
         self._alpha_var = self.params.angular_accel_sd ** 2              # type: ignore[attr-defined]
+        self._nw_diag = np.diag(self._nw).copy()
 
     @staticmethod
     def _delta(w: np.ndarray, dt: float) -> np.ndarray:
@@ -111,24 +112,49 @@ class GyroAttitude(ProcessModel):
         Q[:, 4:7, 4:7] = self._nbw[None] * dts[:, None, None]
         return F, Q
 
+    def _one(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> tuple[list, list, float]:
+        """(q (4,) of x, d = exp(a) (4,), dt) in plain floats for one state x (7,) (the EKF's one-sample path)."""
+        w, b, c, e, bx, by, bz = np.asarray(x, dtype=float).tolist()
+        if u is None:
+            return [w, b, c, e], [1.0, 0.0, 0.0, 0.0], 0.0
+        _, _, _, gx, gy, gz = np.asarray(u, dtype=float).tolist()
+        h = 0.5 * dt
+        return [w, b, c, e], [(gx - bx) * h, (gy - by) * h, (gz - bz) * h], float(dt)
+
     def jacobian(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
-        """F (7, 7) at x (7,) (exact)."""
-        if u is None or dt == 0.0:
-            return np.eye(7)
-        x = np.asarray(x, dtype=float)
-        a = (np.asarray(u, dtype=float)[3:6] - x[4:7]) * (0.5 * dt)
-        q = x[0:4] / math.sqrt(float(x[0:4] @ x[0:4]))
-        F, _ = self._parts(q[None], a[None], np.array([float(dt)]))
-        F[0, 0:4, 4:7] *= math.sqrt(float(x[0:4] @ x[0:4]))            # L(x_q), not L(q / |q|)
-        return F[0]
+        """F (7, 7) at x (7,) (exact; plain-float arithmetic, the same formulas as :meth:`_parts`)."""
+        q, a, dt = self._one(x, u, dt)
+        F = np.eye(7)
+        if dt == 0.0:
+            return F
+        a1, a2, a3 = a
+        s = math.sqrt(a1 * a1 + a2 * a2 + a3 * a3)
+        k = math.sin(s) / s if s >= 1e-6 else 1.0 - s * s / 6.0
+        cc = (math.cos(s) - k) / (s * s) if s >= 1e-6 else -1.0 / 3.0 + s * s / 30.0
+        p0, p1, p2, p3 = math.cos(s), k * a1, k * a2, k * a3
+        F[0:4, 0:4] = ((p0, -p1, -p2, -p3), (p1, p0, p3, -p2), (p2, -p3, p0, p1), (p3, p2, -p1, p0))
+        q0, q1, q2, q3 = q
+        L = np.array(((q0, -q1, -q2, -q3), (q1, q0, -q3, q2), (q2, q3, q0, -q1), (q3, -q2, q1, q0)))
+        D = np.array(((-k * a1, -k * a2, -k * a3),
+                      (k + cc * a1 * a1, cc * a1 * a2, cc * a1 * a3),
+                      (cc * a2 * a1, k + cc * a2 * a2, cc * a2 * a3),
+                      (cc * a3 * a1, cc * a3 * a2, k + cc * a3 * a3)))
+        F[0:4, 4:7] = (-0.5 * dt) * (L @ D)
+        return F
 
     def Q(self, x: np.ndarray, u: np.ndarray | None, dt: float) -> np.ndarray:
         """Discrete process noise (7, 7) over dt s at x (7,) (module docstring)."""
         dt = max(float(dt), 0.0)
-        x = np.asarray(x, dtype=float)
-        q = x[0:4] / math.sqrt(float(x[0:4] @ x[0:4]))
-        w = np.zeros(3) if u is None else np.asarray(u, dtype=float)[3:6] - x[4:7]
-        return self._parts(q[None], (0.5 * dt) * w[None], np.array([dt]))[1][0]
+        q0, q1, q2, q3 = np.asarray(x, dtype=float)[0:4].tolist()
+        n = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+        q = np.array((q0, q1, q2, q3)) / n
+        q0, q1, q2, q3 = q.tolist()
+        X = np.array(((-q1, -q2, -q3), (q0, -q3, q2), (q3, q0, -q1), (-q2, q1, q0)))
+        var = self._nw_diag * dt + self._alpha_var * dt ** 4 / 4.0
+        Qm = np.zeros((7, 7))
+        Qm[0:4, 0:4] = 0.25 * ((X * var) @ X.T) + self._norm_var * np.outer(q, q)
+        Qm[4:7, 4:7] = self._nbw * dt
+        return Qm
 
     def linearise_inputs(self, x: np.ndarray, us: np.ndarray, dts: np.ndarray
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
