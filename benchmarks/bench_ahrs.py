@@ -109,7 +109,8 @@ def main(argv: list[str] | None = None) -> int:
     steps = per_step()
     ins = steps["ins predict (16 states, one sample)"]
     lines = ["# AHRS speed (configs/ahrs.yaml)", "",
-             "Regenerate: `python benchmarks/bench_ahrs.py` (2-core VM shared with other jobs; rerun for your machine).",
+             "Regenerate: `python benchmarks/bench_ahrs.py` (2-core VM shared with other jobs; rerun for your "
+             "machine).",
              "", f"Whole process, recordings/ahrs_handheld.log ({duration:g} s, IMU 100 Hz, accelerometer and "
              "magnetometer updates 25 Hz each), best of " f"{args.repeats}:", "",
              "| measure | seconds | x real time |", "|---|---|---|",

@@ -127,8 +127,9 @@ def table(rows: dict[str, list[dict]], disturbed: bool) -> list[str]:
     for name, runs in rows.items():
         r = np.mean([x["rmse"] for x in runs], axis=0)
         mx = f"{np.mean([x['max_dist'] for x in runs]):.2f}" if disturbed else "-"
-        out.append(f"| {name} | {r[0]:.2f} | {r[1]:.2f} | {r[2]:.2f} | {np.mean([x['total'] for x in runs]):.2f} "
-                   f"| {mx} | {np.mean([x['nees_att'] for x in runs]):.2f} | {np.mean([x['nees'] for x in runs]):.2f} |")
+        m = {k: np.mean([x[k] for x in runs]) for k in ("total", "nees_att", "nees")}
+        out.append(f"| {name} | {r[0]:.2f} | {r[1]:.2f} | {r[2]:.2f} | {m['total']:.2f} | {mx} "
+                   f"| {m['nees_att']:.2f} | {m['nees']:.2f} |")
     return out
 
 

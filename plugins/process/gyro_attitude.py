@@ -13,7 +13,10 @@ for a positive-definite P along the unobservable norm), the bias random walk ``Q
 The input is held over each interval (a sample's rate until the next one): when the rate changes by
 ``alpha dt`` a step, the held rate errs by up to that, the angle by ``alpha dt^2 / 2``; ``angular_accel_sd``
 (sd of alpha, the body's angular acceleration) adds that variance, ``(alpha_sd dt^2 / 2)^2`` a step and axis,
-to the angle noise (0 for a body that turns steadily). Jacobian (exact): ``dq'/dq = R(exp(w dt / 2))``, ``dq'/dbw = -(dt / 2) L(q) d exp(a) / da`` at ``a = w dt / 2``.
+to the angle noise (0 for a body that turns steadily). Those errors add up to a lag (~w dt / 2) more than to
+a random walk, so a value above the motion's rms angular acceleration may be needed (docs/results/ahrs.md).
+Jacobian (exact): ``dq'/dq = R(exp(w dt / 2))``, ``dq'/dbw = -(dt / 2) L(q) d exp(a) / da`` at ``a = w dt / 2``.
+Runs of samples (the EKF's batched prediction, fusion.api.LinearisesInputRuns): :meth:`linearise_inputs`.
 Earth rate is neglected (15 deg/h, below a MEMS gyro's bias instability).
 """
 from __future__ import annotations
