@@ -66,7 +66,7 @@ def our_runner(flt, process, model, x0, P0, u, z, R, dt, steps) -> Runner:
 
 def _label(flt) -> str:
     p = flt.params.model_dump()
-    shown = {k: p[k] for k in ("linear_prediction", "zeroth_point", "covariance_update") if k in p}
+    shown = {k: p[k] for k in ("linear_prediction", "zeroth_point") if k in p}
     if "max_iterations" in p:
         shown["max_iterations"] = p["max_iterations"]
     return "" if not shown else " " + ",".join(f"{k}={v}" for k, v in shown.items())
@@ -241,8 +241,6 @@ FILTERS_4 = [
     ("srukf", {}), ("srukf", {"zeroth_point": "cholupdate"}),
     ("srukf", {"linear_prediction": "never"}),
     ("srukf", {"linear_prediction": "never", "zeroth_point": "cholupdate"}),
-    ("srukf", {"covariance_update": "qr"}),
-    ("srukf", {"zeroth_point": "cholupdate", "covariance_update": "downdate"}),
 ]
 
 

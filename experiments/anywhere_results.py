@@ -40,6 +40,8 @@ MAG_CONFIG = ROOT / "configs" / "imu_gps_mag_ekf.yaml"
 POSE_CONFIG = ROOT / "configs" / "ultrasonic_3d_pose.yaml"
 OUT_002 = ROOT / "docs" / "results" / "imu_gps_mag_anywhere.md"
 OUT_003 = ROOT / "docs" / "results" / "ultrasonic_3d_anywhere.md"
+INPUTS = ("configs/imu_gps_mag_ekf.yaml", "configs/ultrasonic_3d_pose.yaml", "scenarios/car_gps_mag.yaml",
+          "scenarios/ultrasonic_3d_walk.yaml", "scenarios/variants/ultrasonic_3d_walk_renumbered.yaml")
 
 PLACES = [   # (name, lat deg, lon deg, height m, date)
     ("Seattle", 47.61, -122.33, 50.0, "2024-05-01T10:00:00"),
@@ -263,8 +265,11 @@ def main(argv: list[str] | None = None) -> int:
         r002 = paper002(seeds, Path(d))
         r003 = paper003(seeds, Path(d))
     minutes = (time.process_time() - t0) / 60.0
-    OUT_002.write_text(page002(r002, seeds, minutes))
-    OUT_003.write_text(page003(r003, seeds, minutes))
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import provenance
+
+    provenance.write_page(OUT_002, page002(r002, seeds, minutes), INPUTS)
+    provenance.write_page(OUT_003, page003(r003, seeds, minutes), INPUTS)
     print(f"wrote {OUT_002} and {OUT_003} ({minutes:.1f} min)", file=sys.stderr)
     return 0
 

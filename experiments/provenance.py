@@ -60,10 +60,11 @@ def input_hash_at(commit: str, path: str, root: Path = ROOT) -> str:
 
 
 def head_commit(root: Path = ROOT) -> str:
-    """The checkout's commit, with `` + uncommitted changes`` when tracked files differ from it."""
+    """The checkout's commit, with `` + uncommitted changes`` when tracked files other than the results
+    pages (written one after another by a regeneration) differ from it."""
     sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True).stdout.strip()
-    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
-                           capture_output=True, text=True).stdout.strip()
+    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ".", ":!docs/results"],
+                           cwd=root, capture_output=True, text=True).stdout.strip()
     return (sha or "unknown") + (" + uncommitted changes" if dirty else "")
 
 
@@ -143,7 +144,7 @@ def with_banner(text: str, banner: str) -> str:
     """``text`` with ``banner`` under its title (replacing an earlier one): a stale mark a reader sees first."""
     if BANNER in text:
         head, _, rest = text.partition(BANNER)
-        text = head.rstrip("\n") + "\n" + rest.split("\n\n", 1)[1] if "\n\n" in rest else head
+        text = head.rstrip("\n") + "\n\n" + rest.split("\n\n", 1)[1] if "\n\n" in rest else head
     title, sep, rest = text.partition("\n")
     return f"{title}\n\n{BANNER}\n{banner}\n{rest}" if sep else text
 
@@ -169,6 +170,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     bad = 0
     for page in sorted(RESULTS.glob("*.md")):
+        if page.name == "README.md":   # the index of the pages
+            continue
         info = parse(page.read_text())
         moved = changed(page)
         if info is None:

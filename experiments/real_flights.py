@@ -27,7 +27,6 @@ import contextlib  # noqa: E402
 import csv  # noqa: E402
 import io  # noqa: E402
 import json  # noqa: E402
-import subprocess  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -42,6 +41,12 @@ PAGE = ROOT / "docs" / "results" / "real_flights.md"
 from fusion.cli import main  # noqa: E402
 from fusion.importers.flight_events import in_flight  # noqa: E402
 from fusion.logformat import ParsedStream, iter_messages  # noqa: E402
+import provenance  # noqa: E402  (experiments/, on the path: the page's provenance block)
+
+#: The files the page is made from (their hashes go in its provenance block, experiments/provenance.py); the
+#: shared PX4 log is outside the repository and read in place.
+INPUTS = ("configs/px4_ins_gps_mag.yaml", "configs/ardupilot_ins_gps_mag.yaml", "experiments/flight_layouts.py",
+          "tests/systems/ardupilot_synth.py")
 
 CONFIG = {"bin": ROOT / "configs" / "ardupilot_ins_gps_mag.yaml", "ulg": ROOT / "configs" / "px4_ins_gps_mag.yaml"}
 LABELS = {"dataflash_new": "ArduPilot 4.x DataFlash (synthetic)", "dataflash_old": "ArduPilot 3.3 DataFlash, older GPS (synthetic)",
@@ -131,7 +136,7 @@ def _f(v, digits: str = ".2f") -> str:
     return "-" if v is None else format(v, digits)
 
 
-def page(results: list[tuple[str, dict]], commit: str) -> str:
+def page(results: list[tuple[str, dict]]) -> str:
     head = ("| log | config | in flight (s) | roll RMSE / max (deg) | pitch RMSE / max (deg) | yaw RMSE / max (deg) "
             "| velocity RMSE (m/s) | horizontal position RMSE (m) | real-time factor | exit |\n"
             "|---|---|---|---|---|---|---|---|---|---|\n")
@@ -146,20 +151,24 @@ def page(results: list[tuple[str, dict]], commit: str) -> str:
            for label, r in results if r.get("coverage")]
     return f"""# Real flights: the vehicle configs on logs of every layout
 
-Regenerate: `python experiments/real_flights.py` (about 10 s; made at commit {commit}). Each log: `fusion import
+Regenerate: `python experiments/real_flights.py` (about 10 s; its commit and inputs: the provenance block at
+the end). Each log: `fusion import
 LOG -o X.log`, then `fusion run configs/<vehicle>_ins_gps_mag.yaml --input X.log`, unchanged. Scored in
 flight (between the header's `ARMED` and `DISARMED` lines) against the vehicle's own estimator (the log's
 `reference` lines) at its times: roll, pitch, yaw differences of the ZYX Euler angles, velocity (3-D) and
 horizontal position; real-time factor = log seconds per wall second of the run.
 
 The synthetic logs (experiments/flight_layouts.py) are one simulated 40 s flight written in each layout,
-their "onboard estimator" the simulator's truth: their agreement is the error. The PX4 log is the shared
+their "onboard estimator" the simulator's truth: their agreement is the error. `exit` is `fusion run`'s: 4
+is a degraded run (its health says the estimate cannot be trusted, the line names why). The PX4 log is the shared
 real one (a 6.5 s ground run of a Cube Orange; its EKF2 never flags a horizontal position or velocity
 valid, hence the dashes; its yaw is EKF2's own heading still converging). The GPS of the synthetic logs
 lags as the configs assume (0.2 s ArduPilot, 0.11 s PX4: `sensors.gps.time_offset`). The ArduPilot 3.3 log
 has no `ORGN` record: its reference is referred to the recording's origin by its own position at the first
 fix's stamp, which the GPS lag puts 0.2 s after the instant the fix measures, an offset its horizontal
-position carries.
+position carries. Its GPS records carry no accuracies (no `GPA` before ArduPilot 3.4): the config's floor,
+0.5 m (EK3_POSNE_M_NSE), is then below this simulated receiver's 0.7 m / 1.2 m, and the health rule finds
+the GPS innovations inconsistent (exit 4), as it should.
 
 {head}{chr(10).join(rows)}
 
@@ -176,8 +185,6 @@ dead reckoning from such samples gives.
 def main_() -> int:
     import flight_layouts as fl
 
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
-                            text=True).stdout.strip() or "unknown"
     results = []
     with tempfile.TemporaryDirectory() as d:
         work = Path(d)
@@ -190,7 +197,7 @@ def main_() -> int:
             path = work / (layout + (".bin" if layout.startswith("dataflash") else ".ulg"))
             fl.write(layout, f, path)
             results.append((LABELS[layout], run_one(path, work, layout)))
-    PAGE.write_text(page(results, commit), encoding="utf-8")
+    provenance.write_page(PAGE, page(results), INPUTS)
     print(f"wrote {PAGE}")
     return 0
 

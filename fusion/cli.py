@@ -149,10 +149,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         if args.command in NUMERIC_COMMANDS:
-            from fusion.lazy_imports import cheap_yaml_reader, defer_unused_numpy_modules
+            from fusion.lazy_imports import defer_unused_numpy_modules
 
             defer_unused_numpy_modules()
-            cheap_yaml_reader()
         with warnings.catch_warnings(), _stoppable(args.command) as received:
             warnings.showwarning = _warning_printer(args.command)
             try:

@@ -77,6 +77,9 @@ from fusion.config_values import MAX_INITIAL_SD  # noqa: E402 (= 1e6, used by th
 #: Fastest fixed-rate output (Hz): each output costs a prediction and a row (~200 B of CSV); beyond the
 #: fastest sensor (an IMU at 100 Hz-1 kHz) more rows carry no information (1 kHz over an hour: 3.6 M rows).
 MAX_OUTPUT_RATE_HZ = 1000.0
+#: The longest reorder window, s: a minute (the default max_predict_s) is longer than any link's jitter; a
+#: longer known delay is a sensor's time_offset. The buffer's memory is bounded apart (fusion.run.reorder).
+MAX_LATENCY_S = 60.0
 #: Largest |time_offset| (s): Unix time is 1.7e9 s, so an offset between time bases fits; 1e10 s (317
 #: years) is no clock's.
 MAX_TIME_OFFSET_S = 1e10
@@ -139,7 +142,7 @@ class SensorSpec(_Strict):
 class InitialSpec(_Strict):
     """Initial belief by block name: ``mean`` values and ``sd`` (scalar or per element), or full ``P``.
     ``from_sensor`` takes the position block from that sensor's fixes before the start: the latest, or all of
-    an ``align_s`` window the process model judged static, combined (fusion.scheduling.initialisation)."""
+    an ``align_s`` window the process model judged static, combined (fusion.run.startup)."""
 
     mean: dict[str, float | list[float]] = Field(default_factory=dict)
     sd: dict[str, float | list[float]] = Field(default_factory=dict)
@@ -157,12 +160,14 @@ class InitialSpec(_Strict):
 
 
 class SchedulerSpec(_Strict):
-    max_latency: float = Field(0.0, ge=0.0, description="reorder buffer length, s")
+    max_latency: float = Field(0.0, ge=0.0, le=MAX_LATENCY_S, allow_inf_nan=False,
+                               description="reorder buffer length, s (at most MAX_LATENCY_S: a longer delay is a "
+                                           "sensor's time_offset, not a transport latency)")
     late_policy: Literal["drop", "replay"] = "drop"
     history: int = Field(500, ge=1, le=100_000, description="beliefs kept for replay")
     future_s: float = Field(5.0, gt=0.0, allow_inf_nan=False,
                             description="s a stamp may be ahead of (or behind) the newest accepted time before it "
-                                        "is held as a wild stamp or a clock jump (fusion.clock)")
+                                        "is held as a wild stamp or a clock jump (fusion.run.clock)")
     resync_after: int = Field(3, ge=1, description="messages of a sensor that must agree on a new time base "
                                                    "before its clock is re-synchronised")
     max_predict_s: float = Field(60.0, gt=0.0, allow_inf_nan=False,
@@ -171,7 +176,7 @@ class SchedulerSpec(_Strict):
                              description="a stamp past the stream's newest time (+ max_latency) by more than "
                                          "cadence_floor_s and ahead of its sensor's newest stamp, or of the stream's "
                                          "newest time, by more than cadence_k x their learned message spacing + "
-                                         "cadence_floor_s is held until its sensor's next message (fusion.clock); "
+                                         "cadence_floor_s is held until its sensor's next message (fusion.run.clock); "
                                          "0: off; off with late_policy replay, which expects arrival jitter")
     cadence_floor_s: float = Field(0.02, gt=0.0, allow_inf_nan=False,
                                    description="s a stamp may always be past the stream's newest time (+ max_latency) "
@@ -384,6 +389,7 @@ def _build_failed(registry: Registry, cls: type, kind: str, name: str, where: st
 
 
 from fusion.config_values import initial_belief_values, noise_matrix  # noqa: E402 (the numbers of a config, split out)
+from fusion_plugins.filters.checks import checked  # noqa: E402 (a plugin's models are checked at their calls)
 
 
 def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = None,
@@ -406,7 +412,7 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
         if world.gravity is not None:
             extra["gravity"] = world.gravity.value
     ctx = BuildContext(layout=None, beacons=beacons, base_dir=base_dir, extra=dict(extra))
-    process = build_component(reg, "process", spec.process, ctx, doc, ["process"])
+    process = checked(build_component(reg, "process", spec.process, ctx, doc, ["process"]))
     assert isinstance(process, ProcessModel)
     layout = process.layout
     fctx = BuildContext(layout, beacons, None, base_dir, dict(extra))
@@ -433,7 +439,7 @@ def wire(spec: SystemSpec, doc: LocatedYAML | None = None, path: Path | None = N
         if s.role == "measurement":
             if s.model is None:
                 raise ConfigError(f"{where}: a measurement sensor needs 'model: NAME'")
-            model = build_component(reg, "measurement", s.model, sctx, doc, [*loc, "model"])
+            model = checked(build_component(reg, "measurement", s.model, sctx, doc, [*loc, "model"]))
             R = noise_matrix(s.noise, model.dim, doc.where([*loc, "noise"]) if doc else f"{where}.noise")
             if R is None and model.carries_R is False:
                 raise ConfigError(f"{where}: a measurement sensor needs 'noise:' (sd or R): its model "

@@ -34,7 +34,9 @@ def igrf_ned(lat_deg: float, lon_deg: float, height_m: float, when: _dt.datetime
         raise ConfigError(f"IGRF: date {when.date()} outside the model's {VALID_YEARS[0]}-{VALID_YEARS[1]}")
     import ppigrf
 
-    be, bn, bu = ppigrf.igrf(lon_deg, lat_deg, height_m / 1000.0, when.replace(tzinfo=None))
+    if when.tzinfo is not None:
+        when = when.astimezone(_dt.timezone.utc).replace(tzinfo=None)
+    be, bn, bu = ppigrf.igrf(lon_deg, lat_deg, height_m / 1000.0, when)
     ned = np.array([float(np.ravel(bn)[0]), float(np.ravel(be)[0]), -float(np.ravel(bu)[0])])
     return ned / UNITS_NT[units]
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from fusion.run_stats import RunStats
+    from fusion.run.stats import RunStats
 
 __all__ = ["summary"]
 
@@ -41,9 +41,9 @@ def summary(stats: "RunStats", source: str, wall_s: float) -> dict[str, Any]:
             why += f"; no message of the config's sensors ({', '.join(sched.sensors)}) was in the input"
             if sched.unused:
                 why += f", which had {', '.join(sorted(sched.unused))}"
-        failed = getattr(sched, "_update_failures", None)
+        failed = stats.update_failures()
         if failed:
-            # the messages reached the filter and its measurement model failed on each (scheduler._update_failed)
+            # the messages reached the filter and its measurement model failed on each (fusion.run.checks.Failures)
             told = "; ".join(f"{name}: {what} {n} time{'s' if n > 1 else ''}" for (name, _), (n, what) in failed.items())
             out["not_started"] = f"no estimate was made: every measurement that reached the filter was lost ({told})"
         else:

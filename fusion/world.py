@@ -73,8 +73,11 @@ def read_world(path: str | Path) -> RecordingWorld | None:
         fh = open(p, encoding="utf-8", errors="replace")
     except OSError:
         return None
-    with fh:
-        return read_world_lines(fh, str(path))
+    try:
+        with fh:
+            return read_world_lines(fh, str(path))
+    except (OSError, ValueError):      # unreadable (an I/O error, a binary file): the run's source reports it
+        return None
 
 
 def read_world_lines(lines: Iterable[str], label: str) -> RecordingWorld:

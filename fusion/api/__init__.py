@@ -18,7 +18,7 @@ from __future__ import annotations
 from fusion.errors import ConfigError, FusionError, InputError, MalformedMessage, RejectedMessage
 from fusion.kinds import KINDS
 
-from .capabilities import (CAPABILITIES, Aligns, AlignsState, ChecksStillness, CapabilityWarning, ChecksGeometry,
+from .capabilities import (CAPABILITIES, Aligns, AlignsState, InitialisesState, ChecksStillness, CapabilityWarning, ChecksGeometry,
                            Closes, HasThreshold, HoldsInput, InputRunNoise, IntegratesInputRuns, KeepsGateState,
                            LinearisesInputRuns,
                            NonAdditiveMeasurementNoise, NonAdditiveProcessNoise, Opens, PositionFromFix,
@@ -62,7 +62,7 @@ __all__ = [
     # optional capabilities (fusion.api.capabilities)
     "Aligns", "ChecksStillness", "IntegratesInputRuns", "InputRunNoise", "LinearisesInputRuns", "NonAdditiveProcessNoise",
     "ReportsStepEvents", "HoldsInput", "ChecksGeometry", "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState",
-    "UsesInput", "PseudoMeasurement", "PredictsInputRuns", "HasThreshold", "KeepsGateState", "ReadsBelief",
+    "UsesInput", "InitialisesState", "PseudoMeasurement", "PredictsInputRuns", "HasThreshold", "KeepsGateState", "ReadsBelief",
     "ReportsInfo", "Opens", "Closes", "ReportsIdle", "ReportsStatus", "ReceivesEvents", "CAPABILITIES",
     "CapabilityWarning", "has", "capabilities_of", "near_misses",
     *_SIMULATION, *_OUTPUTS,

@@ -25,7 +25,8 @@ __all__ = [
     "Aligns", "ChecksStillness", "IntegratesInputRuns", "InputRunNoise", "LinearisesInputRuns", "NonAdditiveProcessNoise",
     "ReportsStepEvents", "HoldsInput",
     # measurement models
-    "ChecksGeometry", "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState", "UsesInput",
+    "ChecksGeometry", "PositionFromFix", "NonAdditiveMeasurementNoise", "AlignsState", "InitialisesState",
+    "UsesInput",
     "PseudoMeasurement",
     # filters
     "PredictsInputRuns",
@@ -60,7 +61,7 @@ class ChecksStillness(Protocol):
     accepts those keywords: with ``still=False`` it takes nothing from the window that only a
     static vehicle would give, e.g. the gyro bias). A window judged static also lets the scheduler combine
     the fixes of ``initial.from_sensor`` taken in it into the initial position
-    (fusion.scheduling.initialisation); one judged moving is a ``warning`` and in the summary's health."""
+    (fusion.run.startup); one judged moving is a ``warning`` and in the summary's health."""
 
     def stillness(self, x0: np.ndarray, P0: np.ndarray, us: np.ndarray,
                   ts: np.ndarray) -> tuple[bool, str] | None:
@@ -199,6 +200,16 @@ class AlignsState(Protocol):
 
 
 @runtime_checkable
+class InitialisesState(Protocol):
+    """A measurement model whose observation replaces an uninformative prior instead of testing against it (the
+    geometric solvers' initial fix: a prior of t 0 +- 1e5 s would refuse the fix of a log stamped in Unix
+    time): the run updates with it without the sensor's gate. Declared by the class attribute
+    ``initialises = True``; resolved once per class."""
+
+    initialises: bool
+
+
+@runtime_checkable
 class UsesInput(Protocol):
     """A preprocessor or measurement model that needs the input at its messages' times (a TRIAD solver
     needs the accelerometer's specific force with each magnetometer sample). Before each of the sensor's
@@ -322,7 +333,7 @@ class ReceivesEvents(Protocol):
 CAPABILITIES: tuple[type, ...] = (
     Aligns, ChecksStillness, IntegratesInputRuns, InputRunNoise, LinearisesInputRuns, NonAdditiveProcessNoise,
     ReportsStepEvents, HoldsInput, ChecksGeometry, PositionFromFix, NonAdditiveMeasurementNoise, AlignsState, UsesInput,
-    PseudoMeasurement,
+    PseudoMeasurement, InitialisesState,
     PredictsInputRuns, HasThreshold, KeepsGateState, ReportsInfo, ReadsBelief, Opens, Closes, ReportsIdle,
     ReportsStatus, ReceivesEvents,
 )

@@ -269,17 +269,17 @@ class BatchUKF(BatchFilter):
 
 
 class BatchSRUKF(BatchUKF):
-    """Batched srukf (plugins/filters/srukf.py) with its defaults, ``zeroth_point: recentred`` and
-    ``covariance_update: joint``: one stacked QR a step, the belief holds S (N, n, n)."""
+    """Batched srukf (plugins/filters/srukf.py) with its default ``zeroth_point: recentred``: one stacked QR a
+    step, the belief holds S (N, n, n)."""
 
     name = "srukf"
 
     def __init__(self, single: Any):
         super().__init__(single)
         p = single.params
-        if p.zeroth_point != "recentred" or p.covariance_update != "joint":
-            raise ConfigError("the batched srukf implements zeroth_point: recentred and covariance_update: joint "
-                              f"(got {p.zeroth_point}, {p.covariance_update}); run the sweep with --engine pool")
+        if p.zeroth_point != "recentred":
+            raise ConfigError("the batched srukf implements zeroth_point: recentred "
+                              f"(got {p.zeroth_point}); run the sweep with --engine pool")
 
     def initial_belief(self, t: float, x, P) -> BatchBelief:
         b = super().initial_belief(t, x, P)

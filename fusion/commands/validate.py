@@ -94,14 +94,14 @@ def _check_models(path: str, system) -> None:
 
     from fusion.errors import ConfigError, ModelFault
     from fusion.yamlsource import load_yaml
-    from fusion_plugins.filters.checks import array_of, finite, frozen
+    from fusion_plugins.filters.checks import array_of, finite, frozen, unchecked
 
     x0 = frozen(np.asarray(system.x0, dtype=float))   # read-only: a model that writes into it raises
     n = x0.shape[0]
     _check_process(path, system, x0)
     uses_h_jacobian = not _sigma_point(system.filter)
     for name, sensor in system.sensors.items():
-        model = sensor.model
+        model = unchecked(sensor.model)   # probed as written, not through the run's checking adapter
         if model is None or not hasattr(model, "h"):
             continue
         where = load_yaml(path).where(["sensors", name, "model"])
@@ -147,9 +147,9 @@ def _check_process(path: str, system, x0) -> None:
 
     from fusion.errors import ConfigError, ModelFault
     from fusion.yamlsource import load_yaml
-    from fusion_plugins.filters.checks import QCheck, array_of, finite
+    from fusion_plugins.filters.checks import QCheck, array_of, finite, unchecked
 
-    process, n = system.process, x0.shape[0]
+    process, n = unchecked(system.process), x0.shape[0]   # probed as written, not through the checking adapter
     u = np.zeros(process.input_dim) if process.input_dim else None
     flt = system.filter
     uses_jacobian = not _sigma_point(flt) or flt.use_linear_prediction(process)

@@ -15,10 +15,12 @@ A run is *degraded* (``fusion run`` exits DEGRADED_EXIT, 4, unless ``--allow-deg
   (Bar-Shalom, Li and Kirubarajan 2001, sec. 5.4). With K windows in the run, a window is beyond when its
   sum exceeds the chi-square quantile of upper tail ``q = (alpha / K) ** (1 / c)``, and the run is flagged
   when ``c = min(2, K)`` consecutive windows are beyond: on a consistent filter (independent windows) the
-  chance of a flag is at most ``K q^c = alpha`` (``nis_false_alarm``, 1e-3). Only too large an NIS flags
+  chance of a flag is at most ``K q^c = alpha`` (``nis_false_alarm``, 1e-3). A window must also be over
+  ``nis_min_ratio`` (2) per dof: far outside, not only significant. Only too large an NIS flags
   (an overconfident filter or a model that disagrees with the data); a small one is a conservative noise;
-- errors against truth (``health.truth``: NEES mean over its dof above 10 by default) or agreement with a
-  reference (``health.reference``: attitude RMSE above 30 deg by default) beyond a limit.
+- errors against truth (``health.truth``: NEES mean over its dof above 10 by default, with under half the
+  estimates' NEES inside their 95 % interval) or agreement with a reference (``health.reference``: attitude
+  RMSE above 30 deg by default) beyond a limit.
 
 Each finding names the sensor, the figures and the likely causes in order (fusion.health.causes)."""
 from __future__ import annotations
@@ -151,10 +153,11 @@ def _locked_out(name: str, w: dict[str, Any], spec: HealthSpec, ctx: causes.RunC
     return [Finding("locked_out", name, figures, tuple(causes.ordered("locked_out", ctx, name)))]
 
 
-def nis_windows_beyond(windows: list[tuple[float, float, float, int]], alpha: float) -> tuple[int, int, float]:
-    """The longest run of consecutive NIS windows beyond their chi-square quantile (see the module): (its first
-    window's index, its length, the tail probability ``q`` each window was tested at); length 0 when none
-    is beyond. ``windows`` are (t first, t last, NIS sum, dof sum)."""
+def nis_windows_beyond(windows: list[tuple[float, float, float, int]], alpha: float,
+                       min_ratio: float = 1.0) -> tuple[int, int, float]:
+    """The longest run of consecutive NIS windows beyond their chi-square quantile (see the module) and over
+    ``min_ratio`` per dof: (its first window's index, its length, the tail probability ``q`` each window was
+    tested at); length 0 when none is beyond. ``windows`` are (t first, t last, NIS sum, dof sum)."""
     k = len(windows)
     if k == 0:
         return 0, 0, math.nan
@@ -164,7 +167,7 @@ def nis_windows_beyond(windows: list[tuple[float, float, float, int]], alpha: fl
     cut: dict[int, float] = {}   # the quantile per dof (windows mostly share one)
     for i, (_, _, total, dof) in enumerate(windows):
         if dof not in cut:
-            cut[dof] = chi2.isf(q, dof)
+            cut[dof] = max(chi2.isf(q, dof), min_ratio * dof)
         run = run + 1 if total > cut[dof] else 0
         if run > best:
             best, best_at = run, i - run + 1
@@ -173,15 +176,15 @@ def nis_windows_beyond(windows: list[tuple[float, float, float, int]], alpha: fl
 
 def _nis(name: str, w: dict[str, Any], spec: HealthSpec, ctx: causes.RunContext) -> list[Finding]:
     windows = w["windows"]
-    at, n, q = nis_windows_beyond(windows, spec.nis_false_alarm)
+    at, n, q = nis_windows_beyond(windows, spec.nis_false_alarm, spec.nis_min_ratio)
     if n < min(2, len(windows)) or n == 0:
         return []
     sel = windows[at: at + n]
     total, dof = sum(s for _, _, s, _ in sel), sum(d for _, _, _, d in sel)
     figures = (f"innovations inconsistent: NIS {total / dof:.3g} per dof over {n} windows of {spec.nis_window_dof} "
                f"dof, t {sel[0][0]:.1f}-{sel[-1][1]:.1f} s (a consistent filter: 1; each window beyond its "
-               f"chi-square quantile at {q:.2g}, {len(windows)} windows in the run, false-alarm rate "
-               f"{spec.nis_false_alarm:g}: health.nis_false_alarm)")
+               f"chi-square quantile at {q:.2g} and {spec.nis_min_ratio:g} per dof, {len(windows)} windows in the "
+               f"run, false-alarm rate {spec.nis_false_alarm:g}: health.nis_false_alarm, health.nis_min_ratio)")
     return [Finding("nis", name, figures, tuple(causes.ordered("nis", ctx, name)))]
 
 
@@ -198,10 +201,13 @@ def _agreement(kind: str, errors: dict[str, Any], consistency: dict[str, Any], l
         if limit is not None and isinstance(value, (int, float)) and math.isfinite(value) and value > limit:
             over.append(f"{label} {value:.3g} {unit} > {limit:g} (health.{kind}.{key})")
     nees, dof = consistency.get("nees_mean"), consistency.get("nees_dof")
+    inside = consistency.get("nees_in_95_fraction")
     if kind == "truth" and limits.nees_per_dof is not None and nees is not None and dof:
-        if nees / dof > limits.nees_per_dof:
-            over.append(f"NEES {nees:.4g} on {dof} dof ({nees / dof:.3g} per dof) > {limits.nees_per_dof:g} per dof "
-                        "(health.truth.nees_per_dof)")
+        persistent = not isinstance(inside, (int, float)) or not inside >= limits.nees_inside_min
+        if nees / dof > limits.nees_per_dof and persistent:
+            told = f", {100 * inside:.0f} % inside its 95 % interval" if isinstance(inside, (int, float)) else ""
+            over.append(f"NEES {nees:.4g} on {dof} dof ({nees / dof:.3g} per dof{told}) > {limits.nees_per_dof:g} "
+                        "per dof (health.truth.nees_per_dof)")
     if not over:
         return []
     what = "errors against truth" if kind == "truth" else "disagreement with the reference"

@@ -6,6 +6,7 @@
       max_unused_share: 0.5        # a measurement sensor rejected or late-dropped for more of its messages
       lockout_s: null              # s of rejections in a row; null: the sensor's recovery.after_s (see below)
       nis_false_alarm: 1.0e-3      # chance that a consistent filter's run is flagged by the NIS test
+      nis_min_ratio: 2.0           # and a window's NIS per dof over this
       nis_window_dof: 100          # a NIS window closes when its updates' dofs add up to this
       truth: {nees_per_dof: 10}    # errors against truth lines beyond any of these
       reference: {attitude_rmse_deg: 30}   # agreement with reference lines beyond any of these
@@ -37,9 +38,12 @@ class AgreementLimits(BaseModel):
 
 class TruthLimits(AgreementLimits):
     """``health.truth``: by default the NEES mean at most 10 per dof, an order of magnitude over a consistent
-    filter's 1 (the covariance understating the error ~3x in sd)."""
+    filter's 1 (the covariance understating the error ~3x in sd), unless at least ``nees_inside_min`` of the
+    estimates' NEES are inside their 95 % interval (the mean made by a few samples, e.g. a bad truth line,
+    is no persistent inconsistency)."""
 
     nees_per_dof: float | None = Field(10.0, gt=1.0)
+    nees_inside_min: float = Field(0.5, gt=0.0, le=1.0)
 
 
 class ReferenceLimits(AgreementLimits):
@@ -63,6 +67,9 @@ class HealthSpec(BaseModel):
                                     "or over max_unused_share of its span")
     nis_false_alarm: float = Field(1e-3, gt=0.0, lt=0.5, description="probability that a consistent filter's "
                                    "run is flagged by the NIS window test")
+    nis_min_ratio: float = Field(2.0, ge=1.0, description="a NIS window counts as beyond only when its NIS per dof "
+                                 "is also over this (innovations sqrt(2) times what the filter predicts): a mild "
+                                 "mis-tuning is significant on long runs, and no reason to distrust the estimate")
     nis_window_dof: int = Field(100, ge=10, le=100_000, description="a NIS window closes when the dofs of its "
                                 "accepted updates add up to this")
     min_messages: int = Field(5, ge=1, description="a sensor with fewer decided messages is not judged by its "

@@ -14,11 +14,9 @@ from __future__ import annotations
 import numpy as np
 
 # AP_Logger LogEvent (the ones a user chooses a span by; others are written by number)
-AP_EVENTS = {10: "ARMED", 11: "DISARMED", 15: "ARMED (auto)", 16: "EVENT land complete maybe",
-             17: "EVENT land complete", 18: "FAILSAFE lost GPS", 25: "EVENT set home", 28: "EVENT not landed",
-             41: "EVENT EKF altitude reset", 42: "EVENT EKF yaw reset", 43: "EVENT EKF primary changed",
-             54: "EVENT surfaced", 55: "EVENT not surfaced", 56: "EVENT bottomed", 57: "EVENT not bottomed",
-             62: "EVENT EKF lane switch", 63: "EVENT EKF yaw reset"}
+AP_EVENTS = {10: "ARMED", 11: "DISARMED", 15: "EVENT auto armed", 16: "EVENT takeoff", 17: "EVENT land complete maybe",
+             18: "EVENT land complete", 19: "FAILSAFE lost GPS", 21: "EVENT flip start", 22: "EVENT flip end",
+             25: "EVENT set home", 28: "EVENT not landed", 54: "FAILSAFE motors emergency stopped"}
 # AP_Logger LogErrorSubsystem
 AP_ERR_SUBSYS = {2: "radio", 3: "compass", 4: "optflow", 5: "FAILSAFE radio", 6: "FAILSAFE battery",
                  7: "FAILSAFE GPS", 8: "FAILSAFE GCS", 9: "FAILSAFE fence", 10: "flight mode", 11: "GPS",

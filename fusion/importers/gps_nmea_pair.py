@@ -1,8 +1,9 @@
-"""The GGA + RMC sentences of ``fusion import --gps nmea`` read back as the geodetic fields of the
+"""The GGA (+ GST) + RMC sentences of ``fusion import --gps nmea`` read back as the geodetic fields of the
 ``gps_fields`` decoder, so one config reads a log imported either way (the decoder sees ``# fields gps
 nmea`` lines: one sentence a line, the GGA then the RMC of one fix at one time).
 
-GGA: latitude, longitude (deg), altitude above mean sea level and geoid separation (m), fix quality,
+GST (when the log had the receiver's accuracies): ``hacc`` the larger of the latitude and longitude sd,
+``vacc`` the altitude sd (m). GGA: latitude, longitude (deg), altitude above mean sea level and geoid separation (m), fix quality,
 satellites, HDOP; RMC: speed over ground (knots) and course (deg true) -> north and east velocity (m/s). A
 GGA without its RMC (the importer writes none when the receiver flagged the velocity invalid) is a
 position-only fix, emitted when the next GGA comes. GGA quality -> the fix type the importers write (1 GPS:
@@ -38,6 +39,14 @@ class NmeaPairs:
         if kind == "GGA":
             done, self._gga = self._gga, _gga(msg)
             return done
+        if kind == "GST":        # the fix's accuracies (1 sd, m), written between its GGA and RMC
+            if self._gga is not None and getattr(msg, "timestamp", None) == self._gga["hms"]:
+                try:
+                    self._gga["hacc"] = max(float(msg.std_dev_latitude), float(msg.std_dev_longitude))
+                    self._gga["vacc"] = float(msg.std_dev_altitude)
+                except (TypeError, ValueError):
+                    pass
+            return None
         if kind == "RMC":
             gga, self._gga = self._gga, None
             if gga is None or getattr(msg, "timestamp", None) != gga["hms"]:
@@ -48,7 +57,7 @@ class NmeaPairs:
                 return gga
             gga["vn"], gga["ve"] = spd * math.cos(crs), spd * math.sin(crs)
             return gga
-        raise MalformedMessage(f"gps_fields: reads GGA and RMC sentences, got {kind or sentence[:6]!r}")
+        raise MalformedMessage(f"gps_fields: reads GGA, GST and RMC sentences, got {kind or sentence[:6]!r}")
 
 
 def _gga(msg) -> dict:

@@ -1,4 +1,4 @@
-"""GPS streams as NMEA 0183 sentences (``fusion import --gps nmea``): one GGA and one RMC a fix, as a
+"""GPS streams as NMEA 0183 sentences (``fusion import --gps nmea``): one GGA, GST and RMC a fix, as a
 receiver sends them, for configs whose GPS goes through the ``nmea`` decoder (paper 002's system).
 
 GGA: UTC time, latitude/longitude (ddmm.mmmmmmm, 1e-7 arc-minute: ~0.2 mm), fix quality (1 GPS, 2 DGPS,
@@ -57,6 +57,15 @@ def gga_rmc(t_utc: dt.datetime, lat: float, lon: float, alt: float, geoid: float
     return gga, rmc
 
 
+def gst(t_utc: dt.datetime, hacc: float, vacc: float) -> str | None:
+    """The GST sentence of a fix's accuracies (1 sd, m: latitude and longitude each ``hacc``, altitude
+    ``vacc``), or None when the receiver gave none (0 or not finite)."""
+    if not (math.isfinite(hacc) and hacc > 0 and math.isfinite(vacc) and vacc > 0):
+        return None
+    hms = t_utc.strftime("%H%M%S") + f".{t_utc.microsecond // 10000:02d}"
+    return _sentence(f"GPGST,{hms},,{hacc:.3f},{hacc:.3f},0.0,{hacc:.3f},{hacc:.3f},{vacc:.3f}")
+
+
 def as_nmea(s: Stream, start_utc: str | None, notes: list[str] | None = None) -> Stream:
     """The stream of GGA + RMC sentences (``# fields gps nmea``) of a numeric GPS stream. Only 3-D fixes
     and better (fix type 3-6) are written: a GGA carries no fix dimension, so a 2-D fix (its height not
@@ -75,6 +84,7 @@ def as_nmea(s: Stream, start_utc: str | None, notes: list[str] | None = None) ->
     geoid, vn, ve = col("geoid", 0.0), col("vn", 0.0), col("ve", 0.0)
     fix, nsat, hdop = col("fix", 3.0), col("nsat", 0.0), col("hdop")
     vok = col("vok", 1.0)      # a velocity the receiver flagged invalid: GGA only (a position-only epoch)
+    hacc, vacc = col("hacc"), col("vacc")
     ts, rows = [], []
     usable = np.isin(fix, list(_USABLE))
     if notes is not None and not usable.all():
@@ -87,12 +97,11 @@ def as_nmea(s: Stream, start_utc: str | None, notes: list[str] | None = None) ->
         when = base + dt.timedelta(seconds=t)
         gga, rmc = gga_rmc(when, lat[k], lon[k], alt[k], geoid[k], vn[k], ve[k],
                            _QUALITY[int(fix[k])], int(nsat[k]), hdop[k])
-        if vok[k] < 0.5:
-            ts.append(t)
-            rows.append((gga,))
-            continue
-        ts += [t, t]
-        rows += [(gga,), (rmc,)]
+        acc = gst(when, hacc[k], vacc[k])
+        for sentence in (gga, acc, rmc if vok[k] >= 0.5 else None):
+            if sentence is not None:
+                ts.append(t)
+                rows.append((sentence,))
     meta = dict(s.meta)
     meta["units"] = "NMEA 0183 GGA + RMC a fix" + ("" if start_utc else " (UTC from 2000-01-01: the log gave no date)")
     return Stream(s.sensor, ("nmea",), np.array(ts), rows=rows, meta=meta)

@@ -43,7 +43,7 @@ def unsupported(system: Any, trial: Trial) -> str | None:
     if getattr(system.filter, "_augmented", False):
         return "augmented ukf"
     p = getattr(system.filter, "params", None)
-    if system.filter.name == "srukf" and (p.zeroth_point != "recentred" or p.covariance_update != "joint"):
+    if system.filter.name == "srukf" and p.zeroth_point != "recentred":
         return "srukf variant without a batched version"
     if system.process.input_dim:
         return "an input sensor (IMU) drives the process"
@@ -168,7 +168,8 @@ def _health(system: Any, counts: dict, i: int, row: dict[str, Any], nees_dof: in
                    "late": c["late"], "malformed": 0} for n, c in counts.items()}
     errors = {k: row[k] for k in ("position_rmse_m", "position_max_m", "velocity_rmse_mps") if k in row}
     summary = {"sensors": sensors, "errors": errors,
-               "consistency": {"nees_mean": row.get("nees_mean"), "nees_dof": nees_dof}}
+               "consistency": {"nees_mean": row.get("nees_mean"), "nees_dof": nees_dof,
+                               "nees_in_95_fraction": row.get("nees_in_95_fraction")}}
     return health_columns(system, summary, watch)
 
 

@@ -23,7 +23,6 @@ import numpy as np
 from fusion import kernels
 from fusion.api import Belief, Event, Filter, Gate, MeasurementModel, ProcessModel, UpdateResult
 
-from .checks import MEAN, ITERATE, QCheck, array_of, frozen, nonfinite, trusted
 from .jacobian import measurement_jacobian, process_jacobian
 from .linalg import cholesky_lower, recover_factor, solve_lower, symmetrise
 
@@ -39,7 +38,6 @@ KERNEL_MAX_STATES = 64
 
 _ndarray = np.ndarray
 _float64 = np.dtype(float)
-_vdot = np.vdot
 
 
 def as_vector(z) -> np.ndarray:
@@ -104,15 +102,10 @@ class KalmanBase(Filter):
     (``StateLayout.normalize``): the filter's own layout (the system's, given at wiring), else the
     measurement model's. The predicted mean by the process model's ``normalize``.
 
-    A plugin's models are given read-only views of the belief and every value they return is checked where
-    it is received (plugins/filters/checks.py; fusion's own models are trusted): a bad one raises
-    ModelFault, which the run charges to the model.
-    ``check_Q`` is the process noise's test (it remembers which sources it has fully checked once).
+    The filters call their models as they are: a plugin's models are wrapped at wiring by the checking
+    adapter (plugins/filters/checks.py ``checked``), which gives them read-only views and checks every value
+    they return (a bad one raises ModelFault, which the run charges to the model).
     """
-
-    def __init__(self, params=None, context=None):
-        super().__init__(params, context)
-        self.check_Q = QCheck()
 
     # ------------------------------------------------------------------ diagnostics
     def event(self, t: float, kind: str, detail: str = "") -> Event:
@@ -175,34 +168,17 @@ def _identity(x: np.ndarray) -> np.ndarray:
     return x
 
 
-def linearised_predict(belief: Belief, process: ProcessModel, u: np.ndarray | None, dt: float,
-                       check_Q: QCheck | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def linearised_predict(belief: Belief, process: ProcessModel, u: np.ndarray | None,
+                       dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The linearised prediction's terms (paper 001 eqs. 9-10), shared by ekf, ukf and srukf::
 
         x^- = normalize(f(x, u, dt)),   F = df/dx (x, u, dt),   Q = Q(x, u, dt)
 
-    returned as ``(x^-, F, Q)``; the covariance (``F P F^T + Q``, or its square root) is the caller's.
-    The models get a read-only view of the mean; what they return is checked (f (n,), F and Q (n, n),
-    finite, Q positive semi-definite: ``check_Q``, the filter's, else a full test every call), a bad
-    value raising ModelFault (not for one of fusion's own models: checks.trusted)."""
-    if trusted(process):
-        x = belief.x
-        F = process_jacobian(process, x, u, dt)
-        Q = process.Q(x, u, dt)
-        return process.normalize(process.f(x, u, dt)), F, Q
-    x = frozen(belief.x)
-    n = x.shape[0]
+    returned as ``(x^-, F, Q)``; the covariance (``F P F^T + Q``, or its square root) is the caller's."""
+    x = belief.x
     F = process_jacobian(process, x, u, dt)
-    if type(F) is not _ndarray or F.shape != (n, n):   # a numerical F of an f of the wrong shape: f is named
-        array_of(process.f(x, u, dt), (n,), "f", MEAN)
-        F = array_of(F, (n, n), "jacobian", MEAN)
-    Q = (check_Q or QCheck())(process.Q(x, u, dt), n, "Q", MEAN, x)
-    x1 = array_of(process.f(x, u, dt), (n,), "f", MEAN)
-    s = x1.dot(x1) + _vdot(F, F)                 # finite: one test for both (checks.finite)
-    if s - s != 0.0:
-        nonfinite(x1, "f", MEAN, x)
-        nonfinite(F, "jacobian", MEAN, x)
-    return process.normalize(x1), F, Q
+    Q = process.Q(x, u, dt)
+    return process.normalize(process.f(x, u, dt)), F, Q
 
 
 _EYE: dict[int, np.ndarray] = {}
@@ -214,17 +190,6 @@ def _eye(n: int) -> np.ndarray:
         I = _EYE[n] = np.eye(n)
         I.flags.writeable = False
     return I
-
-
-def _predicted(model: MeasurementModel, x: np.ndarray, m: int, at: str, chk: bool) -> np.ndarray:
-    """h(x), checked (shape (m,), finite: one dot product) for a model that is not trusted."""
-    zh = model.h(x)
-    if chk:
-        zh = array_of(zh, (m,), "h", at)
-        s = zh.dot(zh)
-        if s - s != 0.0:
-            nonfinite(zh, "h", at, x)
-    return zh
 
 
 def linearised_update(flt: KalmanBase, belief: Belief, model: MeasurementModel, z: np.ndarray,
@@ -247,8 +212,7 @@ def _update_compiled(flt: KalmanBase, belief: Belief, model: MeasurementModel, z
     effects). None when the numpy code must run instead:
     more than KERNEL_MAX_STATES states, or S not positive definite (its repair and event are the numpy
     code's)."""
-    chk = not trusted(model)
-    x0 = frozen(belief.x) if chk else belief.x
+    x0 = belief.x
     n = x0.shape[0]
     if n > KERNEL_MAX_STATES:
         return None
@@ -257,15 +221,7 @@ def _update_compiled(flt: KalmanBase, belief: Belief, model: MeasurementModel, z
     m = z.shape[0]
     R = as_covariance(R, m)
     H = measurement_jacobian(model, x0)
-    if chk:
-        if H.shape != (m, n):                    # a numerical H of an h of the wrong shape: h is named
-            array_of(model.h(x0), (m,), "h", MEAN)
-            H = array_of(H, (m, n), "jacobian", MEAN)
-        s = _vdot(H, H)
-        if s - s != 0.0:
-            nonfinite(H, "jacobian", MEAN, x0)
-    zh = _predicted(model, x0, m, MEAN, chk)
-    r = residual_of(model)(z, zh)
+    r = residual_of(model)(z, model.h(x0))
     S, x1, P1 = np.empty((m, m)), np.empty(n), np.empty((n, n))
     try:                                         # the arrays as they are (nearly always float64, C-ordered)
         nis = KERNEL.update(x0, P, H, R, r, S, x1, P1)
@@ -295,8 +251,7 @@ def linearised_update_numpy(flt: KalmanBase, belief: Belief, model: MeasurementM
     its covariance, the NIS and the gate decision are those of the prior (iteration 0), the same as
     the EKF's.
     """
-    chk = not trusted(model)
-    x0 = frozen(belief.x) if chk else belief.x   # a plugin's model gets read-only views (checks.py)
+    x0 = belief.x
     n = x0.shape[0]
     P = covariance_of(belief)
     z = np.asarray(z, dtype=float).reshape(-1)
@@ -305,22 +260,12 @@ def linearised_update_numpy(flt: KalmanBase, belief: Belief, model: MeasurementM
     xi = x0
     events: tuple = ()
     for it in range(max_iterations):
-        at = MEAN if it == 0 else ITERATE       # where a check of an untrusted model's value names it
-        xv = xi if not chk else (x0 if it == 0 else frozen(xi))
-        H = measurement_jacobian(model, xv)
-        if chk:
-            if H.shape != (m, n):                # a numerical H of an h of the wrong shape: h is named
-                array_of(model.h(xv), (m,), "h", at)
-                H = array_of(H, (m, n), "jacobian", at)
-            s = _vdot(H, H)                      # finite (checks.finite, inline)
-            if s - s != 0.0:
-                nonfinite(H, "jacobian", at, xv)
+        H = measurement_jacobian(model, xi)
         HP = H @ P                               # (P H^T)^T, P symmetric
         Ly, S, event = flt.factor(HP @ H.T + R, belief.t, "innovation covariance")
         if event is not None:
             events += (event,)
-        zh = _predicted(model, xv, m, at, chk)
-        r = model.residual(z, zh)
+        r = model.residual(z, model.h(xi))
         W = solve_lower(Ly, HP)                  # L_y^-1 H P   (m, n)
         if it == 0:
             y0, S0 = r, S

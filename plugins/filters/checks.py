@@ -1,33 +1,36 @@
-"""The boundary between a filter and the models it calls: what a model is given, and what it gives back.
+"""The boundary between a filter and a third party's models: what a model is given, and what it gives back.
 
-A model is given read-only views of the filter's own arrays (the belief's mean, an iterate), so a model that
-writes into its argument (``x -= bias`` after computing a right result) raises ``ValueError: assignment
-destination is read-only`` in the model, where the run names it, instead of rewriting the belief
-(tester6 #1). A view costs ~0.4 us and copies nothing.
+A plugin's model is wrapped ONCE, at wiring (:func:`checked`, called by fusion.config.wire): a shallow copy
+whose class is a checking subclass of the model's own (so its capabilities, provider and per-run copies are
+the model's), and whose calls give the model read-only views of their arguments, so a model that writes into
+its argument (``x -= bias`` after computing a right result) raises ``ValueError: assignment destination is
+read-only`` in the model, where the run names it, instead of rewriting the belief. A view copies nothing.
+The filters themselves have one code path and never check a model.
 
-Every value a model returns is checked once, where the filter receives it: its shape (``f`` (n,) at the
+Every value a checked model returns is checked where it leaves the model: its shape (``f`` (n,) at the
 mean, (k, n) on k sigma points; ``jacobian`` (n, n); ``Q`` (n, n); ``h`` (m,) or (k, m); a measurement
 ``jacobian`` (m, n)), a float64 array (anything numpy reads as one is converted: a list, float32), finite
 where the state it was given is finite, and Q with non-negative variances on its diagonal on every call
 and symmetric positive semi-definite on its first (:class:`QCheck`). A bad value raises
 :class:`fusion.errors.ModelFault` with what was wrong; the run charges it to the model as if the model had
 raised (a measurement's message lost and counted malformed, a process model's prediction held, the run
-stopped after several in a row). The shape and type tests are attribute compares (~0.1 us); a finiteness
-test is one dot product (~0.5 us).
+stopped after several in a row).
 
-A model of fusion itself (:func:`trusted`) skips the view and the checks: its own tests check its shapes
-(tests/models, fusion.testing.check_*) and tests/filters/test_model_boundary.py replays shipped configs with
-every check on to the same bytes; the ~3-5 us a step they cost would be 2-5% of a shipped replay. This is
-the rule fusion.pipeline applies to sinks (its own are trusted not to write into what they are given).
+fusion's own models (:func:`trusted`) are not wrapped: their own tests check their shapes (tests/models,
+fusion.testing.check_*) and tests/filters/test_model_boundary.py replays shipped configs with them wrapped
+to the same bytes.
 """
 from __future__ import annotations
+
+import copy
+import dataclasses
 
 import numpy as np
 
 from fusion.errors import ModelFault
 
 __all__ = ["ModelFault", "frozen", "array_of", "finite", "all_finite", "QCheck", "SYMMETRY_RTOL", "PSD_RTOL",
-           "MEAN", "ITERATE", "SIGMA", "nonfinite", "trusted"]
+           "MEAN", "ITERATE", "SIGMA", "nonfinite", "trusted", "checked", "unchecked"]
 
 #: What a model was given, for the messages.
 MEAN, ITERATE, SIGMA = "the belief's mean", "an iterate of the update", "the sigma points"
@@ -47,7 +50,7 @@ _TRUSTED: dict[type, bool] = {}
 
 def trusted(model) -> bool:
     """Whether ``model`` is one of fusion's own (its class defined in ``fusion`` or ``fusion_plugins``, not a
-    subclass a plugin defines), for which the filters skip the read-only view and the checks."""
+    subclass a plugin defines): :func:`checked` leaves it as it is."""
     cls = type(model)
     t = _TRUSTED.get(cls)
     if t is None:
@@ -152,3 +155,160 @@ class QCheck:
         if k and what not in self._full:
             self.full(Q[0], what)
         return Q
+
+
+# ------------------------------------------------------------------------------------------ the adapter
+def _given(x: np.ndarray) -> str:
+    return MEAN if np.ndim(x) == 1 else SIGMA
+
+
+def _out(out, shape: tuple, what: str, x: np.ndarray, *inputs) -> np.ndarray:
+    """``out`` of ``what`` at ``x``: a float64 array of ``shape``, finite where its inputs are."""
+    given = _given(x)
+    out = array_of(out, shape, what, given)
+    finite(out, what, given, x, *inputs)
+    return out
+
+
+def _q(self, Q, x: np.ndarray, what: str, *inputs) -> np.ndarray:
+    n = x.shape[-1]
+    return self._fusion_qcheck(Q, n, what, _given(x), x, *inputs)
+
+
+def _f(self, x, u, dt):
+    x = frozen(np.asarray(x, dtype=float))
+    return _out(super(self._fusion_checked, self).f(x, u, dt), x.shape, "f", x)
+
+
+def _process_jacobian(self, x, u, dt):
+    x = frozen(np.asarray(x, dtype=float))
+    F = super(self._fusion_checked, self).jacobian(x, u, dt)
+    if F is None:
+        return None
+    n = x.shape[-1]
+    return _out(F, (n, n), "jacobian", x)
+
+
+def _Q(self, x, u, dt):
+    x = frozen(np.asarray(x, dtype=float))
+    return _q(self, super(self._fusion_checked, self).Q(x, u, dt), x, "Q")
+
+
+def _f_inputs(self, X, us, dts):
+    X = frozen(np.asarray(X, dtype=float))
+    return _out(super(self._fusion_checked, self).f_inputs(X, us, dts), X.shape, "f_inputs", X, us)
+
+
+def _Q_inputs(self, x0, x1, us, dts):
+    x0, x1 = frozen(np.asarray(x0, dtype=float)), frozen(np.asarray(x1, dtype=float))
+    return _q(self, super(self._fusion_checked, self).Q_inputs(x0, x1, us, dts), x0, "Q_inputs", x1)
+
+
+def _linearise_inputs(self, x, us, dts):
+    x = frozen(np.asarray(x, dtype=float))
+    run = super(self._fusion_checked, self).linearise_inputs(x, us, dts)
+    if run is None:
+        return None
+    x1, F, Q = run
+    n, k = x.shape[0], len(dts)
+    x1 = array_of(x1, (n,), "linearise_inputs' mean", MEAN)
+    finite(x1, "linearise_inputs' mean", MEAN, x, us)
+    F = array_of(F, (k, n, n), "linearise_inputs' jacobians", MEAN)
+    finite(F, "linearise_inputs' jacobians", MEAN, x, us)
+    Q = self._fusion_qcheck.stack(Q, k, n, "linearise_inputs' Q", MEAN, x, us)
+    return x1, F, Q
+
+
+def _f_with_noise(self, X, W, u, dt):
+    X, W = frozen(np.asarray(X, dtype=float)), frozen(np.asarray(W, dtype=float))
+    return _out(super(self._fusion_checked, self).f_with_noise(X, W, u, dt), X.shape, "f_with_noise", X, W)
+
+
+def _m_shape(self, x: np.ndarray, out) -> tuple:
+    """h's shape at x: (m,) a state, m the model's ``dim`` (else what h gave)."""
+    m = self.dim or (np.shape(out)[-1] if np.ndim(out) else 1)
+    return x.shape[:-1] + (int(m),)
+
+
+def _h(self, x):
+    x = frozen(np.asarray(x, dtype=float))
+    z = super(self._fusion_checked, self).h(x)
+    return _out(z, _m_shape(self, x, z), "h", x)
+
+
+def _measurement_jacobian(self, x):
+    x = frozen(np.asarray(x, dtype=float))
+    H = super(self._fusion_checked, self).jacobian(x)
+    if H is None:
+        return None
+    if type(H) is not np.ndarray or H.ndim != 2:      # a row for a scalar measurement is read as (1, n)
+        H = np.atleast_2d(array_of(H, np.shape(H), "jacobian", MEAN))
+    return _out(H, (self.dim or H.shape[0], x.shape[-1]), "jacobian", x)
+
+
+def _h_with_noise(self, X, V):
+    X, V = frozen(np.asarray(X, dtype=float)), frozen(np.asarray(V, dtype=float))
+    Z = super(self._fusion_checked, self).h_with_noise(X, V)
+    return _out(Z, _m_shape(self, X, Z), "h_with_noise", X, V)
+
+
+def _observe(self, message):
+    """The model's observation, its model checked too (a model bound to the message may be a new object)."""
+    o = super(self._fusion_checked, self).observe(message)
+    model = getattr(o, "model", None)
+    if (model is None or model is self or getattr(type(model), "_fusion_checked", None) is type(model)
+            or not dataclasses.is_dataclass(o)):
+        return o
+    return dataclasses.replace(o, model=checked(model))
+
+
+_PROCESS = {"f": _f, "jacobian": _process_jacobian, "Q": _Q, "f_inputs": _f_inputs, "Q_inputs": _Q_inputs,
+            "linearise_inputs": _linearise_inputs, "f_with_noise": _f_with_noise}
+_MEASUREMENT = {"h": _h, "jacobian": _measurement_jacobian, "h_with_noise": _h_with_noise, "observe": _observe}
+_CLASSES: dict[type, type] = {}
+
+
+def _checking_class(cls: type) -> type:
+    """The checking subclass of ``cls`` (memoised): the calls of :data:`_PROCESS` or :data:`_MEASUREMENT` that
+    ``cls`` has, no others (so it has the same capabilities), under the same name and module (the same
+    provider in messages)."""
+    sub = _CLASSES.get(cls)
+    if sub is None:
+        from fusion.api import ProcessModel
+
+        calls = _PROCESS if issubclass(cls, ProcessModel) else _MEASUREMENT
+        body = {name: fn for name, fn in calls.items() if callable(getattr(cls, name, None))}
+        body.update(__module__=cls.__module__, __qualname__=cls.__qualname__, __doc__=cls.__doc__,
+                    __reduce_ex__=_reduce_checked)
+        sub = _CLASSES[cls] = type(cls.__name__, (cls,), body)
+        sub._fusion_checked = sub
+    return sub
+
+
+def unchecked(model):
+    """The model a :func:`checked` one wraps (a shallow copy of it, of its own class); any other as it is."""
+    cls = type(model)
+    if getattr(cls, "_fusion_checked", None) is not cls:
+        return model
+    base = cls.__mro__[1]
+    raw = base.__new__(base)
+    raw.__dict__.update((k, v) for k, v in model.__dict__.items() if k != "_fusion_qcheck")
+    return raw
+
+
+def _reduce_checked(self, protocol):
+    """Pickled (and deep-copied) as ``checked(the model)``: the checking class is made at run time, so it is
+    not found by name; the copy gets a fresh QCheck."""
+    return checked, (unchecked(self),)
+
+
+def checked(model):
+    """``model`` with every call checked (the module's docstring), or ``model`` itself when it is one of
+    fusion's own (:func:`trusted`) or already checked. The model is not changed: the checked one is a
+    shallow copy of it (with its own :class:`QCheck`)."""
+    if model is None or trusted(model) or getattr(type(model), "_fusion_checked", None) is type(model):
+        return model
+    wrapped = copy.copy(model)
+    wrapped.__class__ = _checking_class(type(model))
+    wrapped._fusion_qcheck = QCheck()
+    return wrapped

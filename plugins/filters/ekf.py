@@ -7,7 +7,6 @@ from fusion.api import Belief, Gate, LinearisesInputRuns, MeasurementModel, Para
 
 from . import base
 from .base import KalmanBase, covariance_of, linear_predict, linearised_predict, linearised_update
-from .checks import MEAN, array_of, finite, frozen, trusted
 from .linalg import symmetrise
 
 
@@ -37,7 +36,7 @@ class ExtendedKalmanFilter(KalmanBase):
     def predict(self, belief: Belief, process: ProcessModel, u: np.ndarray | None, dt: float) -> Belief:
         if dt == 0.0:
             return belief
-        x1, F, Q = linearised_predict(belief, process, u, dt, self.check_Q)
+        x1, F, Q = linearised_predict(belief, process, u, dt)
         return Belief(belief.t + dt, x1, P=linear_predict(belief.x, covariance_of(belief), F, Q))
 
     def predict_inputs(self, belief: Belief, process: ProcessModel, us: np.ndarray, dts: np.ndarray) -> Belief:
@@ -47,14 +46,10 @@ class ExtendedKalmanFilter(KalmanBase):
         end of the run: ~2 us a sample less), the same numbers as k calls of :meth:`predict` to rounding;
         otherwise k calls of :meth:`predict`. The chain runs in C when the kernel is built (_kalman_kernel.c:
         F's nonzeros only, the upper triangle; ~1 us a sample against ~5 us), else :func:`propagate_run`."""
-        chk = not trusted(process)
-        x = frozen(belief.x) if chk else belief.x
-        run = process.linearise_inputs(x, us, dts) if has(process, LinearisesInputRuns) else None
+        run = process.linearise_inputs(belief.x, us, dts) if has(process, LinearisesInputRuns) else None
         if run is None:
             return super().predict_inputs(belief, process, us, dts)
         x1, F, Q = run
-        if chk:
-            x1, F, Q = self._checked_run(x, x1, F, Q, us, len(dts))
         P = covariance_of(belief)
         n = P.shape[0]
         kernel = base.KERNEL
@@ -66,16 +61,6 @@ class ExtendedKalmanFilter(KalmanBase):
             P1 = propagate_run(P, F, Q)
         # sum() adds left to right from belief.t: the same time as t += dt sample by sample
         return Belief(sum(np.asarray(dts, dtype=float).tolist(), belief.t), x1, P=P1)
-
-    def _checked_run(self, x, x1, F, Q, us, k: int):
-        """A plugin's ``linearise_inputs`` result, checked (plugins/filters/checks.py)."""
-        n = x.shape[0]
-        x1 = array_of(x1, (n,), "linearise_inputs' mean", MEAN)
-        finite(x1, "linearise_inputs' mean", MEAN, x, us)
-        F = array_of(F, (k, n, n), "linearise_inputs' jacobians", MEAN)
-        finite(F, "linearise_inputs' jacobians", MEAN, x, us)
-        Q = self.check_Q.stack(Q, k, n, "linearise_inputs' Q", MEAN, x, us)
-        return x1, F, Q
 
     def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                gate: Gate | None = None) -> UpdateResult:

@@ -16,7 +16,7 @@ No function here forms an explicit inverse.
 from __future__ import annotations
 
 import numpy as np
-from fusion.lapack import blas, lapack
+from scipy.linalg import blas, lapack
 
 __all__ = [
     "cholesky_lower", "robust_cholesky", "recover_factor", "psd_sqrt_rows", "qr_lower",

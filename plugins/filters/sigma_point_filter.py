@@ -1,29 +1,17 @@
 """The base of the sigma-point filters (ukf, srukf): cached weights, the choice of prediction, the batched
-prediction over a run of input samples, and the sigma-point measurement transform both updates use."""
+prediction over a run of input samples, and the one sigma-point update both use (they differ only in how the
+innovation's square root, the gain and the posterior's covariance or square root are formed)."""
 from __future__ import annotations
 
 import numpy as np
 
-from fusion.api import Belief, InputRunNoise, IntegratesInputRuns, MeasurementModel, ProcessModel, has
+from fusion.api import (Belief, Gate, InputRunNoise, IntegratesInputRuns, MeasurementModel, ProcessModel,
+                        UpdateResult, has)
 
-from .base import KalmanBase, residual_of
-from .checks import MEAN, SIGMA, array_of, finite, frozen, trusted
+from .base import KalmanBase, as_vector, residual_of
 from .sigma_points import SigmaPoints
 
-__all__ = ["SigmaPointFilter", "measurement_transform"]
-
-
-def measurement_transform(sp: SigmaPoints, x: np.ndarray, L: np.ndarray, model: MeasurementModel, m: int):
-    """The sigma points' deviations ``dX`` (2n+1, n) from the mean x (n,) for the lower factor L of P
-    (P = L L^T), the predicted measurements ``Z = h(x + dX)`` (2n+1, m) in ONE call of h (paper 001
-    eq. 14, paper 000 eq. 8), and the model's difference function (``residual``, or plain subtraction).
-    Z is checked (shape (2n+1, m), finite at finite points: checks.py), a bad one raising ModelFault."""
-    dX = sp.E @ L.T
-    Z = model.h(x + dX)
-    if not trusted(model):
-        Z = array_of(Z, (dX.shape[0], m), "h", SIGMA)
-        finite(Z, "h", SIGMA, x, dX)
-    return dX, Z, residual_of(model)
+__all__ = ["SigmaPointFilter"]
 
 
 class SigmaPointFilter(KalmanBase):
@@ -94,13 +82,64 @@ class SigmaPointFilter(KalmanBase):
             return X
 
         def noise(x0: np.ndarray, x1: np.ndarray) -> np.ndarray:
-            if trusted(process):
-                return Q_inputs(x0, x1, us, dts)
-            return self.check_Q(Q_inputs(frozen(x0), frozen(x1), us, dts), x0.shape[0], "Q_inputs", MEAN, x0, x1)
+            return Q_inputs(x0, x1, us, dts)
 
         return self.sigma_predict(belief, process, propagate, noise, float(dts.sum()))
 
     def sigma_predict(self, belief: Belief, process: ProcessModel, propagate, noise, dt: float) -> Belief:
         """The sigma-point prediction over ``dt``: ``propagate(X)`` maps the (2n+1, n) points, ``noise(x,
         x1)`` gives the process noise from the prior mean x and the (normalised) predicted mean x1."""
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------ update
+    #: whether the belief holds the square root S (srukf) rather than P (ukf)
+    square_root = False
+
+    def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
+               gate: Gate | None = None) -> UpdateResult:
+        r"""The sigma-point update (paper 001 eqs. 14-20; paper 000 Algorithm 1, eqs. 8-16), with sigma points
+        redrawn from the prior (x^-, L), L L^T = P^-::
+
+            Z_i = h(x^- + dX_i)  (one call),   z^ = sum W_m^i Z_i,   y = residual(z, z^)
+            L_y L_y^T = S = sum W_c^i (Z_i - z^)(Z_i - z^)^T + R
+            G = L_y^-1 P_xz^T,   w = L_y^-1 y,   NIS = w^T w,   x^+ = x^- + G^T w   (K y = P_xz S^-1 y)
+            P^+ = P^- - G^T G
+
+        :meth:`innovation` is where the filters differ: the ukf forms S and P_xz as sums and factors S; the
+        srukf gets L_y, G and the posterior's square root from one QR (its docstring)."""
+        x = belief.x
+        z = as_vector(z)
+        m = z.shape[0]
+        events: list = []
+        L, prior = self.prior_factor(belief, events)
+        if self._augmented:
+            sp, dX, Z, diff = self.measure_augmented(belief, L, model, R, m)
+            R = None
+        else:
+            sp = self.sigma_points(x.shape[0])
+            dX = sp.E @ L.T
+            Z = model.h(x + dX)                                  # one call (001 eq. 14, 000 eq. 8)
+            diff = residual_of(model)
+        y, S, w, G, post = self.innovation(sp, dX, Z, diff, z, R, prior, belief.t, events)
+        nis = float(w.dot(w))
+        if gate is not None and not gate.accept(nis, m):
+            return UpdateResult(belief, y, S, nis, False, tuple(events), 0)
+        x1 = self.normalizer(model)(x + w @ G)                   # 001 eqs. 18-19, 000 eq. 14
+        b = Belief(belief.t, x1, S=post) if self.square_root else Belief(belief.t, x1, P=post)
+        return UpdateResult(b, y, S, nis, True, tuple(events), 0)
+
+    def prior_factor(self, belief: Belief, events: list) -> tuple[np.ndarray, np.ndarray]:
+        """``(L, prior)``: L the lower factor of the prior's covariance (a repair's event appended to
+        ``events``), ``prior`` what the posterior is formed from (the ukf's P, the srukf's S = L)."""
+        raise NotImplementedError
+
+    def measure_augmented(self, belief: Belief, L: np.ndarray, model: MeasurementModel, R, m: int):
+        """``(sp, dX, Z, diff)`` of the augmented form (the ukf's ``augmented: true``)."""
+        raise NotImplementedError
+
+    def innovation(self, sp: SigmaPoints, dX: np.ndarray, Z: np.ndarray, diff, z: np.ndarray, R,
+                   prior: np.ndarray, t: float, events: list):
+        """``(y, S, w, G, post)``: the innovation ``y = residual(z, z^)``, its covariance S, the whitened
+        innovation ``w = L_y^-1 y`` (L_y L_y^T = S), ``G = L_y^-1 P_xz^T`` (so K y = w G) and the posterior's
+        P (ukf) or S (srukf). R is None when the points already carry the noise (augmented)."""
         raise NotImplementedError

@@ -7,12 +7,11 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from fusion.api import Belief, Gate, MeasurementModel, ProcessModel, UpdateResult
+from fusion.api import Belief, ProcessModel
 
-from .base import as_covariance, as_vector, linearised_predict
-from .checks import MEAN, SIGMA, array_of, finite, frozen, trusted
+from .base import as_covariance, linearised_predict
 from .linalg import cholupdate, psd_sqrt_rows, qr_lower, qr_lower_scaled, recover_factor, solve_lower
-from .sigma_point_filter import SigmaPointFilter, measurement_transform
+from .sigma_point_filter import SigmaPointFilter
 from .sigma_points import SigmaPoints, UnscentedParams
 
 
@@ -39,21 +38,16 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         x^+ = x^- + K (z - z^)                                            (eq. 14, as corrected)
         U = K S_y,  S^+ = cholupdate{S^-, U, -1}                           (eqs. 15-16)
 
-    ``covariance_update`` chooses how eqs. 10-16 are computed (all give the same numbers):
+    Eqs. 10-16 are computed in the "array form" of square-root filters: one QR of the stacked deviations
+    of measurement and state, then one cholupdate of the joint factor for the zeroth point::
 
-    * ``joint`` (default): one QR of the stacked deviations of measurement and state (the "array
-      form" of square-root filters), then one cholupdate of the joint factor for the zeroth point::
+        L = qr{[c (Z_1:2n - z^), c (chi_1:2n - x^-); B_R, 0]},  L = cholupdate{L, [Z_0 - z^; 0], W_c^0}
+        L = [[S_y, 0], [P_xz S_y^-T, S^+]]
 
-          L = qr{[c (Z_1:2n - z^), c (chi_1:2n - x^-); B_R, 0]},  L = cholupdate{L, [Z_0 - z^; 0], W_c^0}
-          L = [[S_y, 0], [P_xz S_y^-T, S^+]]
-
-      since L L^T is the joint covariance [[P_zz, P_zx], [P_xz, P^-]] and its Cholesky factor has
-      those blocks (block Cholesky: S^+ S^+^T = P^- - P_xz P_zz^-1 P_zx = P^- - K S K^T). The gain is
-      applied by one triangular solve: ``K y = (P_xz S_y^-T)(S_y^-1 y)``.
-    * ``qr``: eqs. 10-13 as written, then S^+ from one QR of a stacked (Joseph-like) matrix,
-      ``qr{[c ((chi_1:2n - x^-) - K (Z_1:2n - z^)); B_R K^T]}`` and cholupdate{., K (Z_0 - z^), W_c^0},
-      since ``sum W_c (dx - K dz)(dx - K dz)^T + K R K^T = P - K S K^T``.
-    * ``downdate``: eqs. 10-16 literally (m rank-1 downdates by the columns of U = K S_y).
+    since L L^T is the joint covariance [[P_zz, P_zx], [P_xz, P^-]] and its Cholesky factor has those
+    blocks (block Cholesky: S^+ S^+^T = P^- - P_xz P_zz^-1 P_zx = P^- - K S K^T). The gain is applied by
+    one triangular solve: ``K y = (P_xz S_y^-T)(S_y^-1 y)``. The same numbers as eqs. 10-16 written out
+    (QR and cholupdate for S_y, m rank-1 downdates for S^+), at a third of the time (benchmarks/README.md).
 
     ``zeroth_point``: ``cholupdate`` is eqs. 5-7 and 9-11 as written (QR of points 1..2n about the mean,
     then a rank-1 update, or a downdate when W_c^0 < 0, for the zeroth point). ``recentred`` (default)
@@ -78,6 +72,7 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
     """
 
     name = "srukf"
+    square_root = True
 
     class Params(UnscentedParams):
         """Scaled unscented transform parameters and the square-root variant."""
@@ -86,14 +81,10 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
             "recentred", description="recentred: covariances about the zeroth point, every weight "
                                      "positive (one QR); cholupdate: eqs. 6-7 as written (QR, then a "
                                      "rank-1 update/downdate with W_c^0)")
-        covariance_update: Literal["joint", "qr", "downdate"] = Field(
-            "joint", description="joint: one QR of the stacked measurement and state deviations; "
-                                 "qr: gain first, then one QR; downdate: eqs. 15-16, m rank-1 downdates")
 
     def __init__(self, params=None, context=None):
         super().__init__(params, context)
         self._recentred = self.params.zeroth_point == "recentred"
-        self._cov_update = self.params.covariance_update
 
     # ------------------------------------------------------------------ helpers
     def initial_belief(self, t: float, x: np.ndarray, P: np.ndarray) -> Belief:
@@ -151,14 +142,11 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         if self.use_linear_prediction(process):
             events: list = []
             S = self.sqrt_of(belief, events)
-            x1, F, Q = linearised_predict(belief, process, u, dt, self.check_Q)
+            x1, F, Q = linearised_predict(belief, process, u, dt)
             BQ = psd_sqrt_rows(Q)
             S1 = qr_lower(np.concatenate((F @ S, BQ.T), axis=1).T, overwrite=True)   # sqrt(F P F^T + Q)
             return Belief(belief.t + dt, x1, S=S1, events=tuple(events))
-        if trusted(process):
-            Q = process.Q(belief.x, u, dt)
-        else:
-            Q = self.check_Q(process.Q(frozen(belief.x), u, dt), belief.x.shape[0], "Q", MEAN, belief.x)
+        Q = process.Q(belief.x, u, dt)
         return self.sigma_predict(belief, process, lambda X: process.f(X, u, dt), lambda x0, x1: Q, dt)
 
     def sigma_predict(self, belief: Belief, process: ProcessModel, propagate, noise, dt: float) -> Belief:
@@ -168,34 +156,22 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         sp = self.sigma_points(x.shape[0])
         dX = sp.E @ S.T
         Y = propagate(x + dX)                                       # eqs. 3-4, one call
-        if not trusted(process):
-            Y = array_of(Y, dX.shape, "f", SIGMA)
-            finite(Y, "f", SIGMA, x, dX)
         xm, D1, v0, w0 = self.deviations(sp, Y, np.subtract)        # eq. 5
         xm = process.normalize(xm)
         BQ = psd_sqrt_rows(noise(x, xm))
         S1 = self.sqrt_transform(sp, D1, BQ, v0, w0, belief.t, "srukf predict", events)  # eqs. 6-7
         return Belief(belief.t + dt, xm, S=S1, events=tuple(events))
 
-    # ------------------------------------------------------------------ update
-    def _whiten(self, belief, Sy: np.ndarray, y: np.ndarray, gate, m: int, events: list):
-        """w = S_y^-1 y, the NIS w.w, S = S_y S_y^T and the gate's verdict (None to go on, else the
-        rejected result)."""
-        w = solve_lower(Sy, y)
-        nis, Syy = float(w.dot(w)), Sy @ Sy.T
-        return w, nis, Syy, self.rejected(belief, y, Syy, nis, gate, m, tuple(events), 0)
-
-    def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
-               gate: Gate | None = None) -> UpdateResult:
-        x = belief.x
-        events: list = []
+    # ------------------------------------------------------------------ update (SigmaPointFilter.update)
+    def prior_factor(self, belief: Belief, events: list) -> tuple[np.ndarray, np.ndarray]:
         S = belief.S if belief.S is not None else self.sqrt_of(belief, events)
-        z = as_vector(z)
-        m = z.shape[0]
-        n = x.shape[0]
+        return S, S
+
+    def innovation(self, sp, dX, Z, diff, z, R, prior, t, events):
+        """S_y, P_xz S_y^-T and S^+ as the blocks of one QR (eqs. 9-16 in array form, the class docstring)."""
+        m = Z.shape[1]
+        n = dX.shape[1]
         BR = psd_sqrt_rows(as_covariance(R, m))
-        sp = self.sigma_points(n)
-        dX, Z, diff = measurement_transform(sp, x, S, model, m)      # eq. 8, one call
         if self._recentred:                                          # eq. 9 (deviations(), inline)
             Z0 = Z[0]
             D1 = diff(Z[1:], Z0)
@@ -205,43 +181,20 @@ class SquareRootUnscentedKalmanFilter(SigmaPointFilter):
         else:
             zm, D1, v0, w0 = self.deviations(sp, Z, diff)
             V = None
-        dX1 = dX[1:]
+        k = 2 * n
+        c = sp.sqrt_w
+        # the rows [c D1, c dX1; B_R, 0; sqrt(w0) v0] divided by c (plain copies into the Fortran-ordered A, no
+        # strided products); c goes onto the triangle in qr_lower_scaled
+        A = np.zeros((k + m + (w0 > 0.0), m + n), order="F")
+        A[:k, :m] = D1
+        A[:k, m:] = dX[1:]
+        A[k:k + m, :m] = BR / c
+        if w0 > 0.0:
+            A[-1, :m] = V[1] if V is not None else v0 * (math.sqrt(w0) / c)
+        J = qr_lower_scaled(A, c)                                    # eqs. 10, 12-13, 15-16 at once
+        if w0 < 0.0:
+            J = self.rank1(J, np.concatenate((v0, np.zeros(n))), w0, t, "srukf update", events)  # eq. 11
+        Sy = J[:m, :m]
         y = diff(z, zm)
-        mode = self._cov_update
-        if mode == "joint":
-            k = 2 * n
-            c = sp.sqrt_w
-            # the rows [c D1, c dX1; B_R, 0; sqrt(w0) v0] divided by c (plain copies into the Fortran-ordered
-            # A, no strided products); c goes onto the triangle in qr_lower_scaled
-            A = np.zeros((k + m + (w0 > 0.0), m + n), order="F")
-            A[:k, :m] = D1
-            A[:k, m:] = dX1
-            A[k:k + m, :m] = BR / c
-            if w0 > 0.0:
-                A[-1, :m] = V[1] if V is not None else v0 * (math.sqrt(w0) / c)
-            L = qr_lower_scaled(A, c)                                # eqs. 10, 12-13, 15-16 at once
-            if w0 < 0.0:
-                L = self.rank1(L, np.concatenate((v0, np.zeros(n))), w0, belief.t, "srukf update", events)  # eq. 11
-            Sy = L[:m, :m]
-            w, nis, Syy, out = self._whiten(belief, Sy, y, gate, m, events)
-            if out is not None:
-                return out
-            x1 = x + L[m:, :m] @ w                                   # eq. 14: K y = (P_xz S_y^-T) S_y^-1 y
-            S1 = L[m:, m:]
-        else:
-            Sy = self.sqrt_transform(sp, D1, BR, v0, w0, belief.t, "srukf innovation", events)  # eqs. 10-11
-            Pxz = (sp.w * dX1.T) @ D1                                # eq. 12 (chi_0 - x^- = 0)
-            w, nis, Syy, out = self._whiten(belief, Sy, y, gate, m, events)
-            if out is not None:
-                return out
-            W = solve_lower(Sy, Pxz.T)                               # S_y^-1 P_xz^T
-            x1 = x + w @ W                                           # eq. 14: K y = W^T S_y^-1 y
-            Kt = solve_lower(Sy, W, trans=1)                         # eq. 13: K^T = S_y^-T S_y^-1 P_xz^T
-            if mode == "qr":
-                S1 = self.sqrt_transform(sp, dX1 - D1 @ Kt, BR @ Kt, v0 @ Kt, w0, belief.t, "srukf update", events)
-            else:
-                U = Kt.T @ Sy                                        # eq. 15
-                S1 = S
-                for j in range(m):                                   # eq. 16: m downdates (columns, not points)
-                    S1 = self.rank1(S1, U[:, j], -1.0, belief.t, "srukf update", events)
-        return UpdateResult(Belief(belief.t, self.normalizer(model)(x1), S=S1), y, Syy, nis, True, tuple(events), 0)
+        # eq. 14: K y = (P_xz S_y^-T) S_y^-1 y, G^T = P_xz S_y^-T the joint factor's lower-left block
+        return y, Sy @ Sy.T, solve_lower(Sy, y), J[m:, :m].T, J[m:, m:]

@@ -4,14 +4,13 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from fusion.lapack import blas
-from fusion.api import (Belief, Gate, MeasurementModel, NonAdditiveMeasurementNoise, NonAdditiveProcessNoise,
-                        ProcessModel, UpdateResult, has)
+from scipy.linalg import blas
+from fusion.api import (Belief, MeasurementModel, NonAdditiveMeasurementNoise, NonAdditiveProcessNoise,
+                        ProcessModel, has)
 
-from .base import as_covariance, as_vector, covariance_of, linear_predict, linearised_predict, residual_of
-from .checks import MEAN, SIGMA, array_of, finite, frozen, trusted
+from .base import as_covariance, covariance_of, linear_predict, linearised_predict, residual_of
 from .linalg import psd_sqrt_rows, symmetrise
-from .sigma_point_filter import SigmaPointFilter, measurement_transform
+from .sigma_point_filter import SigmaPointFilter
 from .sigma_points import UnscentedParams
 
 __all__ = ["UnscentedKalmanFilter", "SigmaPointFilter"]   # SigmaPointFilter: import shim, now in sigma_point_filter.py
@@ -68,12 +67,9 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         if dt == 0.0:
             return belief
         if self.use_linear_prediction(process):
-            x1, F, Q = linearised_predict(belief, process, u, dt, self.check_Q)
+            x1, F, Q = linearised_predict(belief, process, u, dt)
             return Belief(belief.t + dt, x1, P=linear_predict(belief.x, covariance_of(belief), F, Q))
-        if trusted(process):
-            Q = process.Q(belief.x, u, dt)
-        else:
-            Q = self.check_Q(process.Q(frozen(belief.x), u, dt), belief.x.shape[0], "Q", MEAN, belief.x)
+        Q = process.Q(belief.x, u, dt)
         if self._augmented:
             return self._predict_augmented(belief, process, u, dt, covariance_of(belief), Q)
         return self.sigma_predict(belief, process, lambda X: process.f(X, u, dt), lambda x0, x1: Q, dt)
@@ -84,9 +80,6 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         L, _, event = self.factor(covariance_of(belief), belief.t, "ukf predict")   # L L^T = P
         dX = sp.E @ L.T
         Y = propagate(x + dX)                                # 000 eq. 4, one call
-        if not trusted(process):
-            Y = array_of(Y, dX.shape, "f", SIGMA)
-            finite(Y, "f", SIGMA, x, dX)
         xm = sp.Wm @ Y                                       # 000 eq. 5
         D = Y - xm
         xm = process.normalize(xm)
@@ -104,73 +97,55 @@ class UnscentedKalmanFilter(SigmaPointFilter):
         W = dX[:, n:]
         if has(process, NonAdditiveProcessNoise):
             Y = process.f_with_noise(X, W, u, dt)
-            if not trusted(process):
-                Y = array_of(Y, X.shape, "f_with_noise", SIGMA)
         else:
-            Y = process.f(X, u, dt)
-            Y = (Y if trusted(process) else array_of(Y, X.shape, "f", SIGMA)) + W
-        if not trusted(process):
-            finite(Y, "f", SIGMA, X, W)
+            Y = process.f(X, u, dt) + W
         xm = sp.Wm @ Y
         D = Y - xm
         return Belief(belief.t + dt, process.normalize(xm), P=symmetrise((D.T * sp.Wc) @ D),
                       events=(event,) if event is not None else ())
 
-    # ------------------------------------------------------------------ update
-    def update(self, belief: Belief, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
-               gate: Gate | None = None) -> UpdateResult:
-        x = belief.x
-        P = belief.P if belief.P is not None else belief.cov
-        z = as_vector(z)
-        m = z.shape[0]
-        R = as_covariance(R, m)
-        n = x.shape[0]
-        L, P, event = self.factor(P, belief.t, "ukf update")      # L L^T = P (repaired if need be)
-        events = (event,) if event is not None else ()
-        if self._augmented:
-            sp = self.sigma_points(n + m)
-            La = np.zeros((n + m, n + m))
-            La[:n, :n] = L
-            La[n:, n:] = psd_sqrt_rows(R).T
-            dXa = sp.E @ La.T
-            dX = dXa[:, :n]
-            if has(model, NonAdditiveMeasurementNoise):
-                Z = model.h_with_noise(x + dX, dXa[:, n:])
-                if not trusted(model):
-                    Z = array_of(Z, (dX.shape[0], m), "h_with_noise", SIGMA)
-            else:
-                Z = model.h(x + dX)
-                Z = (Z if trusted(model) else array_of(Z, (dX.shape[0], m), "h", SIGMA)) + dXa[:, n:]
-            if not trusted(model):
-                finite(Z, "h", SIGMA, x, dXa)
-            R = None
-            diff = residual_of(model)
+    # ------------------------------------------------------------------ update (SigmaPointFilter.update)
+    def prior_factor(self, belief: Belief, events: list) -> tuple[np.ndarray, np.ndarray]:
+        L, P, event = self.factor(covariance_of(belief), belief.t, "ukf update")   # L L^T = P (repaired if need be)
+        if event is not None:
+            events.append(event)
+        return L, P
+
+    def measure_augmented(self, belief: Belief, L: np.ndarray, model: MeasurementModel, R, m: int):
+        """The points also sample v ~ N(0, R): R is then in them."""
+        n = belief.x.shape[0]
+        sp = self.sigma_points(n + m)
+        La = np.zeros((n + m, n + m))
+        La[:n, :n] = L
+        La[n:, n:] = psd_sqrt_rows(as_covariance(R, m)).T
+        dXa = sp.E @ La.T
+        dX = dXa[:, :n]
+        if has(model, NonAdditiveMeasurementNoise):
+            Z = model.h_with_noise(belief.x + dX, dXa[:, n:])
         else:
-            sp = self.sigma_points(n)
-            dX, Z, diff = measurement_transform(sp, x, L, model, m)   # 001 eq. 14, one call
+            Z = model.h(belief.x + dX) + dXa[:, n:]
+        return sp, dX, Z, residual_of(model)
+
+    def innovation(self, sp, dX, Z, diff, z, R, P, t, events):
+        """S and P_xz as sums (001 eqs. 14-17), S factored; ``W = L_y^-1 P_xz^T`` (C = W^T) and w from one
+        triangular solve, P^+ = P^- - W^T W (001 eqs. 18-20)."""
         zm = sp.Wm @ Z
         dZ = diff(Z, zm)
         A = dZ * sp.Wc_col
         S = dZ.T @ A                                           # 001 eq. 16
         if R is not None:
-            S += R                                             # 001 eq. 17
-        Ly, S, event = self.factor(S, belief.t, "ukf innovation covariance")
+            S += as_covariance(R, Z.shape[1])                  # 001 eq. 17
+        Ly, S, event = self.factor(S, t, "ukf innovation covariance")
         if event is not None:
-            events += (event,)
+            events.append(event)
         # [P_xz; y^T] (n + 1, m) in one buffer, so that one triangular solve gives both
         # W = L_y^-1 P_xz^T and w = L_y^-1 y (its transpose is Fortran-ordered: no copy for BLAS)
-        B = np.empty((n + 1, m))
+        n = dX.shape[1]
+        B = np.empty((n + 1, Z.shape[1]))
         np.matmul(dX.T, A, out=B[:n])                          # 001 eq. 15
         y = B[n] = diff(z, zm)
         V = _dtrsm(1.0, Ly, B.T, 0, 1, 0, 0, 1)               # (m, n + 1) = L_y^-1 [P_xz^T, y] (left, lower, overwrite_b)
         W = V[:, :n]
-        w = V[:, n]
-        nis = float(w.dot(w))
-        out = self.rejected(belief, y, S, nis, gate, m, events, 0)
-        if out is not None:
-            return out
-        x1 = x + w @ W                                         # 001 eqs. 18-19
-        P1 = P - W.T @ W                                       # 001 eq. 20
-        # W.T @ W is computed by BLAS syrk (numpy detects a.T @ a), exactly symmetric, so P1 is exactly
+        # W.T @ W is computed by BLAS syrk (numpy detects a.T @ a), exactly symmetric, so P^+ is exactly
         # symmetric when P is (tests/filters/test_filters_exactness.py checks it bit for bit)
-        return UpdateResult(Belief(belief.t, self.normalizer(model)(x1), P=P1), y, S, nis, True, events, 0)
+        return y, S, V[:, n], W, P - W.T @ W                   # 001 eq. 20

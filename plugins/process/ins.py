@@ -249,19 +249,21 @@ class Ins(InsNoise, ProcessModel):
         order: the same numbers as k calls of :meth:`f` (to rounding, ~1e-15), for the filters'
         ``predict_inputs`` (a run of samples between two measurements in one sigma-point step).
 
-        Vectorised over the samples as well as the points (``ins_batch.integrate_inputs``: within a run
-        the biases are constant and the rotation increments do not depend on the attitude). With eta > 0
-        (|q| enters every step), the Earth rate (it depends on the attitude) or a sample held past
-        ``hold_after`` (an IMU gap: the coast is not a sample): k calls of :meth:`f`."""
+        Vectorised over the samples as well as the points by the compiled kernel (``ins_batch.integrate_inputs``:
+        within a run the biases are constant and the rotation increments do not depend on the attitude). With
+        eta > 0 (|q| enters every step), the Earth rate (it depends on the attitude), a sample held past
+        ``hold_after`` (an IMU gap: the coast is not a sample), or without the kernel: k calls of :meth:`f`."""
         us = np.asarray(us, dtype=float)
         dts = np.asarray(dts, dtype=float)
         x = np.asarray(x, dtype=float)
         held = self._hold is not None and float(dts.max()) > self._hold
-        if dts.shape[0] == 1 or self.params.eta or self.w_ie is not None or held:  # type: ignore[attr-defined]
-            for u, dt in zip(us, dts):
-                x = self.f(x, u, dt)
-            return x
-        return integrate_inputs(x, us, dts, self._g_col, self._trap)
+        if not (dts.shape[0] == 1 or self.params.eta or self.w_ie is not None or held):  # type: ignore[attr-defined]
+            out = integrate_inputs(x, us, dts, self._g_col, self._trap)
+            if out is not None:
+                return out
+        for u, dt in zip(us, dts):
+            x = self.f(x, u, dt)
+        return x
 
     def normalize(self, x: np.ndarray) -> np.ndarray:
         """Renormalise the quaternion block of states x (..., 16) to unit norm (a new array); with

@@ -1,17 +1,16 @@
-"""Vectorised kernels of the ``ins`` process for a run of IMU samples integrated in one step (the filters'
-``predict_inputs``): :func:`integrate_inputs` (the mean propagation, exact against sample-by-sample
-:meth:`Ins.f <fusion_plugins.process.ins.Ins.f>`) and :func:`interval_noise` (the process noise of the
-interval), and :func:`add_hold_noise` (the noise of a sample held over an IMU gap). Kept apart from ins.py
-so that each module stays small; the maths is paper 000 eqs. 33-52.
+"""The ``ins`` process for a run of IMU samples integrated in one step (the filters' ``predict_inputs``):
+:func:`integrate_inputs` (the mean propagation by the compiled kernel, exact against sample-by-sample
+:meth:`Ins.f <fusion_plugins.process.ins.Ins.f>`, the one numpy propagation), :func:`interval_noise` (the
+process noise of the interval), and :func:`add_hold_noise` (the noise of a sample held over an IMU gap).
+Kept apart from ins.py so that each module stays small; the maths is paper 000 eqs. 33-52.
 
 States are handled component-first, ``(16, N)`` (one row per element, one column per sigma point), so
 every product is one BLAS call on whole rows instead of N tiny ones.
 
 :func:`integrate_inputs` and (isotropic noises) :func:`interval_noise` run the compiled kernel
-``_ins_batch_kernel.c`` when it is built (fusion.kernels; the same operations as loops, the same numbers to
-rounding: 320 -> 51 us for a run of 40 samples on 33 points, 36 -> 10 us for the noise);
-:func:`integrate_inputs_numpy` and :func:`interval_noise_numpy` are the references they are tested against
-(tests/models/test_ins_batch_kernel.py), and what runs without a C compiler or with ``FUSION_PURE_PYTHON=1``.
+``_ins_batch_kernel.c`` when it is built (fusion.kernels). Their references, tested against the kernel
+(tests/models/test_ins_batch_kernel.py) and run without a C compiler or with ``FUSION_PURE_PYTHON=1``:
+k calls of ``Ins.f`` and :func:`interval_noise_numpy`.
 """
 from __future__ import annotations
 
@@ -22,7 +21,7 @@ import numpy as np
 from fusion import kernels
 from fusion import quaternion as quat
 
-__all__ = ["integrate_inputs", "integrate_inputs_numpy", "interval_noise", "interval_noise_numpy", "add_hold_noise",
+__all__ = ["integrate_inputs", "interval_noise", "interval_noise_numpy", "add_hold_noise",
            "integrated_gm_variance", "gm_rate_noise", "K10T", "T16T"]
 
 # [R(q).ravel(), |q|^2] = outer(q, q).ravel() @ K10 (one product gives the rotation matrix and its normaliser)
@@ -31,7 +30,6 @@ K10 = np.concatenate([quat.ROTATION_FORM, np.eye(16)[:, quat.NORM_TERMS].sum(axi
 # per sigma point): every product below is then one BLAS gemm on whole rows instead of N tiny ones.
 K10T = np.ascontiguousarray(K10.T)          # (10, 16): [R(q) rows (9), |q|^2] = K10T @ outer(q, q)
 T16T = np.ascontiguousarray(quat.PRODUCT_FORM.T)     # (4, 16):  p (x) q = T16T @ outer(p, q)
-_ONE = np.array([1.0, 0.0, 0.0, 0.0])
 # 4-point Gauss-Legendre on [-1, 1], mapped to [0, 1] below: numpy.polynomial.legendre.leggauss(4) to the
 # last bit (tests/models/test_ins_batch_constants.py), tabulated because importing numpy.polynomial costs
 # ~7 ms of every run's start-up
@@ -49,46 +47,28 @@ _G16[10:16, 9:15] = np.eye(6)
 _GL_POWERS = np.stack((_GL_NODES, 0.5 * _GL_NODES ** 2, _GL_NODES ** 3 / 6.0), axis=1)
 
 
-def _qmul_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton products of quaternions stored as rows: a, b (..., 4, N) -> (..., 4, N)."""
-    o = a[..., :, None, :] * b[..., None, :, :]
-    return np.matmul(T16T, o.reshape(o.shape[:-3] + (16, o.shape[-1])))
-
-
-def _prefix_products(D: np.ndarray, N: int) -> None:
-    """In place: D (k + 1, 4, N) holds 1 then the increments dq_0 .. dq_{k-1}; on return D[j] = dq_0 (x) ...
-    (x) dq_{j-1}. A loop of one product per sample costs ~3 numpy calls a sample; from ~16 samples on, blocks
-    of b ~ sqrt(k) are cheaper: prefixes inside every block at once (b - 1 products), then along the block
-    ends (k / b - 1), then one product for the rest. (A log-depth scan measured slower: log2(k) passes over
-    the whole array.)"""
-    k = D.shape[0] - 1
-    b = int(round(math.sqrt(k)))
-    nb = k // b
-    if k < 16 or nb < 2:
-        for j in range(1, k + 1):
-            np.matmul(T16T, (D[j - 1][:, None] * D[j]).reshape(16, N), out=D[j])
-        return
-    E = D[1:1 + nb * b].reshape(nb, b, 4, N)               # a view: blocks of b increments
-    for j in range(1, b):                                   # prefixes within each block
-        E[:, j] = _qmul_rows(E[:, j - 1], E[:, j])
-    for i in range(1, nb):                                  # prefixes at the block ends
-        E[i, b - 1] = _qmul_rows(E[i - 1, b - 1], E[i, b - 1])
-    E[1:, :b - 1] = _qmul_rows(E[:-1, b - 1][:, None], E[1:, :b - 1])
-    for j in range(1 + nb * b, k + 1):                      # the samples after the last full block
-        np.matmul(T16T, (D[j - 1][:, None] * D[j]).reshape(16, N), out=D[j])
-
-
 _KERNEL = kernels.load("fusion_plugins.process._ins_batch_kernel")
 
 
 def integrate_inputs(x: np.ndarray, us: np.ndarray, dts: np.ndarray, g_col: np.ndarray,
-                     trapezoidal: bool) -> np.ndarray:
+                     trapezoidal: bool) -> np.ndarray | None:
     """States x (..., 16) after the IMU samples ``us`` (k, 6) (m/s^2, rad/s, FRD), each held over ``dts``
-    (k,) (s), without eta and Earth rate; ``g_col`` (3, 1) is g_n (m/s^2, NED): :func:`integrate_inputs_numpy`
-    (the maths), by the compiled kernel when it is loaded (C-contiguous float64 copies of the arguments
-    where needed; the result is a new C-contiguous array)."""
+    (k,) (s), without eta and Earth rate; ``g_col`` (3, 1) is g_n (m/s^2, NED): by the compiled kernel, or
+    None when it is not loaded (the caller then integrates sample by sample with ``Ins.f``, the reference the
+    kernel is tested against, tests/models/test_ins_batch_kernel.py). A new C-contiguous array.
+
+    The kernel is vectorised over the samples too, which is exact because within the run the biases are
+    constant (eqs. 51-52) and, without eta and Earth rate, the rotation increments do not depend on the
+    attitude: with a_j = u_j - b_a, dq_j = [cos s_j, sinc s_j w_j dt_j / 2] (eqs. 43-49) and the prefix
+    products P_j = dq_0 (x) ... (x) dq_{j-1}, q_j = q_0 (x) P_j and C_j = C(q_0) C(P_j), so with
+    b_j = C(P_j) a_j (Euler) or (C(P_j) + C(P_j+1)) a_j / 2 (trapezoidal)::
+
+        v_k = v_0 + C(q_0) sum_j b_j dt_j + g_n T
+        p_k = p_0 + v_0 T + C(q_0) sum_j b_j w_j + g_n sum_j w_j,   w_j = dt_j r_j (+ dt_j^2 / 2)
+
+    with T = sum dt_j and r_j = sum_{i>j} dt_i."""
     if _KERNEL is None:
-        return integrate_inputs_numpy(x, us, dts, g_col, trapezoidal)
+        return None
     X = np.ascontiguousarray(x, dtype=float)
     if X.shape[-1:] != (16,):
         raise ValueError(f"integrate_inputs: states must be (..., 16), got shape {X.shape}")
@@ -96,63 +76,6 @@ def integrate_inputs(x: np.ndarray, us: np.ndarray, dts: np.ndarray, g_col: np.n
     _KERNEL.integrate(X.reshape(-1, 16), np.ascontiguousarray(us, dtype=float), np.ascontiguousarray(dts, dtype=float),
                       np.ascontiguousarray(g_col, dtype=float).reshape(3), bool(trapezoidal), out.reshape(-1, 16))
     return out
-
-
-def integrate_inputs_numpy(x: np.ndarray, us: np.ndarray, dts: np.ndarray, g_col: np.ndarray,
-                           trapezoidal: bool) -> np.ndarray:
-    """States x (..., 16) after the IMU samples ``us`` (k, 6), each held over ``dts`` (k,) (s), without
-    eta and Earth rate (see :meth:`Ins.f_inputs`); ``g_col`` (3, 1) is g_n. The same numbers as k
-    calls of ``Ins.f`` to rounding (~1e-15).
-
-    Vectorised over the samples too, which is exact because within the run the biases are constant
-    (eqs. 51-52) and, without eta and Earth rate, the rotation increments do not depend on the
-    attitude: with a_j = u_j - b_a, dq_j = [cos s_j, sinc s_j w_j dt_j / 2] (eqs. 43-49) and the prefix
-    products P_j = dq_0 (x) ... (x) dq_{j-1} (:func:`_prefix_products`),
-    q_j = q_0 (x) P_j and C_j = C(q_0) C(P_j), so with b_j = C(P_j) a_j (Euler) or (C(P_j) + C(P_j+1)) a_j / 2 (trapezoidal)::
-
-        v_k = v_0 + C(q_0) sum_j b_j dt_j + g_n T
-        p_k = p_0 + v_0 T + C(q_0) sum_j b_j w_j + g_n sum_j w_j,   w_j = dt_j r_j (+ dt_j^2 / 2)
-
-    with T = sum dt_j and r_j = sum_{i>j} dt_i."""
-    k = dts.shape[0]
-    lead = x.shape[:-1]
-    X = x.reshape(-1, 16).T                                  # (16, N)
-    N = X.shape[1]
-    half = (us[:, 3:, None] - X[13:16]) * (0.5 * dts)[:, None, None]   # (k, 3, N): w dt / 2, eqs. 43-45
-    s = np.sqrt(np.einsum("kin,kin->kn", half, half))       # eq. 49
-    s_ = np.maximum(s, 1e-300)
-    D = np.empty((k + 1, 4, N))                              # D[j] = P_j = dq_0 (x) ... (x) dq_{j-1}
-    D[0] = _ONE[:, None]
-    D[1:, 0] = np.cos(s)
-    np.multiply((np.sin(s_) / s_)[:, None], half, out=D[1:, 1:])
-    _prefix_products(D, N)
-    Dt = D.transpose(1, 0, 2)                                # (4, k + 1, N) view: the outer product comes out
-    RP = K10T[:9] @ (Dt[:, None] * Dt[None, :]).reshape(16, (k + 1) * N)   # in gemm order, no copy
-    RP = RP.reshape(3, 3, k + 1, N)                          # C(P_j) (unit P_j: R = C)
-    a = us[:, :3].T[:, :, None] - X[10:13, None, :]          # (3, k, N): a_j = u_j - b_a, eq. 37
-    T = float(dts.sum())
-    wts = np.empty((k, 2))
-    wts[:, 0] = dts
-    np.multiply(dts, T - np.cumsum(dts), out=wts[:, 1])
-    if trapezoidal:
-        wts[:, 1] += 0.5 * dts * dts
-    g_p = g_col * wts[:, 1].sum()
-    if trapezoidal:
-        b = ((RP[:, :, :-1] + RP[:, :, 1:]) * a).sum(axis=1)    # (3, k, N): twice b_j
-        wts *= 0.5
-    else:
-        b = (RP[:, :, :-1] * a).sum(axis=1)
-    B = np.tensordot(b, wts, axes=(1, 0))[None]              # (1, 3, N, 2): [sum b dt, sum b w], frame of q_0
-    q0 = X[6:10]
-    Rn = K10T @ (q0[:, None] * q0[None, :]).reshape(16, N)
-    CB = ((Rn[:9] / Rn[9]).reshape(3, 3, N, 1) * B).sum(axis=1)   # (3, N, 2)
-    out = np.empty((16, N))
-    v0 = X[3:6]
-    out[3:6] = v0 + CB[..., 0] + g_col * T
-    out[0:3] = X[0:3] + v0 * T + CB[..., 1] + g_p
-    np.matmul(T16T, (q0[:, None] * D[-1][None, :]).reshape(16, N), out=out[6:10])
-    out[10:16] = X[10:16]
-    return out.T.reshape(lead + (16,))
 
 
 def interval_noise(x0: np.ndarray, x1: np.ndarray, dts: np.ndarray, g_n: np.ndarray, var_a: np.ndarray,

@@ -45,5 +45,7 @@ def test_batched_ukf_equals_filterpy(name, linear_prediction):
             ref.update(z[i])
             worst = max(worst, np.abs(b.x[i] - ref.x).max(), np.abs(b.cov[i] - ref.P).max(),
                         np.abs(up.S[i] - ref.S).max())
+            # closed-form equations both, differing only by rounding (no solver tolerance): measured under 1 %
+            # of these tolerances with numpy 1.26 and 2.4, FilterPy 2.0
             assert up.nis[i] == pytest.approx(float(ref.y @ np.linalg.solve(ref.S, ref.y)), rel=1e-9)
     assert worst < 1e-9

@@ -1,4 +1,4 @@
-"""Time sanity (issue 10 item 2, fusion/clock.py): wild stamps never move the horizon, clock jumps and
+"""Time sanity (issue 10 item 2, fusion/run/clock.py): wild stamps never move the horizon, clock jumps and
 restarts are detected and re-synchronised, gaps are bounded.
 
 Every time asserted here is a sensor stamp of the recording (or the span they cover, ``duration_s``),
@@ -16,7 +16,7 @@ import pytest
 from fusion import pipeline
 from fusion.api import Message
 from fusion.cli import main
-from fusion.clock import ClockGuard
+from fusion.run.clock import ClockGuard
 from fusion.config import SchedulerSpec, load_system
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -71,5 +71,5 @@ def test_mutated_values_of_range_recordings_run_to_the_end(workdir, case):
 @given(case=mutation(ALL_TARGETS))
 def test_any_mutated_line_of_any_recording_runs_to_the_end(workdir, case):
     """Any field mutated, the time stamp too, in every shipped recording (a stamp bit-flipped 1 s ahead, inside
-    scheduler.future_s, is held by the cadence bound of fusion/clock.py and dropped, not taken as real)."""
+    scheduler.future_s, is held by the cadence bound of fusion/run/clock.py and dropped, not taken as real)."""
     check(workdir, case, values_only=False)

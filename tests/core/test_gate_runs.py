@@ -93,7 +93,7 @@ def test_replay_rewinds_a_gate_state_with_the_belief():
     sys.path.insert(0, str(ROOT / "tests" / "core"))
     from test_scheduler import estimates, stream, system
 
-    from fusion.scheduler import Scheduler
+    from fusion.run import Loop
 
     class EveryOther(Gate):
         """Accepts every other measurement (memory: the parity, a bool)."""
@@ -111,13 +111,13 @@ def test_replay_rewinds_a_gate_state_with_the_belief():
         return sys_
 
     msgs = stream(duration=10.0)
-    ordered = Scheduler(with_gate(system()))
+    ordered = Loop(with_gate(system()))
     ref = estimates(ordered, msgs)
     held = {5, 17, 40}
     arrival = [m for i, m in enumerate(msgs) if i not in held]
     for i in sorted(held):
         arrival.insert(next(j for j, m in enumerate(arrival) if m.t > msgs[i].t + 1.0), msgs[i])
-    sched = Scheduler(with_gate(system(late_policy="replay")))
+    sched = Loop(with_gate(system(late_policy="replay")))
     out = list(sched.run(arrival))
     assert [e.kind for e in out if getattr(e, "kind", None) in ("late", "replayed")] == ["replayed"] * 3
     np.testing.assert_allclose(sched.belief.x, ref[-1].belief.x, atol=1e-10)

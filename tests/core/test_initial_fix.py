@@ -11,7 +11,7 @@ import yaml
 
 from fusion.config import load_system
 from fusion.logformat import iter_messages
-from fusion.scheduler import Scheduler
+from fusion.run import Loop
 from fusion.sources.recording import open_lines
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -31,16 +31,16 @@ def _system(tmp_path: Path):
 
 def test_first_fix_with_velocity_sets_position_and_velocity(tmp_path):
     system = _system(tmp_path)
-    sched = Scheduler(system)
+    sched = Loop(system)
     for item in iter_messages(open_lines(system.recording)):
         if getattr(item, "sensor", None) in ("truth", "reference") or isinstance(item, Exception):
             continue
         list(sched.push(item))
         if sched.belief is not None:
             break
-    fix = sched._fix
+    fix = sched.startup.latest_fix
     assert fix is not None and len(fix.z) == 5          # [pn pe pd vn ve]: the fix carried velocity
-    x0, P0 = sched._initial()
+    x0, P0 = sched.startup.initial()
     lay = system.layout
     p, v = lay["p"], lay["v"]
     np.testing.assert_allclose(x0[p.start:p.start + 3], fix.model.position_from(fix.z, x0), atol=1e-12)

@@ -3,7 +3,7 @@ stillness test (tester5 #5).
 
 #7: the initial position was the LAST fix of ``initial.align_s`` (docs: "the first fix"): one echo-corrupted
 fix there started the filter 1.6 m off. Now a window judged static combines its fixes robustly
-(fusion.scheduling.initialisation.combine_fixes). #5: the window was averaged as static with no check; a
+(fusion.run.startup.combine_fixes). #5: the window was averaged as static with no check; a
 moving one is now a warning (and the summary's health), the gyro-bias prior is kept."""
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ import yaml
 
 from fusion.api import Observation
 from fusion.config import load_system
-from fusion.scheduler import Scheduler
-from fusion.scheduling.initialisation import combine_fixes
+from fusion.run import Loop
+from fusion.run.startup import combine_fixes
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -48,11 +48,11 @@ def test_combine_without_covariances_is_the_median():
     assert P is None
 
 
-def _abps_scheduler() -> Scheduler:
-    return Scheduler(load_system(ROOT / "configs" / "abps_ins.yaml"))
+def _abps_scheduler() -> Loop:
+    return Loop(load_system(ROOT / "configs" / "abps_ins.yaml"))
 
 
-def _fixes(sched: Scheduler, last_off: float) -> None:
+def _fixes(sched: Loop, last_off: float) -> None:
     model = sched.sensors["abps"].model
     R = np.diag([0.07, 0.22, 0.05]) ** 2
     rng = np.random.default_rng(1)
@@ -60,26 +60,26 @@ def _fixes(sched: Scheduler, last_off: float) -> None:
         z = np.array([3.2, 1.2, -0.75]) + rng.normal(size=3) * [0.07, 0.22, 0.05]
         if i == 18:
             z[1] += last_off
-        sched._take_fix(Observation(0.45 * i, z, model, R))
+        sched.startup.take_fix(Observation(0.45 * i, z, model, R))
 
 
 def test_static_window_starts_from_the_fixes_not_the_last_one():
     sched = _abps_scheduler()
     _fixes(sched, 1.6)
-    sched._still = True                                  # the alignment found the window static
-    x0, P0 = sched._initial()
+    sched.startup.still = True                                  # the alignment found the window static
+    x0, P0 = sched.startup.initial()
     p = sched.system.layout["p"]
     rx = x0[p.start:p.start + 2] + [0.2, 0.0]             # the receiver (lever arm 0.2 m forward, yaw 0)
     assert np.linalg.norm(rx - [3.2, 1.2]) < 0.15         # the last fix alone: 1.6 m off
     assert P0[p.start + 1, p.start + 1] == pytest.approx(0.22 ** 2)
-    assert any(e.kind == "initial" and "18 of the 19" in e.detail for e in sched._filter_events)
+    assert any(e.kind == "initial" and "18 of the 19" in e.detail for e in sched.tally.take())
 
 
 def test_a_window_not_judged_static_starts_from_the_latest_fix():
     sched = _abps_scheduler()
     _fixes(sched, 1.6)
-    sched._still = None                                  # no stillness verdict (no test, in flight)
-    x0, _ = sched._initial()
+    sched.startup.still = None                                  # no stillness verdict (no test, in flight)
+    x0, _ = sched.startup.initial()
     p = sched.system.layout["p"]
     assert x0[p.start + 1] > 2.2
 

@@ -1,4 +1,4 @@
-"""Scheduler: reorder buffer, rates, late policies, outputs, input integration."""
+"""The run loop (fusion.run.loop.Loop): reorder buffer, rates, late policies, outputs, input integration."""
 import random
 import textwrap
 
@@ -7,7 +7,7 @@ import pytest
 
 from fusion.api import Estimate, Event, Message
 from fusion.config import SystemSpec, wire
-from fusion.scheduler import Scheduler
+from fusion.run import Loop, Updated
 
 import yaml
 
@@ -52,12 +52,12 @@ def estimates(sched, msgs):
 
 def test_shuffled_arrival_gives_same_estimates_as_time_order():
     msgs = stream()
-    ref = estimates(Scheduler(system()), msgs)
+    ref = estimates(Loop(system()), msgs)
     rng = random.Random(7)
     # Jitter arrival order by up to 0.4 s; a 0.5 s reorder buffer restores the time order.
     arrival = sorted(msgs, key=lambda m: m.t + rng.uniform(0, 0.4))
     assert arrival != msgs
-    got = estimates(Scheduler(system(max_latency=0.5)), arrival)
+    got = estimates(Loop(system(max_latency=0.5)), arrival)
     assert len(got) == len(ref) == len(msgs)
     for a, b in zip(got, ref):
         assert a.t == b.t and a.sensor == b.sensor
@@ -70,12 +70,12 @@ def test_late_messages_dropped_and_counted():
     rng = random.Random(3)
     arrival = sorted(msgs, key=lambda m: m.t + rng.uniform(0, 0.4))
     sys_ = system(max_latency=0.0)
-    sched = Scheduler(sys_)
+    sched = Loop(sys_)
     out = list(sched.run(arrival))
     late = sum(s.counters["late"] for s in sched.sensors.values())
     assert late > 0
     assert late == sum(1 for e in out if isinstance(e, Event) and e.kind == "late")
-    # A message arriving ahead of the others by more than the cadence bound is held (fusion.clock) and, when
+    # A message arriving ahead of the others by more than the cadence bound is held (fusion.run.clock) and, when
     # its sensor's next message comes stamped before it, dropped as a wild stamp: counted, with a time event.
     wild = sum(s.counters["malformed"] for s in sched.sensors.values())
     assert wild == sum(1 for e in out if isinstance(e, Event) and e.kind == "time")
@@ -84,7 +84,7 @@ def test_late_messages_dropped_and_counted():
 
 def test_replay_recovers_time_ordered_result():
     msgs = stream(duration=10.0)
-    ref = estimates(Scheduler(system()), msgs)
+    ref = estimates(Loop(system()), msgs)
     # Hold back three messages and deliver them 1 s late: replay must give the same final belief.
     held = {5, 17, 40}
     arrival = [m for i, m in enumerate(msgs) if i not in held]
@@ -92,7 +92,7 @@ def test_replay_recovers_time_ordered_result():
         pos = next(j for j, m in enumerate(arrival) if m.t > msgs[i].t + 1.0)
         arrival.insert(pos, msgs[i])
     sys_ = system(late_policy="replay")
-    sched = Scheduler(sys_)
+    sched = Loop(sys_)
     out = list(sched.run(arrival))
     # replayed, so counted by what the re-run made of them (used), not late
     assert sum(1 for e in out if isinstance(e, Event) and e.kind == "replayed") == 3
@@ -108,10 +108,10 @@ def test_replay_of_consecutive_and_jittered_late_messages_recovers_the_time_orde
     snapshot before it, none dropped while the history covers it, and the end is the in-order belief.
     (Not in the first second: a message older than the filter's first one has no snapshot before it.)"""
     msgs = stream(seed=seed, duration=10.0)
-    ref = estimates(Scheduler(system()), msgs)
+    ref = estimates(Loop(system()), msgs)
     rng = random.Random(seed)
     arrival = sorted(msgs, key=lambda m: m.t + (rng.uniform(0, 0.35) if m.t > 1.0 else 0.0))
-    sched = Scheduler(system(late_policy="replay"))
+    sched = Loop(system(late_policy="replay"))
     out = list(sched.run(arrival))
     replayed = sum(1 for e in out if isinstance(e, Event) and e.kind == "replayed")
     assert replayed > 20 and sum(s.counters["late"] for s in sched.sensors.values()) == 0
@@ -124,13 +124,13 @@ def test_replay_of_consecutive_and_jittered_late_messages_recovers_the_time_orde
 def test_two_adjacent_late_messages_are_both_replayed():
     """The second of two consecutive late ranges is older than the first one's re-run: still replayed."""
     msgs = stream(duration=6.0)
-    ref = estimates(Scheduler(system()), msgs)
+    ref = estimates(Loop(system()), msgs)
     a, b = 20, 21
     arrival = [m for i, m in enumerate(msgs) if i not in (a, b)]
     for i in (a, b):
         pos = next(j for j, m in enumerate(arrival) if m.t > msgs[b].t + 0.3)
         arrival.insert(pos, msgs[i])
-    sched = Scheduler(system(late_policy="replay"))
+    sched = Loop(system(late_policy="replay"))
     out = list(sched.run(arrival))
     assert [e.kind for e in out if isinstance(e, Event) and e.kind in ("late", "replayed")] == ["replayed"] * 2
     np.testing.assert_allclose(sched.belief.x, ref[-1].belief.x, rtol=0, atol=1e-10)
@@ -138,7 +138,7 @@ def test_two_adjacent_late_messages_are_both_replayed():
 
 def test_fixed_rate_outputs_between_updates():
     msgs = stream(duration=5.0)
-    out = estimates(Scheduler(system(rate_hz=20)), msgs)
+    out = estimates(Loop(system(rate_hz=20)), msgs)
     ticks = [e.t for e in out if e.reason == "output"]
     assert len(ticks) >= 5 * 20 - 2
     np.testing.assert_allclose(np.diff(ticks), 0.05, atol=1e-9)
@@ -146,14 +146,14 @@ def test_fixed_rate_outputs_between_updates():
 
 def test_time_offset_shifts_sensor_time():
     msgs = stream(duration=3.0)
-    out = estimates(Scheduler(system(offset=-0.02, max_latency=0.02)), msgs)   # the offset fits the buffer
+    out = estimates(Loop(system(offset=-0.02, max_latency=0.02)), msgs)   # the offset fits the buffer
     fast_t = sorted(e.t for e in out if e.sensor == "fast")
     np.testing.assert_allclose(fast_t[:3], [0.03, 0.13, 0.23], atol=1e-12)
 
 
 def test_truth_and_unknown_sensors_are_not_fed():
     msgs = [Message(0.0, "truth", (1.0, 2.0, 0.0, 0.0)), Message(0.1, "mystery", (1.0,))] + stream(duration=1.0)
-    sched = Scheduler(system())
+    sched = Loop(system())
     out = list(sched.run(msgs))
     assert sched.unused == {"mystery": 1}                  # truth is the pipeline's, never counted as unknown
     assert any(isinstance(e, Event) and e.kind == "warning" and e.sensor == "mystery" for e in out)
@@ -162,7 +162,7 @@ def test_truth_and_unknown_sensors_are_not_fed():
 def test_message_with_several_ranges_uses_block_diagonal_R():
     """One message 'B1 r1 B2 r2' is one joint EKF update with R = 0.1^2 I (R of the config is per range)."""
     sys_ = system()
-    a = estimates(Scheduler(sys_), [Message(0.0, "fast", ("B1", 9.0, "B2", 12.0))])[-1]
+    a = estimates(Loop(sys_), [Message(0.0, "fast", ("B1", 9.0, "B2", 12.0))])[-1]
     x, P = sys_.x0, sys_.P0
     b = np.array([BEACONS["B1"], BEACONS["B2"]])
     d = x[:2] - b
@@ -189,7 +189,7 @@ def test_geometry_warning_reported_when_it_starts_and_clears():
         p = np.array([5.0, y])
         b = "ABC"[k % 3]
         msgs.append(Message(t, "uwb", (b, float(np.linalg.norm(p - np.array(spec.beacons[b]))))))
-    out = list(Scheduler(wire(spec)).run(msgs))
+    out = list(Loop(wire(spec)).run(msgs))
     kinds = [e.kind for e in out if isinstance(e, Event) and e.sensor == "uwb"]
     assert "warning" in kinds and "cleared" in kinds
     first_warn = next(i for i, k in enumerate(kinds) if k == "warning")
@@ -207,10 +207,10 @@ def test_a_replayed_message_is_counted_once_by_its_re_run_outcome():
             msgs[i] = m._replace(values=(m.values[0], m.values[1] + 5.0))
 
     def run(sched, arrival):
-        nis = []
-        sched.on_nis = lambda s, t, v, dim, ok: nis.append((s, round(t, 9), ok))
-        out = list(sched.run(arrival))
-        return out, sorted(nis)
+        out = [o for m in arrival for o in sched.push(m)] + list(sched.finish())
+        nis = [(u.sensor, round(u.t, 9), u.accepted) for u in out if isinstance(u, Updated)]
+        assert nis   # the NIS travels in the loop's output
+        return [o for o in out if not isinstance(o, Updated)], sorted(nis)
 
     def with_gate(sys_):
         from fusion.api import GateDecision, Gate
@@ -224,11 +224,11 @@ def test_a_replayed_message_is_counted_once_by_its_re_run_outcome():
             s.gate = Chi2()
         return sys_
 
-    ordered = Scheduler(with_gate(system()))
+    ordered = Loop(with_gate(system()))
     ref_out, ref_nis = run(ordered, msgs)
     # the fast ranges arrive 0.25 s after their stamps (the slow ones in time)
     arrival = sorted(msgs, key=lambda m: m.t + (0.25 if m.sensor == "fast" and m.t > 1.0 else 0.0))
-    sched = Scheduler(with_gate(system(late_policy="replay")))
+    sched = Loop(with_gate(system(late_policy="replay")))
     out, nis = run(sched, arrival)
     fast, ref_fast = sched.sensors["fast"].counters, ordered.sensors["fast"].counters
     assert ref_fast["rejected"] > 10 and fast["late"] == 0

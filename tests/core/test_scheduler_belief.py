@@ -13,7 +13,7 @@ import numpy as np
 from fusion.api import Estimate, Message, ReadsBelief, Solver
 from fusion.config import SystemSpec, wire
 from fusion.registry import make_plugin_manager
-from fusion.scheduler import Scheduler
+from fusion.run import Loop
 
 from test_scheduler_inputs import Batched, Odometry, stream
 
@@ -79,7 +79,7 @@ def test_belief_at_predicts_to_the_asked_time_and_fixes_are_used_at_their_time()
     msgs = sorted(stream() + [Message(9.995, "fix", (8.0,))], key=lambda m: m.t)   # inputs run to 9.99 s
     sys_ = _system()
     sys_.filter = Batched(sys_.filter)
-    sched = Scheduler(sys_)
+    sched = Loop(sys_)
     probe = sched.sensors["fix"].preprocessor                     # the run's own copy
     assert probe.bound == 1                                       # bound once, when the run loop is wired
     assert sys_.sensors["fix"].preprocessor.bound == 0            # the wired system is not touched
@@ -93,14 +93,14 @@ def test_belief_at_predicts_to_the_asked_time_and_fixes_are_used_at_their_time()
     shifted.append(Message(9.995 - Probe.lag, "fix", (8.0,)))
     ref_sys = _system(probe=False)
     ref_sys.filter = Batched(ref_sys.filter)
-    ref = [e for e in Scheduler(ref_sys).run(sorted(shifted, key=lambda m: m.t))
+    ref = [e for e in Loop(ref_sys).run(sorted(shifted, key=lambda m: m.t))
            if isinstance(e, Estimate) and e.reason == "update"]
     assert [e.t for e in ref] == [e.t for e in ups]
     for a, b in zip(ups, ref):
         np.testing.assert_allclose(a.belief.x, b.belief.x, atol=1e-12)
         np.testing.assert_allclose(a.belief.cov, b.belief.cov, atol=1e-12)
     sys_s = _system()                                             # sample by sample
-    sched_s = Scheduler(sys_s)
+    sched_s = Loop(sys_s)
     probe_s = sched_s.sensors["fix"].preprocessor
     list(sched_s.run(msgs))
     assert probe_s.asked and all(tb >= t for t, tb in probe_s.asked)
@@ -143,10 +143,10 @@ def test_a_failing_flush_is_named_and_the_run_still_ends(monkeypatch):
             "initial": {"mean": {"p": 0.0, "b": 0.0}, "sd": {"p": 1.0, "b": 0.5}},
             "sensors": {"odo": {"role": "input"}, "fix": {"model": {"type": "position"}, "noise": 0.1,
                                                           "preprocessor": {"type": "bad_flush_test"}}}})
-        sched = Scheduler(wire(spec, registry=reg))
+        sched = Loop(wire(spec, registry=reg))
         return sched, list(sched.run(msgs))
 
-    good_sched = Scheduler(_system())
+    good_sched = Loop(_system())
     good = [e for e in good_sched.run(msgs) if isinstance(e, Estimate) and e.reason == "update"][:-1]  # no flushed fix
     for how, said in (("raise", "flush failed: RuntimeError: boom in flush"),
                       ("not_a_list", "flush returned 'fix'"), ("bad_item", "flush returned")):

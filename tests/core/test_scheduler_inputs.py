@@ -5,7 +5,7 @@ import pytest
 from fusion.api import Block, Estimate, Event, Message, Params, ProcessModel, RejectedMessage, StateLayout
 from fusion.config import SystemSpec, wire
 from fusion.registry import make_plugin_manager
-from fusion.scheduler import Scheduler
+from fusion.run import Loop
 
 
 class Odometry(ProcessModel):
@@ -103,7 +103,7 @@ def stream(bias=0.3, seed=0, gap=None, bad=()):
 def run(sys_, msgs, batched=False):
     if batched:
         sys_.filter = Batched(sys_.filter)
-    sched = Scheduler(sys_)
+    sched = Loop(sys_)
     out = list(sched.run(msgs))
     return sched, [e for e in out if isinstance(e, Estimate)], [e for e in out if isinstance(e, Event)]
 

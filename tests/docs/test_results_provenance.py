@@ -11,7 +11,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "docs" / "results"
-PAGES = sorted(RESULTS.glob("*.md"))
+PAGES = sorted(p for p in RESULTS.glob("*.md") if p.name != "README.md")   # README.md: the index
 
 
 def _provenance():
@@ -48,10 +48,10 @@ def test_a_page_records_its_commit_and_inputs_and_they_have_not_changed(page):
 
 @pytest.mark.parametrize("script", ["abps_fix_age", "abps_results", "fuzz_recordings", "imu_dropout",
                                     "imu_gps_mag_results", "real_logs", "smoother_seeds", "ultrasonic_3d",
-                                    "uwb_sweep_page"])
+                                    "uwb_sweep_page", "real_flights", "anywhere_results", "health_false_alarm"])
 def test_each_script_writes_its_page_through_the_provenance_helper(script):
     text = (ROOT / "experiments" / f"{script}.py").read_text()
-    assert "provenance.write_page(" in text and re.search(r"^INPUTS = ", text, re.M)
+    assert "provenance.write_page(" in text and re.search(r"^INPUTS(_\w+)? = |^    inputs: list", text, re.M)
     assert not re.search(r"(OUT|PAGE|out)\.write_text\(", text), "a page written without its provenance block"
 
 
@@ -99,5 +99,9 @@ def test_a_stale_mark_is_shown_and_holds_until_the_inputs_change_again(checkout)
     assert info["stale"].startswith("dims changed")
     assert info["stale_against"]["configs/c.yaml"] == prov.input_hash("configs/c.yaml", root)
     assert info["inputs"]["configs/c.yaml"] != info["stale_against"]["configs/c.yaml"]   # the made-with hash kept
+    prov.mark_stale(page, "marked again", root=root)
+    again = page.read_text()
+    assert again.count(prov.BANNER) == 1 and "\n> **Stale**: marked again (Provenance" in again
+    assert "(Provenance, at the end of the page.)\n\nRegenerate: " in again
     prov.write_page(page, "# A page\n\nregenerated\n", ["configs/c.yaml"], root=root)   # a rerun clears the mark
     assert prov.parse(page.read_text())["stale"] is None and prov.BANNER not in page.read_text()

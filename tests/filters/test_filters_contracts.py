@@ -93,7 +93,8 @@ MEASUREMENT_CASES = [
     ("attitude", {}, INS, Message(1.0, "att", (0.9, 0.1, -0.3, 0.2))),
     ("arrival_time", {}, CLOCK, Message(1.0, "us", ("B2", 1.05))),
     # its default drops dh/dp from the Jacobian on purpose (position_from_direction: false): the full one here
-    ("direction", {"position_from_direction": True}, CLOCK_Q, Message(1.0, "us", ("B3", 1.05, 3))),
+    ("direction", {"position_from_direction": True, "receivers": "truncated_icosahedron"}, CLOCK_Q,
+     Message(1.0, "us", ("B3", 1.05, 3))),
     ("pose", {"select": ["x", "y", "yaw", "vx", "vyaw"]}, OMNI, Message(1.0, "odom", _ODOM)),
     ("twist", {"select": ["vx", "vy", "vyaw"]}, OMNI, Message(1.0, "tw", _ODOM[28:])),
     ("imu", {"select": ["roll", "yaw", "vyaw", "ax"]}, OMNI,

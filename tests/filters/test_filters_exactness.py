@@ -12,9 +12,6 @@ SIGMA_VARIANTS = [
     ("ukf", {}), ("ukf", {"linear_prediction": "never"}), ("ukf", {"linear_prediction": "always"}),
     ("srukf", {}), ("srukf", {"linear_prediction": "never"}),
     ("srukf", {"linear_prediction": "never", "zeroth_point": "cholupdate"}),
-    ("srukf", {"linear_prediction": "never", "covariance_update": "downdate"}),
-    ("srukf", {"linear_prediction": "never", "covariance_update": "qr"}),
-    ("srukf", {"linear_prediction": "never", "zeroth_point": "recentred", "covariance_update": "qr"}),
     ("srukf", {"linear_prediction": "never", "alpha": 1.0, "kappa": 1.0}),  # W_c^0 > 0: no downdate
     ("iekf", {"max_iterations": 1}),
 ]
@@ -136,10 +133,7 @@ def _max_rel(a, b):
     return max(float(np.max(np.abs(xa - xb) / np.maximum(1.0, np.abs(xb)))) for xa, xb in zip(a, b))
 
 
-@pytest.mark.parametrize("params", [
-    {"zeroth_point": zp, "covariance_update": cu}
-    for zp in ("cholupdate", "recentred") for cu in ("joint", "qr", "downdate")
-])
+@pytest.mark.parametrize("params", [{"zeroth_point": zp} for zp in ("cholupdate", "recentred")])
 @pytest.mark.parametrize("problem", ["range", "turn"])
 def test_srukf_equals_ukf_on_nonlinear_models(problem, params):
     """SR-UKF == UKF to 1e-8 over 300 steps at alpha = 0.5 (W_c^0 = -0.25 for n = 4: every step

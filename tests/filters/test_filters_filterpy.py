@@ -48,6 +48,9 @@ def test_ukf_equals_filterpy_ukf(alpha, beta, kappa, linear_prediction):
         b = res.belief
         worst = max(worst, np.abs(b.x - ref.x).max(), np.abs(b.P - ref.P).max(),
                     np.abs(res.S - ref.S).max(), np.abs(res.innovation - ref.y).max())
+        # closed-form equations both (no iteration, no stopping rule): the two differ only by rounding in another
+        # order of operations (FilterPy inverts S, we solve), ~1e-12 of metre-sized states over 200 steps;
+        # measured under 1 % of these tolerances with numpy 1.26 and 2.4, FilterPy 2.0.
         assert res.nis == pytest.approx(float(ref.y @ np.linalg.solve(ref.S, ref.y)), rel=1e-9)
     assert worst < 1e-9
 
@@ -66,6 +69,8 @@ def test_kf_equals_filterpy_kalman_filter():
     for z in zs:
         ref.predict()
         b = kf.predict(b, proc, None, 0.1)
+        # the same linear equations in another order: rounding only, cond(S) * eps ~ 1e-15 relative here (S is
+        # R plus a P of order 1); the tolerances leave 100x room over the largest difference measured
         np.testing.assert_allclose(b.x, ref.x, rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(b.P, ref.P, rtol=1e-11, atol=1e-12)
         ref.update(z)

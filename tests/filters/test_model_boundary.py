@@ -1,6 +1,6 @@
-"""The boundary between a filter and a third party's models (tester6 #1, #3, #4, #5, #6, #8;
-plugins/filters/checks.py): a model is given read-only views of the filter's state, and every value it
-returns is checked where the filter receives it. A bad one (wrong shape, NaN at a finite state, a Q that is
+"""The boundary between a filter and a third party's models (plugins/filters/checks.py): a plugin's model is
+wrapped at wiring by the checking adapter (``checks.checked``), which gives it read-only views of the filter's
+state and checks every value it returns. A bad one (wrong shape, NaN at a finite state, a Q that is
 not positive semi-definite) raises ModelFault, which the run charges to the model like an exception of its
 own: a measurement's message lost (counted malformed, the model named), a process model's prediction held,
 the run stopped with exit 2 after several in a row; ``fusion validate`` probes the process model too."""
@@ -21,6 +21,7 @@ from fusion.cli import main
 from fusion.config import load_system
 from fusion.errors import ModelFault
 from fusion.registry import make_plugin_manager
+from fusion_plugins.filters.checks import checked
 
 FILTERS = ["kf", "ekf", "iekf", "ukf", "srukf"]
 
@@ -111,7 +112,7 @@ def test_a_process_model_that_writes_into_its_argument_raises_and_the_belief_is_
     flt = testing.build("filter", name)
     b = _belief(flt)
     before = b.x.copy()
-    process = Cv1(FaultParams(fault=fault))
+    process = checked(Cv1(FaultParams(fault=fault)))
     with pytest.raises(ValueError, match="read-only"):
         flt.predict(b, process, None, 0.1)
     assert np.array_equal(b.x, before)
@@ -124,7 +125,7 @@ def test_a_measurement_model_that_writes_into_its_argument_raises_and_the_belief
     b = _belief(flt)
     before = b.x.copy()
     with pytest.raises(ValueError, match="read-only"):
-        flt.update(b, Pos1(FaultParams(fault=fault)), np.array([1.1]), np.array([[0.25]]))
+        flt.update(b, checked(Pos1(FaultParams(fault=fault))), np.array([1.1]), np.array([[0.25]]))
     assert np.array_equal(b.x, before)
 
 
@@ -132,7 +133,7 @@ def test_a_measurement_model_that_writes_into_its_argument_raises_and_the_belief
 def test_f_returning_a_list_is_read_as_an_array(name):
     flt = testing.build("filter", name)
     good = flt.predict(_belief(flt), Cv1(), None, 0.1)
-    listed = flt.predict(_belief(flt), Cv1(FaultParams(fault="list")), None, 0.1)
+    listed = flt.predict(_belief(flt), checked(Cv1(FaultParams(fault="list"))), None, 0.1)
     assert type(listed.x) is np.ndarray and np.array_equal(listed.x, good.x)
 
 
@@ -150,14 +151,14 @@ def test_a_bad_process_model_value_is_a_model_fault(name, fault, match):
     flt = testing.build("filter", name, {"linear_prediction": "always"} if name in ("ukf", "srukf")
                         and fault == "jac_shape" else None)
     with pytest.raises(ModelFault, match=match):
-        flt.predict(_belief(flt), Cv1(FaultParams(fault=fault)), None, 0.1)
+        flt.predict(_belief(flt), checked(Cv1(FaultParams(fault=fault))), None, 0.1)
 
 
 @pytest.mark.parametrize("name", FILTERS)
 def test_nan_from_a_model_at_a_nan_belief_is_not_the_models_fault(name):
     flt = testing.build("filter", name)
     b = _belief(flt, (np.nan, 0.0))
-    flt.predict(b, Cv1(FaultParams(fault="nan")), None, 0.1)     # no ModelFault: the state was NaN already
+    flt.predict(b, checked(Cv1(FaultParams(fault="nan"))), None, 0.1)   # no ModelFault: the state was NaN already
 
 
 @pytest.mark.parametrize("name", FILTERS)
@@ -166,14 +167,14 @@ def test_nan_from_a_model_at_a_nan_belief_is_not_the_models_fault(name):
 def test_a_bad_measurement_model_value_is_a_model_fault_alike_in_every_filter(name, fault, match):
     flt = testing.build("filter", name)
     with pytest.raises(ModelFault, match=match):
-        flt.update(_belief(flt), Pos1(FaultParams(fault=fault)), np.array([1.1]), np.array([[0.25]]))
+        flt.update(_belief(flt), checked(Pos1(FaultParams(fault=fault))), np.array([1.1]), np.array([[0.25]]))
 
 
 @pytest.mark.parametrize("name", ["kf", "ekf", "iekf"])
 def test_a_nan_measurement_jacobian_is_a_model_fault(name):
     flt = testing.build("filter", name)
     with pytest.raises(ModelFault, match="jacobian returned NaN or inf"):
-        flt.update(_belief(flt), Pos1(FaultParams(fault="jac_nan")), np.array([1.1]), np.array([[0.25]]))
+        flt.update(_belief(flt), checked(Pos1(FaultParams(fault="jac_nan"))), np.array([1.1]), np.array([[0.25]]))
 
 
 # ---------------------------------------------------------------------------------------------- a run
@@ -278,8 +279,8 @@ class _Never(dict):
 
 @pytest.mark.parametrize("config", ["uwb_pv_ukf", "ultrasonic_3d_iekf", "abps_ins"])
 def test_the_shipped_models_pass_every_check_to_the_same_numbers(config, monkeypatch):
-    """fusion's own models skip the checks (checks.trusted, for speed): with them on, a shipped replay (ukf,
-    iekf, srukf with the INS's input runs) raises nothing and gives the same estimates to the bit."""
+    """fusion's own models are not wrapped (checks.trusted, for speed): wrapped, a shipped replay (ukf, iekf,
+    srukf with the INS's input runs) raises nothing and gives the same estimates to the bit."""
     from fusion.api import Estimate
     from fusion_plugins.filters import checks
 
@@ -305,3 +306,49 @@ def test_the_shipped_models_pass_every_check_to_the_same_numbers(config, monkeyp
     checked, s2 = replay()
     assert trusted.shape == checked.shape and np.array_equal(trusted, checked, equal_nan=True)
     assert s1["sensors"] == s2["sensors"] and "component_error" not in s2
+
+
+def test_the_adapter_keeps_the_models_class_capabilities_and_state():
+    """checked() returns a copy of the model whose class is a subclass of its own (the same name, module and
+    capabilities), leaves the model itself as it was, wraps once, and leaves fusion's own models alone."""
+    from fusion.api import capabilities_of
+
+    raw = Cv1(FaultParams(fault="write"))
+    c = checked(raw)
+    assert isinstance(c, Cv1) and type(c) is not Cv1 and type(c).__name__ == "Cv1"
+    assert type(c).__module__ == Cv1.__module__ and capabilities_of(c) == capabilities_of(raw)
+    assert checked(c) is c and type(raw) is Cv1
+    x = np.array([1.0, 2.0])
+    raw.f(x, None, 0.1)                                      # the model itself still writes, unwrapped
+    assert np.array_equal(x, 0.0 * x)
+    own = testing.ConstantVelocity(testing.ConstantVelocity.Params())
+    assert checked(own) is own
+
+
+def test_a_checked_model_pickles_and_copies_as_a_checked_model():
+    """The checking class is made at run time: a pickled or deep-copied checked model is checked(its model)."""
+    import copy
+    import pickle
+
+    c = checked(Cv1(FaultParams(fault="shape")))
+    for d in (pickle.loads(pickle.dumps(c)), copy.deepcopy(c)):
+        assert type(d) is type(c) and d.params.fault == "shape"
+        with pytest.raises(ModelFault, match=r"f returned shape \(1,\)"):
+            d.f(np.array([1.0, 2.0]), None, 0.1)
+
+
+def test_a_model_bound_by_observe_is_checked_too():
+    """A plugin's observe() that returns a new model (bound to the message) gets it checked as well."""
+    from fusion.api import Message, Observation
+
+    class Bound(Pos1):
+        name = "test_bound"
+
+        def observe(self, message):
+            return Observation(message.t, np.array([float(message.values[0])]), Pos1(FaultParams(fault="nan")))
+
+    c = checked(Bound(FaultParams()))
+    o = c.observe(Message(1.0, "pos", (1.5,), 1))
+    assert isinstance(o.model, Pos1) and type(o.model) is not Pos1
+    with pytest.raises(ModelFault, match="h returned NaN or inf"):
+        o.model.h(np.array([1.0, 2.0]))

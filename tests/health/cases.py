@@ -25,16 +25,29 @@ def wrong_field(tmp: Path) -> Path:
     declination -20.5 deg, inclination -36 deg, 23.5 uT): most magnetometer updates are rejected."""
     def edit(d):
         d["sensors"]["mag"]["model"].update(declination_deg=12.3, inclination_deg=65.8, intensity=57.6)
+        d["prefer"] = {"magnetic_field": "config"}   # else the recording's header contradicts it: exit 2
     return config(tmp, "imu_gps_mag_ekf.yaml", edit, "wrong_field.yaml")
 
 
 def gps_latency(tmp: Path) -> Path:
-    """The ArduPilot config with a GPS time_offset of -0.3 s beyond a 0.1 s reorder buffer: every fix after
-    the first is dropped as late."""
+    """The ArduPilot config on its recording with every GPS fix stamped 0.3 s before it was logged (a GPS
+    latency the config does not know: its time_offset 0 s, a 0.1 s reorder buffer): every fix after the
+    first is dropped as late. (A time_offset of -0.3 s in the config itself is refused by validation.)"""
+    data = yaml.safe_load((ROOT / "configs" / "ardupilot_ins_gps_mag.yaml").read_text(encoding="utf-8"))
+    source = (ROOT / "configs" / data["recording"]).resolve()
+    lines = []
+    for line in source.read_text(encoding="utf-8").splitlines():
+        head, sep, rest = line.partition(",")
+        if sep and rest.startswith("gps,"):
+            line = f"{float(head) - 0.3:.6f},{rest}"
+        lines.append(line)
+    recording = tmp / "gps_latency.log"
+    recording.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
     def edit(d):
-        d["sensors"]["gps"]["time_offset"] = -0.3
+        d["sensors"]["gps"]["time_offset"] = 0.0
         d["scheduler"]["max_latency"] = 0.1
-    return config(tmp, "ardupilot_ins_gps_mag.yaml", edit, "gps_latency.yaml")
+    return config(tmp, "ardupilot_ins_gps_mag.yaml", edit, "gps_latency.yaml", recording)
 
 
 def wide_start(tmp: Path) -> Path:

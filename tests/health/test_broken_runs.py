@@ -15,7 +15,7 @@ from cases import gps_latency, renumbered_receivers, wide_start, wrong_field
 # (case, sensor named on the last line, what the line must say, the first likely cause)
 CASES = [
     (wrong_field, "mag", "updates rejected", "the config's constants against the recording's header"),
-    (gps_latency, "gps", "dropped as late", "a latency (sensors.gps.time_offset -0.3 s"),
+    (gps_latency, "gps", "dropped as late", "a latency (sensors.gps.time_offset 0 s"),
     (wide_start, "uwb", "updates rejected", "the config's constants"),
     (renumbered_receivers, "us", "errors against truth", "a receiver array of 32 in the header"),
 ]

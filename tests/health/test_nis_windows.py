@@ -77,3 +77,13 @@ def test_no_window_and_one_window():
     assert nis_windows_beyond([], 1e-3)[1] == 0
     one = [(0.0, 1.0, 1000.0, 100)]
     assert nis_windows_beyond(one, 1e-3)[1] == 1   # a run of one window is tested at alpha itself
+
+
+def test_a_mild_inconsistency_is_significant_but_not_far_outside():
+    """NIS 1.5 per dof (sd 0.21 per dof over 100 dof): mostly beyond the chi-square quantile (1.36 per dof
+    here), so flagged without a floor, never with the rule's default floor of 2 per dof; 2.5 per dof is."""
+    rng = np.random.default_rng(8)
+    mild = _windows(rng, 12, 100, 1.5)
+    assert nis_windows_beyond(mild, 1e-3)[1] >= 2                  # flagged: two in a row beyond
+    assert nis_windows_beyond(mild, 1e-3, min_ratio=2.0)[1] == 0
+    assert nis_windows_beyond(_windows(rng, 12, 100, 2.5), 1e-3, min_ratio=2.0)[1] >= 2

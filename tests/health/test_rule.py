@@ -107,6 +107,10 @@ def test_truth_and_reference_limits():
     assert not judge(s, ctx=CTX).degraded                      # NEES 10 per dof is at the limit, 29 deg under 30
     s["consistency"]["nees_mean"] = 41.0
     assert judge(s, ctx=CTX).findings[0].kind == "truth"
+    s["consistency"]["nees_in_95_fraction"] = 0.9   # a mean made by a few samples (a bad truth line): not persistent
+    assert not judge(s, ctx=CTX).degraded
+    s["consistency"]["nees_in_95_fraction"] = 0.3
+    assert "30 % inside its 95 % interval" in judge(s, ctx=CTX).findings[0].figures
     s["consistency"]["nees_mean"] = 4.0
     s["agreement"]["attitude_rmse_deg"] = 128.0
     f = judge(s, ctx=CTX).findings

@@ -1,6 +1,6 @@
 """The PX4 config on a log whose magnetometer starts after the 0.2 s alignment window (a late or slow
 magnetometer, a log cut with --start): every magnetometer sample is rejected with the reason and the run
-goes on with the GPS, as docs/import.md says (tester2 #14: before, the first magnetometer update aborted the
+goes on with the GPS, as docs/import.md says, ending degraded (exit 4: a sensor unused) unless allowed (tester2 #14: before, the first magnetometer update aborted the
 run with exit 2, no summary, and a message that align_s must be > 0)."""
 from __future__ import annotations
 
@@ -20,8 +20,11 @@ def test_no_magnetometer_in_the_window_rejects_it_and_the_run_goes_on(tmp_path, 
                             if ln.startswith("#") or not (",mag," in ln and float(ln.split(",", 1)[0]) < 0.5)))
     out = tmp_path / "s.json"
     capsys.readouterr()
+    # every magnetometer sample unused is a degraded run (exit 4, the sensor named), unless allowed
+    assert main(["run", str(ROOT / "configs" / "px4_ins_gps_mag.yaml"), "--input", str(late), "-q"]) == 4
+    assert "mag:" in capsys.readouterr().err
     assert main(["run", str(ROOT / "configs" / "px4_ins_gps_mag.yaml"), "--input", str(late), "-q",
-                 "--summary-json", str(out)]) == 0
+                 "--allow-degraded", "--summary-json", str(out)]) == 0
     s = json.loads(out.read_text())
     assert s["sensors"]["mag"]["received"] > 200 and s["sensors"]["mag"]["rejected"] == s["sensors"]["mag"]["received"]
     assert s["agreement"]["samples"] > 20

@@ -44,6 +44,7 @@ def test_constant_rate_matches_scipy_exactly():
     dt, n = 0.01, 500
     x = run(m, state(q=q0), lambda t: np.r_[0, 0, -G, w], dt, n)
     ref = Rotation.from_quat(q0, scalar_first=True) * Rotation.from_rotvec(w * dt * n)
+    # closed form both (no integrator tolerance): 500 products round at ~sqrt(500) eps ~ 5e-15; measured 3e-15
     assert quat.angle_between(x[6:10], ref.as_quat(scalar_first=True)) < 1e-12
     np.testing.assert_allclose(quat.to_matrix(x[6:10]), ref.as_matrix(), atol=1e-12)
 
@@ -70,6 +71,8 @@ def test_time_varying_rate_matches_scipy_integration():
     for dt in (0.02, 0.01):
         x = run(m, state(q=q0), lambda t, dt=dt: np.r_[0, 0, -G, _rate(t + dt / 2)], dt, int(round(T / dt)))
         errs.append(float(quat.angle_between(x[6:10], ref)))
+    # the midpoint rule's own truncation, deterministic: measured 1.35e-5 rad at dt = 0.01 (the reference, 100x
+    # finer, carries 1e-4 of that), the same with any numpy/scipy; 2e-5 bounds it, the ratio checks the order
     assert errs[1] < 2e-5
     assert 3.0 < errs[0] / errs[1] < 5.0  # second order
 

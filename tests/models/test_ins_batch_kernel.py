@@ -1,8 +1,7 @@
-"""The compiled kernel of the INS run integration (plugins/process/_ins_batch_kernel.c) against the numpy code
-it mirrors (ins_batch.integrate_inputs_numpy, interval_noise_numpy): the same numbers to rounding on seeded
-random inputs, clear errors on bad arguments, and the same estimates from `fusion run configs/abps_ins.yaml`
-with and without it (FUSION_PURE_PYTHON=1). The numpy code itself is checked against k calls of Ins.f in
-tests/filters/test_predict_inputs.py (which, with the kernel built, checks the kernel too)."""
+"""The compiled kernel of the INS run integration (plugins/process/_ins_batch_kernel.c) against its numpy
+references (k calls of Ins.f, the one numpy propagation; ins_batch.interval_noise_numpy): the same numbers to
+rounding on seeded random inputs, clear errors on bad arguments, and the same estimates from `fusion run
+configs/abps_ins.yaml` with and without it (FUSION_PURE_PYTHON=1)."""
 from __future__ import annotations
 
 import csv
@@ -15,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fusion import kernels
+from fusion import kernels, testing
 from fusion_plugins.process import ins_batch
 
 K = ins_batch._KERNEL
@@ -43,6 +42,21 @@ def samples(rng, k, rate_sd=0.5):
     return us, 0.01 + 0.004 * rng.random(k)                 # uneven intervals (jitter), s
 
 
+_INS: dict[bool, object] = {}
+
+
+def integrate_reference(x, us, dts, g_col, trapezoidal):
+    """k calls of Ins.f (eta 0, no Earth rate, no hold), with gravity g_col (3, 1): the kernel's reference."""
+    ins = _INS.get(trapezoidal)
+    if ins is None:
+        ins = _INS[trapezoidal] = testing.build("process", "ins",
+                                                {"integration": "trapezoidal" if trapezoidal else "euler"})
+    ins._g_col = np.asarray(g_col, dtype=float).reshape(3, 1)   # the kernel takes any g_n; the model's is vertical
+    for u, dt in zip(us, dts):
+        x = ins.f(x, u, float(dt))
+    return x
+
+
 def assert_blockwise_close(a, b, rel=1e-12):
     """Each element within ``rel`` of the largest magnitude of its block (p, v, q, biases) in that state: a
     relative test that an element near zero by cancellation does not turn into a test of its last bits."""
@@ -56,12 +70,12 @@ def assert_blockwise_close(a, b, rel=1e-12):
 @pytest.mark.parametrize("trapezoidal", [True, False])
 @pytest.mark.parametrize("k", [1, 2, 15, 16, 40, 100])
 @pytest.mark.parametrize("N", [1, 33])
-def test_integrate_matches_numpy(N, k, trapezoidal):
+def test_integrate_matches_sample_by_sample(N, k, trapezoidal):
     rng = np.random.default_rng(1000 * N + k)
     x = states(rng, N)
     us, dts = samples(rng, k)
     got = ins_batch.integrate_inputs(x, us, dts, G_COL, trapezoidal)
-    ref = ins_batch.integrate_inputs_numpy(x, us, dts, G_COL, trapezoidal)
+    ref = integrate_reference(x, us, dts, G_COL, trapezoidal)
     assert got.shape == ref.shape == (N, 16)
     assert_blockwise_close(got, ref)
     assert np.array_equal(got[:, 10:], x[:, 10:])          # biases and what follows: kept exactly
@@ -78,7 +92,7 @@ def test_integrate_zero_and_tiny_rotations(rate, trapezoidal):
     x[:, 13:16] = x[0, 13:16]
     us[:, 3:6] = x[0, 13:16] + (0.0 if rate == "zero" else 1e-13 * rng.normal(size=(40, 3)))
     got = ins_batch.integrate_inputs(x, us, dts, G_COL, trapezoidal)
-    ref = ins_batch.integrate_inputs_numpy(x, us, dts, G_COL, trapezoidal)
+    ref = integrate_reference(x, us, dts, G_COL, trapezoidal)
     assert_blockwise_close(got, ref)
     if rate == "zero":
         assert np.array_equal(got[:, 6:10], x[:, 6:10])    # q (x) 1 = q exactly
@@ -93,7 +107,7 @@ def test_integrate_non_unit_quaternions(q_scale):
     us, dts = samples(rng, 40)
     for trap in (True, False):
         assert_blockwise_close(ins_batch.integrate_inputs(x, us, dts, G_COL, trap),
-                               ins_batch.integrate_inputs_numpy(x, us, dts, G_COL, trap))
+                               integrate_reference(x, us, dts, G_COL, trap))
 
 
 @needs_kernel
@@ -106,7 +120,7 @@ def test_integrate_leading_axes_and_layouts():
     for x in (x17[0, :16], x17[:, :16].reshape(2, 3, 16), x17[:, :16]):
         before = x.copy()
         got = ins_batch.integrate_inputs(x, us, dts, G_COL, True)
-        ref = ins_batch.integrate_inputs_numpy(x, us, dts, G_COL, True)
+        ref = integrate_reference(x, us, dts, G_COL, True)
         assert got.shape == ref.shape == x.shape
         assert_blockwise_close(got.reshape(-1, 16), ref.reshape(-1, 16))
         assert np.array_equal(x, before)

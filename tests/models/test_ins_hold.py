@@ -43,6 +43,8 @@ def test_integrated_gauss_markov_variance_against_the_double_integral(sd, tau, e
     # integrand there), by scipy's quadrature
     ref, _ = integrate.dblquad(lambda s, t: 2.0 * sd * sd * math.exp(-(t - s) / tau), 0.0, e, 0.0, lambda t: t,
                                epsabs=1e-14, epsrel=1e-11)
+    # dblquad was asked for 1e-11 relative and estimates its error at <= 6e-12 of the value on these cases:
+    # 1e-7 is 1e4 times that, and a wrong closed form (a lost term of order e / tau) is off by far more
     assert integrated_gm_variance(sd, tau, e) == pytest.approx(ref, rel=1e-7)
 
 
@@ -116,7 +118,9 @@ def test_the_position_noise_is_that_of_the_white_noise_of_the_velocity_variance_
     q = lambda t: 2 * sd * sd * tau * (1 - math.exp(-t / tau))          # dG/dt
     ref = [integrate.quad(lambda t: q(t) * (e1 - t) ** k, e0, e1, epsabs=1e-15, epsrel=1e-12)[0] for k in range(3)]
     vv, pv, pp = gm_rate_noise(sd, tau, e0, e1)
-    np.testing.assert_allclose([vv, pv, pp], ref, rtol=1e-8, atol=1e-13)   # (closed forms: ~1e-15 m^2 of rounding)
+    # quad was asked for 1e-12 relative (1e-15 absolute) on smooth integrands; the closed forms round at ~1e-15 m^2:
+    # rtol 1e-8 is 1e4 times the quadrature's tolerance (measured under 3 % of it)
+    np.testing.assert_allclose([vv, pv, pp], ref, rtol=1e-8, atol=1e-13)
     assert np.linalg.eigvalsh(np.array([[pp, pv], [pv, vv]])).min() >= -1e-15
 
 

@@ -134,7 +134,7 @@ def test_calibration_undoes_biased_ranges(tmp_path):
             p[3] = f"{s * float(p[3]) + b:.6f}"
         biased.append(",".join(p))
     base = _run(tmp_path, "base", head + body)["errors"]["position_rmse_m"]
-    raw = _run(tmp_path, "raw", head + biased)["errors"]["position_rmse_m"]
+    raw = _run(tmp_path, "raw", head + biased, exit_code=4)["errors"]["position_rmse_m"]   # degraded, and said
     fixed = _run(tmp_path, "cal", head + biased,
                  {"model": {"type": "range", "calibration": {k: {"scale": s, "bias": b} for k, (s, b) in cal.items()}}})
     assert raw > 2.0 * base                       # the biases spoil the fix ...

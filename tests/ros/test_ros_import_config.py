@@ -104,6 +104,7 @@ def robot(tmp_path_factory):
     return d
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("flt", ["ekf", "ukf"])
 def test_translated_config_runs_and_agrees_with_the_reference(robot, flt):
     out = robot / f"{flt}.json"
@@ -153,6 +154,7 @@ HUSKY_LAUNCH = """<launch>
 """
 
 
+@pytest.mark.slow
 def test_ros1_launch_with_a_mounted_imu_runs_on_the_bag(tmp_path, capsys):
     """robot_localization's bag-test layout: a launch file with the Husky's IMU mount (x y z yaw pitch roll:
     yaw -90 deg, roll +90 deg), run on the bag directly; the bag's IMU data is in that rotated frame, and its

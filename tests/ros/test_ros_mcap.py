@@ -13,6 +13,7 @@ from bagmaker import write_bag
 from ros_helpers import ROOT, fusion
 
 EKF = ROOT / "docs" / "examples" / "ros" / "ekf.yaml"
+pytestmark = pytest.mark.slow   # a bag written, imported, translated and run twice: ~13 s
 
 
 @pytest.fixture(scope="module")

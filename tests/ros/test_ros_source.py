@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from bagmaker import storage_file, write_bag
 from ros_helpers import ROOT, fusion
 
 EKF = ROOT / "docs" / "examples" / "ros" / "ekf.yaml"
 
 
+@pytest.mark.slow
 def test_bag_input_is_the_imported_recording(tmp_path):
     write_bag(tmp_path / "r", "mcap", duration=10.0)
     bag = storage_file(tmp_path / "r", "mcap")

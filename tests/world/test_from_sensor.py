@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import ROOT, edited
+from world_helpers import ROOT, edited
 
 from fusion.api import StateLayout
 from fusion.cli import main

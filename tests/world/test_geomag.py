@@ -3,7 +3,6 @@ source order: config, then the recording's header, then the IGRF at its origin a
 from __future__ import annotations
 
 import datetime as dt
-import math
 
 import numpy as np
 import pytest

@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import pytest
-from conftest import ROOT, edited, run
+from world_helpers import ROOT, edited, run
 
 from fusion.cli import main
 

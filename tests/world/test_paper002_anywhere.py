@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from conftest import ROOT, car_at, run, simulate
+from world_helpers import ROOT, car_at, run, simulate
 
 CONFIG = ROOT / "configs" / "imu_gps_mag_ekf.yaml"
 HORIZONTAL_M, ATTITUDE_DEG = 2.0, 2.0      # paper 002's figures on the shipped recording (issue 31)

@@ -6,9 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import ROOT, edited, run, simulate
+from world_helpers import ROOT, edited, run, simulate
 
 from fusion.api import BuildContext, ConfigError
+from fusion.cli import main
 from fusion_plugins.measurement.receiver_array import read_file, resolve_receivers
 from fusion_plugins.simulators.arrival import truncated_icosahedron_normals
 
@@ -49,9 +50,9 @@ def test_config_array_contradicting_the_header_is_refused(renumbered, tmp_path, 
     code, _ = run(cfg, None, tmp_path / "s.json")
     err = capsys.readouterr().err
     assert code == 2 and "receivers" in err and "walk.log:17" in err and "prefer" in err
-    assert __import__("fusion.cli").cli.main(["validate", str(cfg)]) == 2
+    assert main(["validate", str(cfg)]) == 2
     cfg = edited(cfg, tmp_path / "c2.yaml", prefer={"receivers": "config"})
-    assert __import__("fusion.cli").cli.main(["validate", str(cfg)]) == 0
+    assert main(["validate", str(cfg)]) == 0
 
 
 def test_array_as_a_list_or_a_file(tmp_path):

@@ -1,7 +1,6 @@
-"""The scheduler's initialisation: the first belief from the configured one, a static-start alignment
+"""The run's start-up (:class:`StartUp`): the first belief from the configured one, a static-start alignment
 (the process model's Aligns capability, then every AlignsState measurement model) and the fixes of
 ``initial.from_sensor`` before the start (through the model's PositionFromFix capability when it has one).
-A mixin of fusion.scheduler.Scheduler, whose attributes it uses.
 
 The initial position: when the alignment window was judged static (the process model's ChecksStillness),
 every fix taken in it measures the same position, so they are combined (:func:`combine_fixes`: outliers
@@ -12,12 +11,12 @@ kept (the model's ``align(still=False)``) and the velocity prior widened to the 
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
 from fusion.api import Aligns, ChecksStillness, Event, PositionFromFix, has
 from fusion.chisquare import chi2
-from fusion.config import SensorRuntime
 
 #: Probability of the test that refuses a fix of the static window against the others (as a chi2 gate's).
 FIX_INLIER_PROBABILITY = 0.999
@@ -74,80 +73,102 @@ def combine_fixes(zs: np.ndarray, Rs: np.ndarray | None) -> tuple[np.ndarray, np
     return m, S @ S.T, keep
 
 
-class Initialisation:
-    """Mixin: ``_start``, ``_align``, ``_take_fix``, ``_initial`` (see fusion.scheduler)."""
+class StartUp:
+    """The start-up state machine: it gathers the static start's input samples (``window``) and the fixes of
+    ``initial.from_sensor`` (``take_fix``) until the first belief can be made (``start``). ``aligners``: per
+    sensor whose model aligns part of the state (AlignsState), its observations of the window. Warnings and the
+    ``initial`` event go to ``tally`` (fusion.run.tally), handed on with the first prediction's events."""
 
-    def _start(self, t: float) -> None:
+    def __init__(self, system, filter_, process, aligners: list[str], sensors: dict, tally):
+        spec = system.spec
+        self.layout = system.layout
+        self.filter, self.process, self.sensors, self.tally = filter_, process, sensors, tally
+        self._x0 = system.x0.copy()
+        self._P0 = system.P0.copy()
+        self.align_s = spec.initial.align_s
+        self.from_sensor = spec.initial.from_sensor
+        self.have_fix = self.from_sensor is None
+        self._align_u: list[np.ndarray] = []
+        self._align_t: list[float] = []
+        self._align_t0: float | None = None
+        # The fixes of initial.from_sensor before the start, and the window's verdict (ChecksStillness: True
+        # static, False moving, None not judged): a static window's fixes are combined.
+        self._fixes: deque = deque(maxlen=FIXES_MAX)
+        self.still: bool | None = None   # the static window's verdict (public: the start-up's state)
+        self.alignment_not_static: str | None = None   # why the window was judged moving (summary health)
+        self.aligners: dict[str, list] = {n: [] for n in aligners}
+        self._stillness = process.stillness if has(process, ChecksStillness) else None
+        self._aligns = has(process, Aligns)
+
+    def start(self, t: float):
         """The first belief, at ``t``: the configured one, aligned and with the remembered fix if any."""
-        belief = self.filter.initial_belief(t, *self._initial())
+        belief = self.filter.initial_belief(t, *self.initial())
         if belief.events:   # a repaired initial covariance (srukf): reported with the first prediction's
-            for e in belief.events:
-                self.filter_counters[e.kind] += 1
-            self._filter_events.extend(belief.events)
+            self.tally.reported(belief.events)
             belief = belief.with_(events=())
-        self.belief = belief
-        self._next_output = t + self.output_dt if self.output_dt else math.inf
+        return belief
 
-    def _align(self, good: list[tuple[float, np.ndarray]], sensor: SensorRuntime) -> list[tuple[float, np.ndarray]]:
-        """Before the first belief: gather the static start; create the belief once aligned (and fixed).
-        Returns the samples left to integrate after the belief exists."""
+    def window(self, good: list[tuple[float, np.ndarray]], sensor: str) -> tuple[int, int | None]:
+        """Before the first belief: gather the static start's samples ``good`` ((t s, u) of the input ``sensor``).
+        Returns ``(samples gathered, i)``: ``i`` the index of the sample at which the window closed (the belief
+        starts there: ``start(t_i)``), None while it is open."""
         for i, (t, u) in enumerate(good):
             if self._align_t0 is None:
                 self._align_t0 = t
-            if t - self._align_t0 < self._align_s or not self._have_fix:
+            if t - self._align_t0 < self.align_s or not self.have_fix:
                 self._align_u.append(u)
                 self._align_t.append(t)
-                sensor.counters["used"] += 1
                 continue
-            if self._align_s and self._align_u:
-                us, ts = np.asarray(self._align_u, dtype=float), np.asarray(self._align_t, dtype=float)
-                u_mean = np.mean(us, axis=0)
-                if has(self.process, ChecksStillness):
-                    verdict = self.process.stillness(self._x0, self._P0, us, ts)
-                    self._still = None if verdict is None else bool(verdict[0])
-                    if verdict is not None and not verdict[0]:
-                        self._not_static(t, sensor.name, verdict[1])
-                    self._x0, self._P0 = self.process.align(self._x0, self._P0, u_mean,
-                                                            still=self._still is not False, window=(us, ts))
-                elif has(self.process, Aligns):   # wiring refuses align_s for a process without it
-                    self._x0, self._P0 = self.process.align(self._x0, self._P0, u_mean)
-                for name, observations in self._aligners.items():
-                    if self._still is not True:   # not a static window (in flight): only its last align_s s
-                        observations = [o for o in observations if o.t >= t - self._align_s] or observations[-1:]
-                    # called with no observations too (no sample of the sensor in the window): the model
-                    # then knows the static start is over and can refuse its later messages with the reason
-                    s = self.sensors[name]
-                    self._x0, self._P0 = s.model.align_state(self._x0, self._P0, u_mean, observations, s.R)  # type: ignore[union-attr]
-            self._start(t)
-            self.u, self._u_t = u, t
-            sensor.counters["used"] += 1
-            return good[i + 1:]
-        return []
+            if self.align_s and self._align_u:
+                self._align(t, sensor)
+            return i, i
+        return len(good), None
+
+    def _align(self, t: float, sensor: str) -> None:
+        us, ts = np.asarray(self._align_u, dtype=float), np.asarray(self._align_t, dtype=float)
+        u_mean = np.mean(us, axis=0)
+        if self._stillness is not None:
+            verdict = self._stillness(self._x0, self._P0, us, ts)
+            self.still = None if verdict is None else bool(verdict[0])
+            if verdict is not None and not verdict[0]:
+                self._not_static(t, sensor, verdict[1])
+            self._x0, self._P0 = self.process.align(self._x0, self._P0, u_mean,
+                                                    still=self.still is not False, window=(us, ts))
+        elif self._aligns:   # wiring refuses align_s for a process without it
+            self._x0, self._P0 = self.process.align(self._x0, self._P0, u_mean)
+        for name, observations in self.aligners.items():
+            if self.still is not True:   # not a static window (in flight): only its last align_s s
+                observations = [o for o in observations if o.t >= t - self.align_s] or observations[-1:]
+            # called with no observations too (no sample of the sensor in the window): the model then knows
+            # the static start is over and can refuse its later messages with the reason
+            s = self.sensors[name]
+            self._x0, self._P0 = s.model.align_state(self._x0, self._P0, u_mean, observations, s.R)
 
     def _not_static(self, t: float, sensor: str, why: str) -> None:
         """The alignment window judged moving (``why``: the process model's numbers and what it keeps): a
         ``warning`` with the first prediction, and the summary's ``health``."""
         self.alignment_not_static = why
-        fixes = (f"; the initial position is the latest fix of {self._from_sensor!r} and the velocity prior is "
-                 "widened to the speed its fixes show") if self._from_sensor else ""
-        self._filter_events.append(Event(t, "warning", sensor, f"alignment: the static start (initial.align_s "
-                                         f"{self._align_s:g} s) is not static: {why}{fixes}"))
+        fixes = (f"; the initial position is the latest fix of {self.from_sensor!r} and the velocity prior is "
+                 "widened to the speed its fixes show") if self.from_sensor else ""
+        self.tally.add(Event(t, "warning", sensor, f"alignment: the static start (initial.align_s "
+                             f"{self.align_s:g} s) is not static: {why}{fixes}"))
 
-    def start_without_fix(self, output_hz: float | None = None) -> None:
-        """Start without waiting for ``initial.from_sensor`` (the recording has no such stream): the position
-        and velocity from the configured prior, the rest aligned as usual; ``output_hz``: estimates by
-        prediction at that rate when the config has none (a recording that may have no update to emit at)."""
-        self._from_sensor = None
-        self._have_fix = True
-        if output_hz and not self.output_dt:
-            self.output_dt = 1.0 / output_hz
+    def start_without_fix(self) -> None:
+        """Start without waiting for ``initial.from_sensor`` (the recording has no such stream): the position and
+        velocity from the configured prior, the rest aligned as usual."""
+        self.from_sensor = None
+        self.have_fix = True
 
-    def _take_fix(self, obs) -> None:
+    def take_fix(self, obs) -> None:
         """Remember a fix of ``initial.from_sensor`` for the initial position (module doc: combined when the
         window was static, else the latest)."""
         self._fixes.append(obs)
-        self._fix = obs          # the latest
-        self._have_fix = True
+        self.have_fix = True
+
+    @property
+    def latest_fix(self):
+        """The latest fix of ``initial.from_sensor`` taken before the start (None when none was)."""
+        return self._fixes[-1] if self._fixes else None
 
     def _fix_for_start(self) -> tuple[object | None, np.ndarray | None, np.ndarray | None]:
         """``(obs, z, R)``: the fix that sets the initial position, with its values and covariance (None when
@@ -159,9 +180,9 @@ class Initialisation:
         obs = self._fixes[-1]
         z = np.array(obs.z, dtype=float)
         R = None if obs.R is None else np.array(obs.R, dtype=float)
-        k = min(len(z), self.system.layout["p"].stop - self.system.layout["p"].start)
+        k = min(len(z), self.layout["p"].stop - self.layout["p"].start)
         same = [f for f in self._fixes if len(f.z) >= k and (f.R is None) == (R is None)]
-        if self._still is not True or len(same) < 2:
+        if self.still is not True or len(same) < 2:
             return obs, z, R
         zs = np.array([np.asarray(f.z, dtype=float)[:k] for f in same])
         Rs = None if R is None else np.array([np.asarray(f.R, dtype=float)[:k, :k] for f in same])
@@ -175,13 +196,13 @@ class Initialisation:
             R[:, :k] = 0.0
             R[:k, :k] = Pc
         out = [f"{f.t:.3f} s" for f, kept in zip(same, keep) if not kept]
-        self._filter_events.append(Event(obs.t, "initial", self._from_sensor, (
+        self.tally.add(Event(obs.t, "initial", self.from_sensor, (
             f"initial position from {int(keep.sum())} of the {len(same)} fixes of the static start"
             + (f" (covariance-weighted mean; refused against the others: {', '.join(out)})" if out else
                " (covariance-weighted mean)" if R is not None else " (per-axis median)"))))
         return obs, z, R
 
-    def _initial(self) -> tuple[np.ndarray, np.ndarray]:
+    def initial(self) -> tuple[np.ndarray, np.ndarray]:
         """x0, P0 with the position block from the remembered fix. A model with ``position_from`` (a
         position with a lever arm) turns the fix's position into the state's at the initial attitude.
         Values of the fix beyond the position (a GPS fix's velocity) set the state elements their rows of
@@ -191,9 +212,9 @@ class Initialisation:
         obs, z, R = self._fix_for_start()
         if obs is None:
             return x0, P0
-        if self._still is False:
+        if self.still is False:
             P0 = self._moving_velocity(P0)
-        sl = self.system.layout["p"]
+        sl = self.layout["p"]
         k = min(len(z), sl.stop - sl.start)
         to_state = obs.model.position_from if has(obs.model, PositionFromFix) else None
         x0[sl.start:sl.start + k] = to_state(z, x0)[:k] if to_state else z[:k]
@@ -218,7 +239,7 @@ class Initialisation:
         """P0 with the velocity variances (a ``v`` block) raised to the squared mean speed of the window's
         fixes (first to last): a prior of a vehicle at rest is no prior for one that drove, and the speed is
         what the fixes show of it; the fixes after the start then give the velocity."""
-        layout = self.system.layout
+        layout = self.layout
         if "v" not in layout or len(self._fixes) < 2:
             return P0
         first, last = self._fixes[0], self._fixes[-1]

@@ -1,12 +1,12 @@
-"""Helpers of the tests of a config against its recording's world: temp scenarios and configs made from the
-shipped ones with a few values changed."""
+"""Helpers of the tests of a config against its recording's world (tests/world): temp scenarios and configs
+made from the shipped ones with a few values changed. (Not conftest.py: tests/health has its own, and
+`from conftest import` would find whichever came first.)"""
 from __future__ import annotations
 
 import json
 from pathlib import Path
 from typing import Any
 
-import pytest
 import yaml
 
 from fusion.cli import main
@@ -41,10 +41,6 @@ def run(config: Path, recording: Path | None, out: Path, *extra: str) -> tuple[i
     code = main(args + (["--input", str(recording)] if recording is not None else []))
     return code, json.loads(out.read_text()) if out.exists() else None
 
-
-@pytest.fixture
-def root() -> Path:
-    return ROOT
 
 
 def car_at(dest: Path, lat: float, lon: float, alt: float, date: str, heading_deg: float, legs: int = 3,

@@ -110,11 +110,11 @@ class ClockGuard:
     stamp instead of becoming the stream's time base (at most START_MAX wait; at the end of input,
     ``release`` feeds what still waits)."""
 
-    def __init__(self, future_s: float = 5.0, agree: int = 3, on_drop=None, max_gap_s: float = math.inf,
+    def __init__(self, future_s: float = 5.0, agree: int = 3, max_gap_s: float = math.inf,
                  cadence_k: float = 0.0, cadence_floor_s: float = 0.02, window_s: float = 0.0, sensors=(),
                  hold_start: bool = False):
         self.max_gap_s = float(max_gap_s)  # a stream-wide jump ahead by more is a clock jump, not a gap
-        self.on_drop = on_drop  # called (sensor, n) when n held messages are dropped as wild
+        self._dropped: dict[str, int] = {}   # sensor -> held messages dropped as wild, not yet taken
         self.future_s = float(future_s)
         self.agree = max(1, int(agree))
         self.offsets: dict[str, float] = {}   # sensor -> s subtracted from its stamps
@@ -158,7 +158,7 @@ class ClockGuard:
         """Decide about ``msg`` of ``sensor`` stamped ``t`` (s, after its time_offset) given the stream's
         newest accepted time. Returns ``([(message, corrected t), ...], [events])`` in the order to feed
         them (other sensors' messages held by the cadence bound that the stream reached come first); held
-        messages that turned out wild are reported by an event and counted through ``on_drop``."""
+        messages that turned out wild are reported by an event and counted (``take_dropped``)."""
         if self._start is not None and sensor != "truth" and sensor != "reference":
             return self._starting(sensor, msg, t)
         c = self._cad.get(sensor)
@@ -205,8 +205,7 @@ class ClockGuard:
         events: list[Event] = []
         for i, (s, m, ti) in enumerate(start):
             if i not in keep:
-                if self.on_drop is not None:
-                    self.on_drop(s, 1)
+                self._count_dropped(s, 1)
                 events.append(Event(math.nan, "time", s, f"line {m.line}: stamp {ti!r} s is far from the stream's "
                                     f"first messages, which agree on another time; it was dropped"))
         return self._admit_in_order([start[i] for i in sorted(keep)], events)
@@ -375,8 +374,7 @@ class ClockGuard:
         self._stream_allow = allow if allow < fut else fut
 
     def _wild(self, sensor: str, m: Message, th: float, t_next: float) -> Event:
-        if self.on_drop is not None:
-            self.on_drop(sensor, 1)
+        self._count_dropped(sensor, 1)
         return Event(math.nan, "time", sensor, f"line {m.line}: stamp {m.t!r} s was ahead of the stream's time and "
                      f"off {sensor}'s cadence; it was dropped (the next {sensor} message, stamped {t_next!r} s, "
                      f"is before it)")
@@ -392,12 +390,20 @@ class ClockGuard:
         if held is None:
             return []
         self.busy = bool(self._held or self.offsets or self._near)
-        if self.on_drop is not None:
-            self.on_drop(sensor, len(held.items))
+        self._count_dropped(sensor, len(held.items))
         m, t = held.items[0]
         n = len(held.items)
         return [Event(math.nan, "time", sensor, f"line {m.line}: stamp {t!r} s is far from the stream's time; "
                       f"{'it was' if n == 1 else f'{n} messages were'} dropped ({why})")]
+
+    def _count_dropped(self, sensor: str, n: int) -> None:
+        self._dropped[sensor] = self._dropped.get(sensor, 0) + n
+
+    def take_dropped(self) -> dict[str, int]:
+        """``{sensor: n}`` of the held messages dropped as wild stamps since the last call (the run counts them
+        malformed: their time is)."""
+        out, self._dropped = self._dropped, {}
+        return out
 
     def held(self) -> int:
         return sum(len(h.items) for h in self._held.values()) + len(self._near) + len(self._start or ())

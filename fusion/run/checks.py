@@ -1,4 +1,4 @@
-"""What the scheduler checks of what a plugin hands it on a message, so a plugin's bug loses that message
+"""What the run checks of what a plugin hands it on a message, so a plugin's bug loses that message
 (counted malformed, the plugin named) instead of the run: a measurement model's Observation
 (:func:`usable`), a gate's decision (:class:`CheckedGateRun`, whose failure is :class:`GateFailed`), and how a
 component is named in those reports (:func:`who`: with its package when it is a third party's)."""
@@ -9,10 +9,11 @@ import math
 
 import numpy as np
 
-from fusion.api import GateDecision, GateRun, Observation
+from fusion.api import Event, Fix, GateDecision, GateRun, MalformedMessage, Message, Observation
+from fusion.errors import ModelFault
 from fusion.lapack import lapack
 
-__all__ = ["who", "shown", "GateFailed", "CheckedGateRun", "usable"]
+__all__ = ["who", "shown", "GateFailed", "CheckedGateRun", "usable", "Failures", "model_fault", "read_only", "failed"]
 
 
 def who(component, registry=None, kind: str | None = None) -> str:
@@ -36,7 +37,7 @@ def shown(value) -> str:
 
 class GateFailed(Exception):
     """A gate's ``check`` raised, or returned something else than ``(GateDecision, next state)``: the gate's
-    fault, so the scheduler loses that message (naming the gate) instead of ending the run."""
+    fault, so the run loses that message (naming the gate) instead of ending the run."""
 
     def __init__(self, gate, why: str):
         super().__init__(why)
@@ -44,7 +45,7 @@ class GateFailed(Exception):
 
 
 class CheckedGateRun(GateRun):
-    """The scheduler's :class:`fusion.api.GateRun`: a gate that fails on a measurement raises
+    """The run's :class:`fusion.api.GateRun`: a gate that fails on a measurement raises
     :class:`GateFailed` through the filter's update (the state and counts unchanged)."""
 
     __slots__ = ()
@@ -122,3 +123,75 @@ def usable(obs) -> Observation | str:
     except Exception as exc:   # a t or an array of things that are not numbers
         return f"it cannot be read: {type(exc).__name__}: {exc}"
     return obs
+
+
+def failed(component, exc: Exception, registry=None) -> MalformedMessage:
+    """A plugin's unexpected exception on one message, as the reason that message is malformed (the plugin
+    should raise MalformedMessage itself; the run goes on either way)."""
+    return MalformedMessage(f"{who(component, registry)} failed on it: {type(exc).__name__}: {exc}")
+
+
+class Failures:
+    """The messages lost to a plugin's failure on them (a model's ``h`` or ``jacobian`` raising in the update, a
+    gate's ``check``, an unusable Observation): per (sensor, component) ``[count, first reason]``. The first of
+    each is reported, the others counted and their number told at the end (``warnings``). ``quiet``: a replay's
+    re-run (counted and told when it first ran)."""
+
+    def __init__(self, registry=None):
+        self.registry = registry
+        self.by: dict[tuple[str, str], list] = {}
+        self.quiet = False
+
+    def lost(self, sensor, msg: Message | Fix, name: str, what: str, short: str) -> Event | None:
+        """A message of ``sensor`` (its SensorRuntime) lost to ``name``'s failure on it (``what``): counted
+        malformed; the event of the first of each sensor and component, else None."""
+        sensor.counters["malformed"] += 1
+        if self.quiet:
+            return None
+        failures = self.by.get((sensor.name, name))
+        if failures is not None:
+            failures[0] += 1
+            return None
+        self.by[(sensor.name, name)] = [1, f"{name} {short}"]
+        return Event(msg.t, "malformed", sensor.name, f"line {msg.line}: {name} {what}; the message is lost, the "
+                     f"belief kept (further failures of {sensor.name} are counted)")
+
+    def update_failed(self, sensor, model, msg: Message, exc: Exception, belief) -> Event | None:
+        """An update of ``sensor`` raised. When its gate is at fault (GateFailed) or its model is (its ``h`` or
+        ``jacobian`` raises at the ``belief``, or ``h`` returns another shape than ``(dim,)``), the message is lost
+        (:meth:`lost`). Otherwise it is the filter's own bug: ``exc`` is raised again (an internal error)."""
+        if isinstance(exc, GateFailed):
+            name = who(exc.gate, self.registry)
+            return self.lost(sensor, msg, name, f"failed in the update: {exc}", f"failed in an update ({exc})")
+        error = str(exc) if isinstance(exc, ModelFault) else model_fault(model, read_only(belief.x))
+        if error is None:
+            raise exc
+        name = who(model, self.registry, "measurement model")
+        return self.lost(sensor, msg, name, f"failed in the update: {error}", f"failed in an update ({error})")
+
+    def warnings(self) -> list[Event]:
+        """At the end: one warning per sensor and component that failed more than once."""
+        return [Event(math.nan, "warning", name, f"{why} {n} times, each message lost (counted malformed)")
+                for (name, _), (n, why) in self.by.items() if n > 1]
+
+
+def model_fault(model, x: np.ndarray) -> str | None:
+    """Why a measurement model fails at the state ``x`` (n,) and on a batch of two (what a filter gives it): its
+    ``h`` or ``jacobian`` raises (the exception), or ``h`` returns another shape than ``(dim,)`` / ``(2, dim)``;
+    None when it does neither there (an update that failed anyway is the filter's bug)."""
+    try:
+        dim = int(model.dim)
+        one, two = np.shape(model.h(x)), np.shape(model.h(np.stack([x, x])))
+        if one != (dim,) or two != (2, dim):
+            return f"h returned shape {one} at the belief ({two} on 2 states), expected ({dim},) ((2, {dim}))"
+        model.jacobian(x)
+    except Exception as exc:
+        return f"{type(exc).__name__}: {exc}"
+    return None
+
+
+def read_only(x: np.ndarray) -> np.ndarray:
+    """A read-only view of the belief's mean for a model probed after a failure (one that writes into it raises)."""
+    v = x.view()
+    v.flags.writeable = False
+    return v
