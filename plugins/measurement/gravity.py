@@ -19,9 +19,9 @@ variance ``2 s^2 tau / dt`` a sample of spacing dt). Per sample (the adaptive R 
 ``motion_sd`` is the floor of the motion's acceleration (an acceleration across gravity barely changes
 |f|: ``|f| ~ g + a_par + a_perp^2 / 2g``); ``(|f| - g)^2`` estimates the sample's own acceleration along
 gravity, taken as the size of the other two components too (an isotropic motion). A sample with
-``| |f| - g | > max_deviation`` is rejected (counted, the attitude left to the gyros), as the
-Madgwick/Mahony filters and PX4's attitude estimator drop the accelerometer when its norm is far from g.
-The ``ahrs`` package's EKF (ahrs.filters.EKF) uses one fixed accelerometer variance instead; both agree at rest.
+``| |f| - g | > max_deviation`` is rejected (counted, the attitude left to the gyros): Sabatini's switch of
+the accelerometer's covariance to infinity past a threshold on ``| |f| - g |``. The ``ahrs`` package's EKF
+(ahrs.filters.EKF) uses one fixed accelerometer variance instead; both agree at rest.
 
 Messages: ``ax ay az`` (m/s^2, FRD), or a whole IMU line ``ax ay az gx gy gz`` (the rates are ignored).
 """

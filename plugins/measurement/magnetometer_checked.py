@@ -3,7 +3,8 @@
 A local magnetic disturbance (steel, a motor, a phone) changes the field the sensor reads; the filter's chi2
 gate sees it only once the error exceeds the attitude's own uncertainty, and a slow disturbance can pull the
 heading first. Two checks that need no attitude reject a sample before the update (counted rejected, with
-the reason), as the ``ahrs`` literature's MARG filters and PX4 EKF2's magnetometer checks do:
+the reason), as Sabatini (IEEE TBME 53(7), 2006) detects a disturbed field and PX4 EKF2's EKF2_MAG_CHECK
+(field strength and inclination) does:
 
 * magnitude: ``| |m_b| / |m_n| - 1 | > max_intensity_error`` (the Earth's field has one intensity);
 * dip: the angle between the field and the horizontal, measured in the body frame against the gravity
