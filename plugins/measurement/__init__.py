@@ -15,6 +15,8 @@ MEASUREMENTS = {
     "pose": "fusion_plugins.measurement.pose:Pose",
     "twist": "fusion_plugins.measurement.twist:Twist",
     "imu": "fusion_plugins.measurement.imu:Imu",
+    "gravity": "fusion_plugins.measurement.gravity:Gravity",
+    "magnetometer_checked": "fusion_plugins.measurement.magnetometer_checked:MagnetometerChecked",
 }
 
 

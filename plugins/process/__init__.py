@@ -9,6 +9,7 @@ PROCESSES = {
     "firing_clock": "fusion_plugins.process.firing_clock:FiringClock",
     "static_orientation": "fusion_plugins.process.static_orientation:StaticOrientation",
     "omni": "fusion_plugins.process.omni:Omni",
+    "gyro_attitude": "fusion_plugins.process.gyro_attitude:GyroAttitude",
 }
 
 

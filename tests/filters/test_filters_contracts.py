@@ -73,6 +73,7 @@ INS = StateLayout.parse("p:3 v:3 q:4:quaternion ba:3 bw:3")
 PV3 = StateLayout.parse("p:3 v:3")
 CLOCK = StateLayout([Block("p", 3), Block("T", 1), Block("t", 1)])
 CLOCK_Q = StateLayout([Block("p", 3), Block("T", 1), Block("t", 1), Block("q", 4, "quaternion")])
+AHRS = StateLayout.parse("q:4:quaternion bw:3")
 MAG = {"field_ned": [20.0, 1.0, 45.0]}
 OMNI = StateLayout([Block("p", 3), Block("roll", 1, "angle"), Block("pitch", 1, "angle"), Block("yaw", 1, "angle"),
                     Block("vb", 3), Block("w", 3), Block("ab", 3)])
@@ -98,10 +99,13 @@ MEASUREMENT_CASES = [
     ("twist", {"select": ["vx", "vy", "vyaw"]}, OMNI, Message(1.0, "tw", _ODOM[28:])),
     ("imu", {"select": ["roll", "yaw", "vyaw", "ax"]}, OMNI,
      Message(1.0, "imu", (0.98, 0.1, 0.0, 0.2, 0.0, 0.0, 0.1, 0.2, 0.0, -9.8, *_C3, *_C3, *_C3))),
+    ("gravity", {}, INS, Message(1.0, "acc", (0.3, -0.2, -9.7))),
+    ("gravity", {}, AHRS, Message(1.0, "acc", (0.3, -0.2, -9.7, 0.01, 0.0, 0.02))),
+    ("magnetometer_checked", MAG, AHRS, Message(1.0, "mag", (20.0, 1.0, 45.0))),
 ]
 PROCESS_CASES = [("pv", {}), ("pv", {"dims": 3}), ("ins", {}), ("ins", {"states": 22}), ("firing_clock", {}),
                  ("firing_clock", {"attitude_sd_deg": 1.0}), ("static_orientation", {}), ("omni", {}),
-                 ("omni", {"two_d_mode": True})]
+                 ("omni", {"two_d_mode": True}), ("gyro_attitude", {})]
 
 
 def test_every_builtin_has_a_contract_case():
