@@ -37,14 +37,19 @@ def _low(tmp_path):
     return path
 
 
-def test_run_warns_once_and_health_reports_it(tmp_path, capsys):
+def test_run_warns_once_and_ends_degraded(tmp_path, capsys):
+    """A log that cannot be dead-reckoned: one warning, the figures in the summary's health, and exit 4 (the
+    health rule's imu_coverage finding) rather than 0."""
     out = tmp_path / "s.json"
     cfg = ROOT / "configs" / "ardupilot_ins_gps_mag.yaml"
-    assert main(["run", str(cfg), "--input", str(_low(tmp_path)), "--summary-json", str(out)]) == 0
+    assert main(["run", str(cfg), "--input", str(_low(tmp_path)), "--summary-json", str(out)]) == 4
     err = capsys.readouterr().err
     assert err.count("IMU coverage:") == 1, err
-    cov = json.loads(out.read_text())["health"]["imu_coverage"]["imu"]
+    assert "degraded" in err.strip().splitlines()[-1] and "imu" in err.strip().splitlines()[-1]
+    health = json.loads(out.read_text())["health"]
+    cov = health["imu_coverage"]["imu"]
     assert cov["insufficient"] and cov["fraction"] == float(f"{LOW:.4g}")
+    assert health["degraded"] and health["findings"][0]["kind"] == "imu_coverage"
 
 
 def test_limits_from_the_config(tmp_path, capsys):
