@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from fusion.health.spec import HealthSpec
+from fusion.health.watch import lockout_limits
 
 __all__ = ["BatchHealthWatch"]
 
@@ -88,14 +89,7 @@ class BatchHealthWatch:
 
     def __init__(self, system: Any, n: int, spec: HealthSpec | None = None):
         self.spec = spec if spec is not None else HealthSpec()
-        self.sensors: dict[str, _Sensor] = {}
-        for name, s in system.sensors.items():
-            if s.role != "measurement":
-                continue
-            limit = self.spec.lockout_s
-            if limit is None and s.recovery is not None:
-                limit = float(s.recovery.after_s)
-            self.sensors[name] = _Sensor(n, limit)
+        self.sensors = {name: _Sensor(n, limit) for name, limit in lockout_limits(system, self.spec).items()}
 
     def add(self, sensor: str, t: float, accepted: np.ndarray, nis: np.ndarray, dof: int) -> None:
         w = self.sensors.get(sensor)

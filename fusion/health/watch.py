@@ -94,6 +94,19 @@ class SensorWatch:
                 "windows": list(self.windows)}
 
 
+def lockout_limits(system: Any, spec: HealthSpec) -> dict[str, float | None]:
+    """Each measurement sensor's lock-out limit (s): the config's ``health.lockout_s``, else the sensor's
+    recovery time, else None (judged against the run's end)."""
+    limits: dict[str, float | None] = {}
+    for name, s in system.sensors.items():
+        if s.role == "measurement":
+            limit = spec.lockout_s
+            if limit is None and s.recovery is not None:
+                limit = float(s.recovery.after_s)
+            limits[name] = limit
+    return limits
+
+
 class HealthWatch:
     """Sink of a run's estimates that records what fusion.health.rule needs (see the module).
 
@@ -102,14 +115,7 @@ class HealthWatch:
 
     def __init__(self, system: Any, spec: HealthSpec | None = None):
         self.spec = spec if spec is not None else HealthSpec()
-        self.sensors: dict[str, SensorWatch] = {}
-        for name, s in system.sensors.items():
-            if s.role != "measurement":
-                continue
-            limit = self.spec.lockout_s
-            if limit is None and s.recovery is not None:
-                limit = float(s.recovery.after_s)
-            self.sensors[name] = SensorWatch(limit)
+        self.sensors = {name: SensorWatch(limit) for name, limit in lockout_limits(system, self.spec).items()}
 
     def on_estimate(self, estimate: Any) -> None:
         up = estimate.update
