@@ -36,6 +36,9 @@ import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests" / "world"))
+from world_helpers import car_at  # noqa: E402  (the scenario the tests run, moved and turned)
+
 MAG_CONFIG = ROOT / "configs" / "imu_gps_mag_ekf.yaml"
 POSE_CONFIG = ROOT / "configs" / "ultrasonic_3d_pose.yaml"
 OUT_002 = ROOT / "docs" / "results" / "imu_gps_mag_anywhere.md"
@@ -54,27 +57,10 @@ PAPER = {"process": {"renormalize": False}, "sensors": {"qnorm": {"model": {"typ
 
 
 def car_scenario(dest: Path, place: tuple, heading: float, seed: int, legs: int, magnetometer: bool) -> Path:
-    """scenarios/car_gps_mag.yaml at ``place``, turned to ``heading`` (deg), its first ``legs`` legs."""
+    """scenarios/car_gps_mag.yaml at ``place``, turned to ``heading`` (deg), its first ``legs`` legs: the
+    scenario the tests of tests/world run (world_helpers.car_at)."""
     _, lat, lon, h, date = place
-    d = yaml.safe_load((ROOT / "scenarios" / "car_gps_mag.yaml").read_text())
-    d.update(name="car_gps_mag_elsewhere", seed=seed, origin={"lat_deg": lat, "lon_deg": lon, "alt_m": h},
-             start_utc=date)
-    c, s = math.cos(math.radians(heading)), math.sin(math.radians(heading))
-
-    def turned(w):
-        if isinstance(w, dict):
-            return {**w, "at": turned(w["at"])}
-        return [w[0] * c - w[1] * s, w[0] * s + w[1] * c, w[2]]
-
-    d["trajectory"]["waypoints"] = [turned(w) for w in d["trajectory"]["waypoints"][:legs + 1]]
-    for k in ("lost_fixes", "gaps"):
-        d["sensors"]["gps"].pop(k, None)
-    for k in ("declination_deg", "inclination_deg", "intensity", "disturbances"):
-        d["sensors"]["mag"].pop(k, None)
-    if not magnetometer:
-        d["sensors"].pop("mag")
-    dest.write_text(yaml.safe_dump(d, sort_keys=False))
-    return dest
+    return car_at(dest, lat, lon, h, date, heading, legs=legs, magnetometer=magnetometer, seed=seed)
 
 
 def simulate(scenario: Path, log: Path, seed: int | None = None) -> Path:
