@@ -281,8 +281,8 @@ def _gpa_per_fix(t: np.ndarray, t_gpa: np.ndarray, columns: list[np.ndarray], na
                  notes: list[str]) -> list[np.ndarray]:
     """The receiver accuracies (m) of each GPS sample at times ``t``: the GPA record written with it (the same
     TimeUS), else the last GPA before it within 1.5 s (a logger that dropped a record: its accuracy changes
-    slowly), else 0, which the gps measurement reads as unknown (its configured floor). One missing GPA
-    used to remove the accuracies of the whole log (tester4 #5); each sample is matched on its own now."""
+    slowly), else 0, which the gps measurement reads as unknown (its configured floor). Each sample is
+    matched on its own, so one missing GPA costs the accuracies of that sample, not of the whole log."""
     j = np.searchsorted(t_gpa, t, side="right") - 1      # the last GPA at or before each fix
     jj = np.clip(j, 0, len(t_gpa) - 1)
     exact = (j >= 0) & (t_gpa[jj] == t)

@@ -70,7 +70,7 @@ def as_nmea(s: Stream, start_utc: str | None, notes: list[str] | None = None) ->
     """The stream of GGA + RMC sentences (``# fields gps nmea``) of a numeric GPS stream. Only 3-D fixes
     and better (fix type 3-6) are written: a GGA carries no fix dimension, so a 2-D fix (its height not
     solved) or an extrapolated one (PX4 fix type 8) would reach the ``nmea`` decoder as an ordinary fix,
-    its unsolved altitude fused and possibly the origin (tester4 #10); the numeric route's ``min_fix`` 3 drops
+    its unsolved altitude fused and possibly the origin; the numeric route's ``min_fix`` 3 drops
     them as well. How many were left out is added to ``notes``."""
     f = {name: i for i, name in enumerate(s.fields)}
     v = np.asarray(s.values, float)

@@ -57,7 +57,7 @@ def _keyed(s: Stream, k: int) -> Iterator[tuple[float, int, str]]:
 
 def _text(value) -> str:
     """A header value on one printable line: a log's info string may carry NULs or newlines (PX4's sys_name
-    'PX4\\0\\0' made the recording a binary file to grep, tester4)."""
+    'PX4\\0\\0' would make the recording a binary file to grep)."""
     return " ".join("".join(c if c.isprintable() else " " for c in str(value)).split())
 
 
