@@ -15,21 +15,11 @@ from fusion.config import load_system
 from fusion.tui.app import make_app
 from fusion.tui.feed import LiveFeed
 from fusion.tui.status_line import StatusLine, describe
+from virtual_clock import VirtualClock
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "configs" / "example_2d.yaml"
 DT = 0.05  # s of sensor time between lines
-
-
-class VirtualClock:
-    def __init__(self):
-        self.now = 1000.0
-
-    def monotonic(self):
-        return self.now
-
-    def sleep(self, dt):
-        self.now += dt
 
 
 def device(clock, n, wall_per_line, hold: threading.Event | None = None):

@@ -9,30 +9,11 @@ import pytest
 from fusion.config import load_system
 from fusion.tui.feed import LiveFeed
 from fusion.tui.status_line import describe
+from virtual_clock import clock  # noqa: F401  (the fixture)
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "configs" / "example_2d.yaml"
 DT = 0.05  # s of sensor time between lines
-
-
-class VirtualClock:
-    def __init__(self):
-        self.now = 1000.0
-
-    def monotonic(self):
-        return self.now
-
-    def sleep(self, dt):
-        self.now += dt
-
-
-@pytest.fixture
-def clock(monkeypatch):
-    import fusion.tui.feed as feed_mod
-
-    c = VirtualClock()
-    monkeypatch.setattr(feed_mod, "time", c)
-    return c
 
 
 def test_a_port_silent_since_it_was_opened_is_lost(clock):
