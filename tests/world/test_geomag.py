@@ -12,7 +12,7 @@ from fusion.api import BuildContext, ConfigError
 from fusion.api.state import StateLayout
 from fusion.world import read_world
 
-pytest.importorskip("ppigrf")
+import ppigrf  # noqa: E402,F401  (a runtime dependency: its absence is a failure, not a skip)
 
 # Published IGRF values (the IGRF synthesis program's yearly table at 59.900 N, 39.900 E geodetic, 0 km,
 # as shown in the pyIGRF documentation): X north, Y east, Z down in nT, rounded to 1 nT. 1900.5 lies in a
