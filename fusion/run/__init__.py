@@ -12,12 +12,14 @@
     checks.py      what plugins hand back, checked (a plugin's bug loses a message, not the run)
     process.py     Processor: one released message through its sensor
     loop.py        Loop: the orchestrator (push, finish, replay)
-    session.py     Run, run, RunResult, Collect: a loop over a source, to RunStats, sinks and hooks
+    session.py     Run: a loop over messages, to RunStats, sinks and hooks
+    drive.py       run(system, source, sinks): a whole source through a Run, its ends told apart
     stats.py       RunStats: what a run counts, online in constant memory
 """
 from fusion.run.integrator import ProcessModelFailed
 from fusion.run.loop import Loop, Updated
-from fusion.run.session import Collect, Run, RunResult, run
+from fusion.run.drive import run
+from fusion.run.session import Collect, Run, RunResult
 from fusion.run.stats import COUNTERS, RunStats
 
 __all__ = ["Loop", "Updated", "Run", "RunResult", "Collect", "run", "RunStats", "COUNTERS", "ProcessModelFailed"]
